@@ -1,0 +1,138 @@
+//! Project automation for flexmpc: `cargo xtask verify` (and later `bench`).
+//!
+//! `cargo xtask` is an alias (`.cargo/config.toml`) for `cargo run --release -p xtask --`, so
+//! every verification case runs optimised.
+
+use anyhow::{bail, Result};
+use flexmpc_verification::{all_cases, run_case, Row, Tier};
+use std::io::Write;
+use std::path::PathBuf;
+
+const USAGE: &str = "\
+usage: cargo xtask verify [FILTER] [--quick | --full] [--json]
+
+  FILTER   run only the cases whose name contains FILTER (e.g. intrinsic-beam/)
+  --quick  only the quick tier (seconds per case; what CI runs)
+  --full   every case (the default)
+  --json   print the report as a JSON array of {case, metric, value, tolerance, pass}
+
+Reports are also written to target/verify/report.md and target/verify/report.json.
+The exit code is non-zero if any case fails.";
+
+fn main() -> Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    match args.first().map(String::as_str) {
+        Some("verify") => verify(&args[1..]),
+        Some("-h") | Some("--help") | Some("help") | None => {
+            println!("{USAGE}");
+            Ok(())
+        }
+        Some(other) => bail!("unknown xtask command `{other}`\n{USAGE}"),
+    }
+}
+
+fn verify(args: &[String]) -> Result<()> {
+    let mut filter: Option<&str> = None;
+    let mut quick = false;
+    let mut json = false;
+    for arg in args {
+        match arg.as_str() {
+            "--quick" => quick = true,
+            "--full" => quick = false,
+            "--json" => json = true,
+            "-h" | "--help" => {
+                println!("{USAGE}");
+                return Ok(());
+            }
+            s if s.starts_with("--") => bail!("unknown option `{s}`\n{USAGE}"),
+            s => {
+                if filter.replace(s).is_some() {
+                    bail!("only one FILTER may be given\n{USAGE}");
+                }
+            }
+        }
+    }
+    let cases: Vec<_> = all_cases()
+        .into_iter()
+        .filter(|c| filter.is_none_or(|f| c.name.contains(f)))
+        .filter(|c| !quick || c.tier == Tier::Quick)
+        .collect();
+    if cases.is_empty() && filter.is_none() {
+        println!("no verification case registered yet (quick tier only: {quick})");
+        return Ok(());
+    }
+    if cases.is_empty() {
+        bail!(
+            "no verification case matches filter {:?} (quick tier only: {quick})",
+            filter.unwrap_or("")
+        );
+    }
+    let mut rows: Vec<Row> = Vec::new();
+    for case in &cases {
+        if !json {
+            eprint!("running {:<50}\r", case.name);
+            let _ = std::io::stderr().flush();
+        }
+        rows.extend(run_case(case));
+    }
+    let table = markdown_table(&rows);
+    let report = json_report(&rows);
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../target/verify");
+    std::fs::create_dir_all(&dir)?;
+    std::fs::write(dir.join("report.md"), &table)?;
+    std::fs::write(dir.join("report.json"), serde_json::to_string_pretty(&report)?)?;
+    let failed = rows.iter().filter(|r| !r.metric.pass()).count();
+    if json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        eprint!("{:<70}\r", "");
+        println!("{table}");
+        println!("{} passed, {} failed", rows.len() - failed, failed);
+    }
+    if failed > 0 {
+        bail!("{failed} verification metric(s) failed");
+    }
+    Ok(())
+}
+
+fn markdown_table(rows: &[Row]) -> String {
+    let mut out = String::from(
+        "| case | metric | value | tolerance | result | time (s) |\n|---|---|---|---|---|---|\n",
+    );
+    for r in rows {
+        let m = &r.metric;
+        let op = match m.comparison {
+            flexmpc_verification::Comparison::AtMost => "≤",
+            flexmpc_verification::Comparison::AtLeast => "≥",
+        };
+        out.push_str(&format!(
+            "| {} | {} | {:.3e} | {} {:.1e} | {} | {:.2} |\n",
+            r.case,
+            m.metric,
+            m.value,
+            op,
+            m.tolerance,
+            if m.pass() { "PASS" } else { "FAIL" },
+            r.seconds
+        ));
+    }
+    out
+}
+
+fn json_report(rows: &[Row]) -> serde_json::Value {
+    let finite =
+        |x: f64| if x.is_finite() { serde_json::json!(x) } else { serde_json::Value::Null };
+    serde_json::Value::Array(
+        rows.iter()
+            .map(|r| {
+                serde_json::json!({
+                    "case": r.case,
+                    "metric": r.metric.metric,
+                    "value": finite(r.metric.value),
+                    "tolerance": finite(r.metric.tolerance),
+                    "pass": r.metric.pass(),
+                })
+            })
+            .collect(),
+    )
+}
