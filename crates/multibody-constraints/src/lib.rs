@@ -1,5 +1,9 @@
 //! Structures of intrinsic beams tied by joints and supports (paper eqs. 11–12).
-//!
-//! This crate will hold the `Structure` (beams, joints, supports), the linearised constraint
-//! rows `G` with a null-space basis `Z`, and the constrained implicit-midpoint FE plant
-//! (issue 3). It is empty until then.
+pub mod error;
+pub mod joint;
+pub mod nullspace;
+pub mod plant;
+pub mod samples;
+pub mod structure;
+pub use error::{MultibodyError, Result};
+pub use plant::{Plant, PlantSettings, StepReport};

@@ -1,0 +1,143 @@
+//! The error type of the crate: bad topology, bad joint data, failed solves.
+
+use thiserror::Error;
+
+/// Everything that can go wrong when building or running a structure.
+#[non_exhaustive]
+#[derive(Debug, Error)]
+pub enum MultibodyError {
+    /// A beam-level error (section, mesh, load, step) from `intrinsic-beam`.
+    #[error(transparent)]
+    Beam(#[from] intrinsic_beam::BeamError),
+    /// A joint or support names a beam that the structure does not have.
+    #[error("{owner}: unknown beam `{beam}` (the structure has: {known})")]
+    UnknownBeam {
+        /// The joint, support or placement that refers to it.
+        owner: String,
+        /// The name given.
+        beam: String,
+        /// The beams that exist, comma separated.
+        known: String,
+    },
+    /// A beam end given as text is neither `start` nor `end`.
+    #[error("{owner}: unknown beam end `{end}` (allowed: `start` (s = 0) or `end` (s = L))")]
+    UnknownEnd {
+        /// The joint or support that refers to it.
+        owner: String,
+        /// The text given.
+        end: String,
+    },
+    /// A beam end takes part in two joints/supports (or twice in one joint).
+    #[error("beam `{beam}` end `{end}` is used twice: by {first} and by {second}")]
+    EndUsedTwice {
+        /// Beam name.
+        beam: String,
+        /// `start` or `end`.
+        end: String,
+        /// First user.
+        first: String,
+        /// Second user.
+        second: String,
+    },
+    /// Two beams, joints or supports share a name.
+    #[error("duplicate name `{name}` ({what})")]
+    DuplicateName {
+        /// The name.
+        name: String,
+        /// What kind of item.
+        what: &'static str,
+    },
+    /// A joint with fewer than two ends.
+    #[error("joint `{joint}` ties {count} beam end(s); a joint needs at least 2 (use a support for one end against the ground)")]
+    TooFewEnds {
+        /// Joint name.
+        joint: String,
+        /// Number of ends given.
+        count: usize,
+    },
+    /// The beams do not form one connected structure.
+    #[error("the structure is not connected: {groups} separate groups ({detail}); join them or allow disconnected structures explicitly")]
+    NotConnected {
+        /// Number of connected groups.
+        groups: usize,
+        /// The beams of each group.
+        detail: String,
+    },
+    /// An axis or direction of zero length (or not finite).
+    #[error("{owner}: axis {axis:?} has zero length or is not finite")]
+    ZeroAxis {
+        /// The joint or support.
+        owner: String,
+        /// The axis given.
+        axis: [f64; 3],
+    },
+    /// A joint's axes in a planar structure leave the plane of motion.
+    #[error("{owner}: {what} is not compatible with a planar structure (motion in the e1–e3 plane, rotation about e2)")]
+    NotPlanar {
+        /// The joint or support.
+        owner: String,
+        /// What is wrong.
+        what: String,
+    },
+    /// The constraints are redundant or conflicting: the linearised constrained system is
+    /// rank deficient.
+    #[error(
+        "redundant or conflicting constraints (rank deficiency {deficiency}) involving: {involved}"
+    )]
+    RedundantConstraints {
+        /// Number of dependent rows.
+        deficiency: usize,
+        /// The joints and supports whose rows take part in the dependency.
+        involved: String,
+    },
+    /// A placement refers to a joint that cannot place the beam.
+    #[error("beam `{beam}`: bad placement: {reason}")]
+    BadPlacement {
+        /// Beam name.
+        beam: String,
+        /// Why.
+        reason: String,
+    },
+    /// An input (load, torque) that the structure cannot take.
+    #[error("input `{input}`: {reason}")]
+    BadInput {
+        /// Input description.
+        input: String,
+        /// Why.
+        reason: String,
+    },
+    /// A setting out of range.
+    #[error("setting `{field}` = {value}: {reason}")]
+    BadSetting {
+        /// Field name.
+        field: &'static str,
+        /// The value given.
+        value: f64,
+        /// The allowed range.
+        reason: &'static str,
+    },
+    /// A numeric quantity given to the structure is not finite.
+    #[error("{what} is not finite: {value}")]
+    NotFinite {
+        /// What.
+        what: String,
+        /// The value.
+        value: f64,
+    },
+    /// A linear solve failed (singular system).
+    #[error("linear solve failed: {0}")]
+    LinearSolve(String),
+    /// Newton's method did not converge in a time step.
+    #[error("Newton did not converge at t = {time}: residual {residual:e} after {iterations} iterations")]
+    NewtonFailed {
+        /// Time at the start of the step.
+        time: f64,
+        /// Final residual norm.
+        residual: f64,
+        /// Iterations spent.
+        iterations: usize,
+    },
+}
+
+/// Result alias of the crate.
+pub type Result<T> = std::result::Result<T, MultibodyError>;
