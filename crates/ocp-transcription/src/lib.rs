@@ -1,2 +1,12 @@
 //! Optimal control problems over ODE models (paper eqs. 33–34): multiple shooting,
 //! integrators with sensitivities, SQP and QPs solved with Clarabel (issue 5).
+
+mod dynamics;
+mod error;
+mod integrator;
+mod la;
+pub mod samples;
+
+pub use dynamics::Dynamics;
+pub use error::{OcpError, Result};
+pub use integrator::{Integrator, IntegratorKind, IntegratorSettings, LinearPart};

@@ -1,0 +1,792 @@
+//! One-interval integrators with exact forward sensitivities: RK4, implicit midpoint and
+//! Lawson (exponential) RK4.
+//!
+//! Each integrates `ẋ = f(x, u)` over one shooting interval of length `Δt` with `n` equal
+//! substeps `h = Δt/n` and `u` constant, and returns `x⁺ = Φ(x, u)`, optionally with the
+//! exact derivatives of the *discrete* map, `A = ∂Φ/∂x` and `B = ∂Φ/∂u`, propagated
+//! alongside the state (internal numerical differentiation: each stage's Jacobian is
+//! evaluated once and reused by the state and all `nx + nu` sensitivity directions).
+//!
+//! * **RK4**: the classical method.
+//! * **Implicit midpoint** (Gauss–Legendre, one stage): `m = x + h/2 f(m, u)`,
+//!   `x⁺ = 2m − x`, solved by Newton; the sensitivities follow from the implicit function
+//!   theorem with the Newton matrix `I − h/2 ∂f/∂x` re-factorised at the converged point.
+//!   Symplectic and quadratic-invariant preserving (keeps `½xᵀx` when `xᵀf(x) = 0`).
+//! * **Lawson RK4**: RK4 applied to `v = e^{−tL}x`, with `L` a constant matrix (the
+//!   stiff linear part): with `E = e^{hL/2}` and `g(x) = f(x, u) − Lx`,
+//!   `k1 = g(x)`, `k2 = g(E(x + h/2 k1))`, `k3 = g(Ex + h/2 k2)`, `k4 = g(E²x + hEk3)`,
+//!   `x⁺ = E²x + h/6 (E²k1 + 2E(k2 + k3) + k4)`. Exact for `ẋ = Lx`; `E` is computed once
+//!   (nalgebra's Padé scaling-and-squaring `exp`) and applied sparsely when it is sparse
+//!   (block-diagonal modal `W`).
+//!
+//! For the explicit methods, [`Integrator::adjoint_hessian`] also returns the exact second
+//! derivative `∇²_{(x,u)} (λᵀΦ)`: the only nonlinear operations are evaluations of `f`, so
+//! `∇²(λᵀΦ) = Σ_stages Ŝⱼᵀ (Σ_i k̄ⱼ,ᵢ ∇²fᵢ(Xⱼ, u)) Ŝⱼ` with `Ŝⱼ = ∂(Xⱼ, u)/∂(x, u)` the forward
+//! sensitivities of the stage inputs (taped) and `k̄ⱼ` the adjoints of the stage slopes
+//! (one backward sweep).
+
+use crate::dynamics::Dynamics;
+use crate::error::{check_dim, invalid, OcpError, Result};
+use crate::la::{all_finite, axpy, gemm, gemv, gemv_t, norm_inf, Operator};
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::linalg::lu::partial_pivoting::{factor as lu_factor, solve as lu_solve};
+use faer::{Conj, Par};
+use nalgebra::DMatrix;
+
+/// Which one-step method runs inside a shooting interval.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum IntegratorKind {
+    /// Classical explicit Runge–Kutta of order 4.
+    Rk4,
+    /// Implicit midpoint rule (one-stage Gauss–Legendre, order 2), Newton inside.
+    ImplicitMidpoint,
+    /// Lawson exponential RK4 (order 4, exact on the linear part `L`).
+    LawsonRk4,
+}
+
+/// The constant linear part `L` of the Lawson integrator.
+#[derive(Clone, Debug, PartialEq)]
+pub enum LinearPart {
+    /// Take `L` from [`Dynamics::linear_part`] (error if the model has none).
+    Model,
+    /// A given `nx × nx` matrix, e.g. the Jacobian of `f` at a reference state.
+    Matrix(DMatrix<f64>),
+}
+
+/// Settings of the shooting-interval integrator.
+#[derive(Clone, Debug, PartialEq)]
+pub struct IntegratorSettings {
+    /// Method. Default [`IntegratorKind::Rk4`].
+    pub kind: IntegratorKind,
+    /// Substeps per shooting interval, `≥ 1`. Default 4.
+    pub substeps: usize,
+    /// Linear part for [`IntegratorKind::LawsonRk4`]. Default [`LinearPart::Model`].
+    pub linear_part: LinearPart,
+    /// Newton tolerance of the implicit midpoint rule on `‖r‖∞ / (1 + ‖m‖∞)`, in (0, 1e-2].
+    /// Default 1e-13 (sensitivities are exact up to this residual).
+    pub newton_tolerance: f64,
+    /// Newton iteration limit, `≥ 1`. Default 30.
+    pub newton_max_iterations: usize,
+}
+
+impl Default for IntegratorSettings {
+    fn default() -> Self {
+        Self {
+            kind: IntegratorKind::Rk4,
+            substeps: 4,
+            linear_part: LinearPart::Model,
+            newton_tolerance: 1e-13,
+            newton_max_iterations: 30,
+        }
+    }
+}
+
+impl IntegratorSettings {
+    /// Settings for `kind` with `substeps` substeps, other fields default.
+    pub fn new(kind: IntegratorKind, substeps: usize) -> Self {
+        Self { kind, substeps, ..Self::default() }
+    }
+
+    /// Checks the ranges documented on each field.
+    pub fn validate(&self) -> Result<()> {
+        if self.substeps == 0 {
+            return Err(invalid("integrator.substeps", self.substeps, "must be at least 1"));
+        }
+        if !(self.newton_tolerance > 0.0 && self.newton_tolerance <= 1e-2) {
+            return Err(invalid(
+                "integrator.newton_tolerance",
+                self.newton_tolerance,
+                "must be in (0, 1e-2]",
+            ));
+        }
+        if self.newton_max_iterations == 0 {
+            return Err(invalid(
+                "integrator.newton_max_iterations",
+                self.newton_max_iterations,
+                "must be at least 1",
+            ));
+        }
+        Ok(())
+    }
+}
+
+#[derive(Clone, Debug)]
+struct Lawson {
+    l: DMatrix<f64>,
+    e: Operator,
+    e2: Operator,
+}
+
+/// Which power of `E` to apply (identity for plain RK4).
+#[derive(Clone, Copy)]
+enum Pow {
+    E1,
+    E2,
+}
+
+/// An integrator over one shooting interval with its workspace (allocated at construction;
+/// integrating does not allocate).
+pub struct Integrator {
+    kind: IntegratorKind,
+    nx: usize,
+    nu: usize,
+    substeps: usize,
+    interval: f64,
+    h: f64,
+    lawson: Option<Lawson>,
+    newton_tolerance: f64,
+    newton_max_iterations: usize,
+    x: Vec<f64>,
+    xs: Vec<f64>,
+    t: Vec<f64>,
+    k: [Vec<f64>; 4],
+    fx: DMatrix<f64>,
+    fu: DMatrix<f64>,
+    s: DMatrix<f64>,
+    sx: DMatrix<f64>,
+    tm: DMatrix<f64>,
+    ks: [DMatrix<f64>; 4],
+    lu: DMatrix<f64>,
+    perm: Vec<usize>,
+    perm_inv: Vec<usize>,
+    mem: MemBuffer,
+    tape_x: Vec<Vec<f64>>,
+    tape_s: Vec<DMatrix<f64>>,
+    kbar: [Vec<f64>; 4],
+    xbar: [Vec<f64>; 4],
+    lbar: Vec<f64>,
+    whess: DMatrix<f64>,
+    shat: DMatrix<f64>,
+    zz: DMatrix<f64>,
+    calls: usize,
+}
+
+impl std::fmt::Debug for Integrator {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Integrator")
+            .field("kind", &self.kind)
+            .field("nx", &self.nx)
+            .field("nu", &self.nu)
+            .field("substeps", &self.substeps)
+            .field("interval", &self.interval)
+            .finish()
+    }
+}
+
+impl Integrator {
+    /// Builds the integrator for `model` over an interval of length `interval` (> 0).
+    pub fn new<D: Dynamics + ?Sized>(
+        model: &D,
+        settings: &IntegratorSettings,
+        interval: f64,
+    ) -> Result<Self> {
+        settings.validate()?;
+        if !(interval > 0.0 && interval.is_finite()) {
+            return Err(invalid("interval", interval, "must be positive and finite"));
+        }
+        let nx = model.nx();
+        let nu = model.nu();
+        if nx == 0 {
+            return Err(invalid("nx", nx, "the model must have at least one state"));
+        }
+        let h = interval / settings.substeps as f64;
+        let lawson = if settings.kind == IntegratorKind::LawsonRk4 {
+            let l = match &settings.linear_part {
+                LinearPart::Model => model.linear_part().ok_or(OcpError::Unsupported {
+                    what: "LinearPart::Model with a model whose linear_part() is None",
+                })?,
+                LinearPart::Matrix(m) => m.clone(),
+            };
+            check_dim("linear part rows", nx, l.nrows())?;
+            check_dim("linear part columns", nx, l.ncols())?;
+            if !all_finite(l.as_slice()) {
+                return Err(OcpError::NonFiniteDynamics { stage: "linear part" });
+            }
+            let e = (&l * (0.5 * h)).exp();
+            let e2 = &e * &e;
+            if !all_finite(e2.as_slice()) {
+                return Err(OcpError::NonFiniteDynamics { stage: "matrix exponential" });
+            }
+            Some(Lawson { l, e: Operator::new(e), e2: Operator::new(e2) })
+        } else {
+            None
+        };
+        let nz = nx + nu;
+        let req = StackReq::any_of(&[
+            lu_factor::lu_in_place_scratch::<usize, f64>(nx, nx, Par::Seq, Default::default()),
+            lu_solve::solve_in_place_scratch::<usize, f64>(nx, nz, Par::Seq),
+        ]);
+        let zv = || vec![0.0; nx];
+        let zm = || DMatrix::zeros(nx, nz);
+        Ok(Self {
+            kind: settings.kind,
+            nx,
+            nu,
+            substeps: settings.substeps,
+            interval,
+            h,
+            lawson,
+            newton_tolerance: settings.newton_tolerance,
+            newton_max_iterations: settings.newton_max_iterations,
+            x: zv(),
+            xs: zv(),
+            t: zv(),
+            k: [zv(), zv(), zv(), zv()],
+            fx: DMatrix::zeros(nx, nx),
+            fu: DMatrix::zeros(nx, nu),
+            s: zm(),
+            sx: zm(),
+            tm: zm(),
+            ks: [zm(), zm(), zm(), zm()],
+            lu: if settings.kind == IntegratorKind::ImplicitMidpoint {
+                DMatrix::zeros(nx, nx)
+            } else {
+                DMatrix::zeros(0, 0)
+            },
+            perm: vec![0; nx],
+            perm_inv: vec![0; nx],
+            mem: MemBuffer::new(req),
+            tape_x: Vec::new(),
+            tape_s: Vec::new(),
+            kbar: [zv(), zv(), zv(), zv()],
+            xbar: [zv(), zv(), zv(), zv()],
+            lbar: zv(),
+            whess: DMatrix::zeros(0, 0),
+            shat: DMatrix::zeros(0, 0),
+            zz: DMatrix::zeros(0, 0),
+            calls: 0,
+        })
+    }
+
+    /// The method.
+    pub fn kind(&self) -> IntegratorKind {
+        self.kind
+    }
+    /// Substeps per interval.
+    pub fn substeps(&self) -> usize {
+        self.substeps
+    }
+    /// Interval length `Δt`.
+    pub fn interval(&self) -> f64 {
+        self.interval
+    }
+    /// Number of interval integrations performed so far.
+    pub fn calls(&self) -> usize {
+        self.calls
+    }
+
+    /// Allocates the tape used by [`Integrator::adjoint_hessian`] (explicit methods only).
+    pub fn enable_second_order(&mut self) -> Result<()> {
+        if self.kind == IntegratorKind::ImplicitMidpoint {
+            return Err(OcpError::Unsupported {
+                what: "exact Hessian with the implicit midpoint integrator",
+            });
+        }
+        let n = 4 * self.substeps;
+        let nz = self.nx + self.nu;
+        if self.tape_x.len() != n {
+            self.tape_x = vec![vec![0.0; self.nx]; n];
+            self.tape_s = vec![DMatrix::zeros(self.nx, nz); n];
+            self.whess = DMatrix::zeros(nz, nz);
+            self.shat = DMatrix::zeros(nz, nz);
+            self.zz = DMatrix::zeros(nz, nz);
+        }
+        Ok(())
+    }
+
+    fn check_args(&self, x0: &[f64], u: &[f64], x_end: &[f64]) -> Result<()> {
+        check_dim("x0", self.nx, x0.len())?;
+        check_dim("u", self.nu, u.len())?;
+        check_dim("x_end", self.nx, x_end.len())
+    }
+
+    /// `x_end = Φ(x0, u)`.
+    pub fn integrate<D: Dynamics + ?Sized>(
+        &mut self,
+        model: &D,
+        x0: &[f64],
+        u: &[f64],
+        x_end: &mut [f64],
+    ) -> Result<()> {
+        self.check_args(x0, u, x_end)?;
+        self.run(model, x0, u, false, false)?;
+        x_end.copy_from_slice(&self.x);
+        Ok(())
+    }
+
+    /// `x_end = Φ(x0, u)`, `a = ∂Φ/∂x0` (`nx × nx`), `b = ∂Φ/∂u` (`nx × nu`).
+    pub fn integrate_with_sensitivities<D: Dynamics + ?Sized>(
+        &mut self,
+        model: &D,
+        x0: &[f64],
+        u: &[f64],
+        x_end: &mut [f64],
+        a: &mut DMatrix<f64>,
+        b: &mut DMatrix<f64>,
+    ) -> Result<()> {
+        self.check_args(x0, u, x_end)?;
+        check_dim("a rows", self.nx, a.nrows())?;
+        check_dim("a columns", self.nx, a.ncols())?;
+        check_dim("b rows", self.nx, b.nrows())?;
+        check_dim("b columns", self.nu, b.ncols())?;
+        self.run(model, x0, u, true, false)?;
+        x_end.copy_from_slice(&self.x);
+        a.copy_from(&self.s.columns(0, self.nx));
+        b.copy_from(&self.s.columns(self.nx, self.nu));
+        Ok(())
+    }
+
+    /// Exact `out = ∇²_{(x0,u)} (λᵀ Φ(x0, u))`, a symmetric `(nx+nu)²` matrix (explicit methods;
+    /// call [`Integrator::enable_second_order`] first). Needs [`Dynamics::weighted_hessian`].
+    pub fn adjoint_hessian<D: Dynamics + ?Sized>(
+        &mut self,
+        model: &D,
+        x0: &[f64],
+        u: &[f64],
+        lambda: &[f64],
+        out: &mut DMatrix<f64>,
+    ) -> Result<()> {
+        check_dim("x0", self.nx, x0.len())?;
+        check_dim("u", self.nu, u.len())?;
+        check_dim("lambda", self.nx, lambda.len())?;
+        let nz = self.nx + self.nu;
+        check_dim("hessian rows", nz, out.nrows())?;
+        check_dim("hessian columns", nz, out.ncols())?;
+        if self.tape_x.len() != 4 * self.substeps {
+            return Err(OcpError::Unsupported {
+                what: "adjoint_hessian before enable_second_order",
+            });
+        }
+        self.run(model, x0, u, true, true)?;
+        self.backward(model, u, lambda, out)
+    }
+
+    fn run<D: Dynamics + ?Sized>(
+        &mut self,
+        model: &D,
+        x0: &[f64],
+        u: &[f64],
+        sens: bool,
+        tape: bool,
+    ) -> Result<()> {
+        self.calls += 1;
+        self.x.copy_from_slice(x0);
+        if sens {
+            self.s.fill(0.0);
+            for i in 0..self.nx {
+                self.s[(i, i)] = 1.0;
+            }
+        }
+        for n in 0..self.substeps {
+            match self.kind {
+                IntegratorKind::ImplicitMidpoint => self.midpoint_substep(model, u, sens)?,
+                _ => {
+                    self.explicit_substep(model, u, sens, if tape { Some(4 * n) } else { None })?
+                }
+            }
+            if !all_finite(&self.x) {
+                return Err(OcpError::NonFiniteDynamics { stage: "state" });
+            }
+        }
+        if sens && !all_finite(self.s.as_slice()) {
+            return Err(OcpError::NonFiniteDynamics { stage: "sensitivity" });
+        }
+        Ok(())
+    }
+
+    /// `dst = alpha * E^p * src` (+= when add); identity for plain RK4.
+    fn pow_vec(
+        lawson: &Option<Lawson>,
+        p: Pow,
+        dst: &mut [f64],
+        src: &[f64],
+        alpha: f64,
+        add: bool,
+    ) {
+        match lawson {
+            Some(lw) => {
+                let op = match p {
+                    Pow::E1 => &lw.e,
+                    Pow::E2 => &lw.e2,
+                };
+                op.apply_vec(dst, src, alpha, add)
+            }
+            None => {
+                if add {
+                    axpy(dst, alpha, src)
+                } else {
+                    for (d, s) in dst.iter_mut().zip(src) {
+                        *d = alpha * s;
+                    }
+                }
+            }
+        }
+    }
+
+    fn pow_mat(
+        lawson: &Option<Lawson>,
+        p: Pow,
+        dst: &mut DMatrix<f64>,
+        src: &DMatrix<f64>,
+        alpha: f64,
+        add: bool,
+    ) {
+        match lawson {
+            Some(lw) => {
+                let op = match p {
+                    Pow::E1 => &lw.e,
+                    Pow::E2 => &lw.e2,
+                };
+                op.apply(dst, src, alpha, add)
+            }
+            None => {
+                if add {
+                    axpy(dst.as_mut_slice(), alpha, src.as_slice())
+                } else {
+                    dst.copy_from(src);
+                    if alpha != 1.0 {
+                        *dst *= alpha;
+                    }
+                }
+            }
+        }
+    }
+
+    /// Transposed power on a vector.
+    fn pow_t_vec(
+        lawson: &Option<Lawson>,
+        p: Pow,
+        dst: &mut [f64],
+        src: &[f64],
+        alpha: f64,
+        add: bool,
+    ) {
+        match lawson {
+            Some(lw) => {
+                let op = match p {
+                    Pow::E1 => &lw.e,
+                    Pow::E2 => &lw.e2,
+                };
+                op.apply_t_vec(dst, src, alpha, add)
+            }
+            None => Self::pow_vec(&None, p, dst, src, alpha, add),
+        }
+    }
+
+    /// Evaluates stage `j` at `(xs, u)` (and its sensitivity at `sx`).
+    fn stage<D: Dynamics + ?Sized>(
+        &mut self,
+        model: &D,
+        u: &[f64],
+        j: usize,
+        sens: bool,
+        tape: Option<usize>,
+    ) -> Result<()> {
+        model.rhs(&self.xs, u, &mut self.k[j]);
+        if let Some(lw) = &self.lawson {
+            gemv(&mut self.k[j], &lw.l, &self.xs, -1.0, true);
+        }
+        if !all_finite(&self.k[j]) {
+            return Err(OcpError::NonFiniteDynamics { stage: "rhs" });
+        }
+        if let Some(base) = tape {
+            self.tape_x[base + j].copy_from_slice(&self.xs);
+            self.tape_s[base + j].copy_from(&self.sx);
+        }
+        if sens {
+            model.jacobians(&self.xs, u, &mut self.fx, &mut self.fu);
+            if let Some(lw) = &self.lawson {
+                self.fx -= &lw.l;
+            }
+            if !all_finite(self.fx.as_slice()) || !all_finite(self.fu.as_slice()) {
+                return Err(OcpError::NonFiniteDynamics { stage: "jacobian" });
+            }
+            gemm(&mut self.ks[j], &self.fx, &self.sx, 1.0, false);
+            let mut kb = self.ks[j].columns_mut(self.nx, self.nu);
+            kb += &self.fu;
+        }
+        Ok(())
+    }
+
+    fn explicit_substep<D: Dynamics + ?Sized>(
+        &mut self,
+        model: &D,
+        u: &[f64],
+        sens: bool,
+        tape: Option<usize>,
+    ) -> Result<()> {
+        let h = self.h;
+        let sens = sens || tape.is_some();
+        // stage 1: X1 = x
+        self.xs.copy_from_slice(&self.x);
+        if sens {
+            self.sx.copy_from(&self.s);
+        }
+        self.stage(model, u, 0, sens, tape)?;
+        // stage 2: X2 = E (x + h/2 k1)
+        self.t.copy_from_slice(&self.x);
+        axpy(&mut self.t, 0.5 * h, &self.k[0]);
+        Self::pow_vec(&self.lawson, Pow::E1, &mut self.xs, &self.t, 1.0, false);
+        if sens {
+            self.tm.copy_from(&self.s);
+            axpy(self.tm.as_mut_slice(), 0.5 * h, self.ks[0].as_slice());
+            Self::pow_mat(&self.lawson, Pow::E1, &mut self.sx, &self.tm, 1.0, false);
+        }
+        self.stage(model, u, 1, sens, tape)?;
+        // stage 3: X3 = E x + h/2 k2
+        Self::pow_vec(&self.lawson, Pow::E1, &mut self.xs, &self.x, 1.0, false);
+        axpy(&mut self.xs, 0.5 * h, &self.k[1]);
+        if sens {
+            Self::pow_mat(&self.lawson, Pow::E1, &mut self.sx, &self.s, 1.0, false);
+            axpy(self.sx.as_mut_slice(), 0.5 * h, self.ks[1].as_slice());
+        }
+        self.stage(model, u, 2, sens, tape)?;
+        // stage 4: X4 = E² x + h E k3
+        Self::pow_vec(&self.lawson, Pow::E2, &mut self.xs, &self.x, 1.0, false);
+        Self::pow_vec(&self.lawson, Pow::E1, &mut self.xs, &self.k[2], h, true);
+        if sens {
+            Self::pow_mat(&self.lawson, Pow::E2, &mut self.sx, &self.s, 1.0, false);
+            Self::pow_mat(&self.lawson, Pow::E1, &mut self.sx, &self.ks[2], h, true);
+        }
+        self.stage(model, u, 3, sens, tape)?;
+        // x⁺ = E²(x + h/6 k1) + h/3 E(k2 + k3) + h/6 k4
+        self.t.copy_from_slice(&self.x);
+        axpy(&mut self.t, h / 6.0, &self.k[0]);
+        Self::pow_vec(&self.lawson, Pow::E2, &mut self.x, &self.t, 1.0, false);
+        for i in 0..self.nx {
+            self.t[i] = self.k[1][i] + self.k[2][i];
+        }
+        Self::pow_vec(&self.lawson, Pow::E1, &mut self.x, &self.t, h / 3.0, true);
+        axpy(&mut self.x, h / 6.0, &self.k[3]);
+        if sens {
+            self.tm.copy_from(&self.s);
+            axpy(self.tm.as_mut_slice(), h / 6.0, self.ks[0].as_slice());
+            Self::pow_mat(&self.lawson, Pow::E2, &mut self.s, &self.tm, 1.0, false);
+            self.tm.copy_from(&self.ks[1]);
+            self.tm += &self.ks[2];
+            Self::pow_mat(&self.lawson, Pow::E1, &mut self.s, &self.tm, h / 3.0, true);
+            axpy(self.s.as_mut_slice(), h / 6.0, self.ks[3].as_slice());
+        }
+        Ok(())
+    }
+
+    /// Factorises `lu = I − h/2 fx` in place.
+    fn factor_newton(&mut self) -> Result<()> {
+        let nx = self.nx;
+        self.lu.copy_from(&self.fx);
+        self.lu *= -0.5 * self.h;
+        for i in 0..nx {
+            self.lu[(i, i)] += 1.0;
+        }
+        let (r, c) = self.lu.shape();
+        let view = faer::MatMut::from_column_major_slice_mut(self.lu.as_mut_slice(), r, c);
+        let _ = lu_factor::lu_in_place(
+            view,
+            &mut self.perm,
+            &mut self.perm_inv,
+            Par::Seq,
+            MemStack::new(&mut self.mem),
+            Default::default(),
+        );
+        for i in 0..nx {
+            let d = self.lu[(i, i)];
+            if d == 0.0 || !d.is_finite() {
+                return Err(OcpError::Singular { what: "implicit midpoint Newton matrix" });
+            }
+        }
+        Ok(())
+    }
+
+    /// Solves with the factorised Newton matrix, in place, for `rhs` (`nx × m`, column-major).
+    fn solve_newton(
+        lu: &DMatrix<f64>,
+        perm: &[usize],
+        perm_inv: &[usize],
+        mem: &mut MemBuffer,
+        rhs: &mut [f64],
+        m: usize,
+    ) {
+        let n = lu.nrows();
+        let lu_ref = faer::MatRef::from_column_major_slice(lu.as_slice(), n, n);
+        // SAFETY-free: the permutation arrays come from lu_in_place.
+        let p = faer::perm::PermRef::new_checked(perm, perm_inv, n);
+        lu_solve::solve_in_place_with_conj(
+            lu_ref,
+            lu_ref,
+            p,
+            Conj::No,
+            faer::MatMut::from_column_major_slice_mut(rhs, n, m),
+            Par::Seq,
+            MemStack::new(mem),
+        );
+    }
+
+    fn midpoint_substep<D: Dynamics + ?Sized>(
+        &mut self,
+        model: &D,
+        u: &[f64],
+        sens: bool,
+    ) -> Result<()> {
+        let h = self.h;
+        let nx = self.nx;
+        // initial guess: explicit half step
+        model.rhs(&self.x, u, &mut self.k[0]);
+        if !all_finite(&self.k[0]) {
+            return Err(OcpError::NonFiniteDynamics { stage: "rhs" });
+        }
+        self.xs.copy_from_slice(&self.x);
+        axpy(&mut self.xs, 0.5 * h, &self.k[0]);
+        let mut converged = false;
+        let mut residual = f64::INFINITY;
+        let mut it = 0;
+        while it <= self.newton_max_iterations {
+            model.rhs(&self.xs, u, &mut self.k[0]);
+            if !all_finite(&self.k[0]) {
+                return Err(OcpError::NonFiniteDynamics { stage: "rhs" });
+            }
+            for i in 0..nx {
+                self.t[i] = self.xs[i] - self.x[i] - 0.5 * h * self.k[0][i];
+            }
+            residual = norm_inf(&self.t);
+            if residual <= self.newton_tolerance * (1.0 + norm_inf(&self.xs)) {
+                converged = true;
+                break;
+            }
+            if it == self.newton_max_iterations {
+                break;
+            }
+            model.jacobians(&self.xs, u, &mut self.fx, &mut self.fu);
+            if !all_finite(self.fx.as_slice()) {
+                return Err(OcpError::NonFiniteDynamics { stage: "jacobian" });
+            }
+            self.factor_newton()?;
+            Self::solve_newton(&self.lu, &self.perm, &self.perm_inv, &mut self.mem, &mut self.t, 1);
+            for i in 0..nx {
+                self.xs[i] -= self.t[i];
+            }
+            if !all_finite(&self.xs) {
+                return Err(OcpError::NonFiniteDynamics { stage: "state" });
+            }
+            it += 1;
+        }
+        if !converged {
+            return Err(OcpError::NewtonFailed { iterations: it, residual });
+        }
+        if sens {
+            model.jacobians(&self.xs, u, &mut self.fx, &mut self.fu);
+            if !all_finite(self.fx.as_slice()) || !all_finite(self.fu.as_slice()) {
+                return Err(OcpError::NonFiniteDynamics { stage: "jacobian" });
+            }
+            self.factor_newton()?;
+            // (I − h/2 fx) ∂m/∂z = S + h/2 [0 | fu];  S⁺ = 2 ∂m/∂z − S
+            self.tm.copy_from(&self.s);
+            axpy(&mut self.tm.as_mut_slice()[nx * nx..], 0.5 * h, self.fu.as_slice());
+            let m = self.nx + self.nu;
+            Self::solve_newton(
+                &self.lu,
+                &self.perm,
+                &self.perm_inv,
+                &mut self.mem,
+                self.tm.as_mut_slice(),
+                m,
+            );
+            self.s *= -1.0;
+            axpy(self.s.as_mut_slice(), 2.0, self.tm.as_slice());
+        }
+        for i in 0..nx {
+            self.x[i] = 2.0 * self.xs[i] - self.x[i];
+        }
+        Ok(())
+    }
+
+    /// Backward sweep over the tape: accumulates `Σ Ŝⱼᵀ (k̄ⱼ·∇²f) Ŝⱼ` into `out`.
+    fn backward<D: Dynamics + ?Sized>(
+        &mut self,
+        model: &D,
+        u: &[f64],
+        lambda: &[f64],
+        out: &mut DMatrix<f64>,
+    ) -> Result<()> {
+        let h = self.h;
+        let nx = self.nx;
+        let nz = nx + self.nu;
+        out.fill(0.0);
+        self.lbar.copy_from_slice(lambda);
+        for n in (0..self.substeps).rev() {
+            let base = 4 * n;
+            // k̄4 = h/6 λ̄
+            for i in 0..nx {
+                self.kbar[3][i] = h / 6.0 * self.lbar[i];
+            }
+            self.stage_adjoint(model, u, base, 3)?;
+            // k̄3 = Eᵀ(h/3 λ̄ + h X̄4)
+            for i in 0..nx {
+                self.t[i] = h / 3.0 * self.lbar[i] + h * self.xbar[3][i];
+            }
+            Self::pow_t_vec(&self.lawson, Pow::E1, &mut self.kbar[2], &self.t, 1.0, false);
+            self.stage_adjoint(model, u, base, 2)?;
+            // k̄2 = h/3 Eᵀλ̄ + h/2 X̄3
+            Self::pow_t_vec(&self.lawson, Pow::E1, &mut self.kbar[1], &self.lbar, h / 3.0, false);
+            let (kb, xb) = (&mut self.kbar[1], &self.xbar[2]);
+            axpy(kb, 0.5 * h, xb);
+            self.stage_adjoint(model, u, base, 1)?;
+            // k̄1 = h/6 E²ᵀ λ̄ + h/2 Eᵀ X̄2
+            Self::pow_t_vec(&self.lawson, Pow::E2, &mut self.kbar[0], &self.lbar, h / 6.0, false);
+            Self::pow_t_vec(&self.lawson, Pow::E1, &mut self.kbar[0], &self.xbar[1], 0.5 * h, true);
+            self.stage_adjoint(model, u, base, 0)?;
+            // λ̄ ← E²ᵀλ̄ + X̄1 + Eᵀ(X̄2 + X̄3) + E²ᵀ X̄4
+            for i in 0..nx {
+                self.t[i] = self.lbar[i] + self.xbar[3][i];
+            }
+            Self::pow_t_vec(&self.lawson, Pow::E2, &mut self.lbar, &self.t, 1.0, false);
+            axpy(&mut self.lbar, 1.0, &self.xbar[0]);
+            for i in 0..nx {
+                self.t[i] = self.xbar[1][i] + self.xbar[2][i];
+            }
+            Self::pow_t_vec(&self.lawson, Pow::E1, &mut self.lbar, &self.t, 1.0, true);
+            // Hessian contributions of the four stages of this substep
+            for j in 0..4 {
+                model.weighted_hessian(&self.tape_x[base + j], u, &self.kbar[j], &mut self.whess);
+                if !all_finite(self.whess.as_slice()) {
+                    return Err(OcpError::NonFiniteDynamics { stage: "hessian" });
+                }
+                self.shat.fill(0.0);
+                self.shat.view_mut((0, 0), (nx, nz)).copy_from(&self.tape_s[base + j]);
+                for i in nx..nz {
+                    self.shat[(i, i)] = 1.0;
+                }
+                gemm(&mut self.zz, &self.whess, &self.shat, 1.0, false);
+                crate::la::gemm_tn(out, &self.shat, &self.zz, 1.0, true);
+            }
+        }
+        // symmetrise against round-off
+        for i in 0..nz {
+            for j in 0..i {
+                let v = 0.5 * (out[(i, j)] + out[(j, i)]);
+                out[(i, j)] = v;
+                out[(j, i)] = v;
+            }
+        }
+        Ok(())
+    }
+
+    /// `X̄ⱼ = (∂g/∂x)ᵀ(Xⱼ) k̄ⱼ`.
+    fn stage_adjoint<D: Dynamics + ?Sized>(
+        &mut self,
+        model: &D,
+        u: &[f64],
+        base: usize,
+        j: usize,
+    ) -> Result<()> {
+        model.jacobians(&self.tape_x[base + j], u, &mut self.fx, &mut self.fu);
+        if let Some(lw) = &self.lawson {
+            self.fx -= &lw.l;
+        }
+        if !all_finite(self.fx.as_slice()) {
+            return Err(OcpError::NonFiniteDynamics { stage: "jacobian" });
+        }
+        gemv_t(&mut self.xbar[j], &self.fx, &self.kbar[j], 1.0, false);
+        Ok(())
+    }
+}

@@ -1,0 +1,396 @@
+//! Canonical test models: a linear system, the cart-pole (NMPC benchmark) and a synthetic
+//! model with the modal ROM's structure `ẋ = Wx + N(x)x + Bu`.
+
+use crate::dynamics::Dynamics;
+use crate::error::{check_dim, invalid, Result};
+use nalgebra::DMatrix;
+use std::ops::{Add, Div, Mul, Neg, Sub};
+
+/// A small deterministic generator (SplitMix64) for reproducible samples, tests and benches.
+#[derive(Clone, Debug)]
+pub struct SplitMix64(u64);
+
+impl SplitMix64 {
+    /// Seeded generator.
+    pub fn new(seed: u64) -> Self {
+        Self(seed)
+    }
+    /// Next raw 64-bit value.
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform in `[lo, hi)`.
+    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        let v = (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
+        lo + (hi - lo) * v
+    }
+    /// Uniform index in `0..n` (`n > 0`).
+    pub fn index(&mut self, n: usize) -> usize {
+        (self.next_u64() % n as u64) as usize
+    }
+}
+
+/// Linear time-invariant model `ẋ = A x + B u`.
+#[derive(Clone, Debug)]
+pub struct LinearModel {
+    a: DMatrix<f64>,
+    b: DMatrix<f64>,
+}
+
+impl LinearModel {
+    /// `A` is `nx × nx`, `B` is `nx × nu`.
+    pub fn new(a: DMatrix<f64>, b: DMatrix<f64>) -> Result<Self> {
+        check_dim("A columns", a.nrows(), a.ncols())?;
+        check_dim("B rows", a.nrows(), b.nrows())?;
+        Ok(Self { a, b })
+    }
+
+    /// A chain of `n` unit masses joined by unit springs (first one tied to a wall), with
+    /// light damping, forces on the first `nu` masses: `nx = 2n`, `x = (positions, velocities)`.
+    pub fn spring_chain(n: usize, nu: usize) -> Self {
+        let nx = 2 * n;
+        let mut a = DMatrix::zeros(nx, nx);
+        let mut b = DMatrix::zeros(nx, nu);
+        for i in 0..n {
+            a[(i, n + i)] = 1.0;
+            let left = 1.0;
+            let right = if i + 1 < n { 1.0 } else { 0.0 };
+            a[(n + i, i)] = -(left + right);
+            if i > 0 {
+                a[(n + i, i - 1)] = 1.0;
+            }
+            if i + 1 < n {
+                a[(n + i, i + 1)] = 1.0;
+            }
+            a[(n + i, n + i)] = -0.05;
+        }
+        for k in 0..nu.min(n) {
+            b[(n + k, k)] = 1.0;
+        }
+        Self { a, b }
+    }
+}
+
+impl Dynamics for LinearModel {
+    fn nx(&self) -> usize {
+        self.a.nrows()
+    }
+    fn nu(&self) -> usize {
+        self.b.ncols()
+    }
+    fn rhs(&self, x: &[f64], u: &[f64], xdot: &mut [f64]) {
+        crate::la::gemv(xdot, &self.a, x, 1.0, false);
+        crate::la::gemv(xdot, &self.b, u, 1.0, true);
+    }
+    fn jacobians(&self, _x: &[f64], _u: &[f64], fx: &mut DMatrix<f64>, fu: &mut DMatrix<f64>) {
+        fx.copy_from(&self.a);
+        fu.copy_from(&self.b);
+    }
+    fn has_second_order(&self) -> bool {
+        true
+    }
+    fn linear_part(&self) -> Option<DMatrix<f64>> {
+        Some(self.a.clone())
+    }
+}
+
+/// Scalars the cart-pole right-hand side is written for (`f64` and hyper-dual numbers).
+trait Scalar:
+    Copy
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+{
+    fn cst(v: f64) -> Self;
+    fn sin(self) -> Self;
+    fn cos(self) -> Self;
+}
+
+impl Scalar for f64 {
+    fn cst(v: f64) -> Self {
+        v
+    }
+    fn sin(self) -> Self {
+        f64::sin(self)
+    }
+    fn cos(self) -> Self {
+        f64::cos(self)
+    }
+}
+
+/// Hyper-dual number `re + a ε₁ + b ε₂ + ab ε₁ε₂` (exact first and second derivatives).
+#[derive(Clone, Copy, Debug)]
+struct HyperDual {
+    re: f64,
+    a: f64,
+    b: f64,
+    ab: f64,
+}
+
+impl HyperDual {
+    fn chain(self, g0: f64, g1: f64, g2: f64) -> Self {
+        Self { re: g0, a: g1 * self.a, b: g1 * self.b, ab: g1 * self.ab + g2 * self.a * self.b }
+    }
+}
+
+impl Add for HyperDual {
+    type Output = Self;
+    fn add(self, o: Self) -> Self {
+        Self { re: self.re + o.re, a: self.a + o.a, b: self.b + o.b, ab: self.ab + o.ab }
+    }
+}
+impl Sub for HyperDual {
+    type Output = Self;
+    fn sub(self, o: Self) -> Self {
+        Self { re: self.re - o.re, a: self.a - o.a, b: self.b - o.b, ab: self.ab - o.ab }
+    }
+}
+impl Mul for HyperDual {
+    type Output = Self;
+    fn mul(self, o: Self) -> Self {
+        Self {
+            re: self.re * o.re,
+            a: self.re * o.a + self.a * o.re,
+            b: self.re * o.b + self.b * o.re,
+            ab: self.re * o.ab + self.a * o.b + self.b * o.a + self.ab * o.re,
+        }
+    }
+}
+impl Div for HyperDual {
+    type Output = Self;
+    fn div(self, o: Self) -> Self {
+        let r = 1.0 / o.re;
+        self * o.chain(r, -r * r, 2.0 * r * r * r)
+    }
+}
+impl Neg for HyperDual {
+    type Output = Self;
+    fn neg(self) -> Self {
+        Self { re: -self.re, a: -self.a, b: -self.b, ab: -self.ab }
+    }
+}
+impl Scalar for HyperDual {
+    fn cst(v: f64) -> Self {
+        Self { re: v, a: 0.0, b: 0.0, ab: 0.0 }
+    }
+    fn sin(self) -> Self {
+        let (s, c) = self.re.sin_cos();
+        self.chain(s, c, -s)
+    }
+    fn cos(self) -> Self {
+        let (s, c) = self.re.sin_cos();
+        self.chain(c, -s, -c)
+    }
+}
+
+/// Cart-pole (the acados/NMPC swing-up benchmark): `x = (p, θ, v, ω)` with `θ = 0` upright,
+/// `u = F` the horizontal force on the cart.
+///
+/// `v̇ = (−m l sinθ ω² + m g cosθ sinθ + F) / (M + m − m cos²θ)`,
+/// `ω̇ = (−m l cosθ sinθ ω² + F cosθ + (M + m) g sinθ) / (l (M + m − m cos²θ))`.
+/// Derivatives (first and second) are exact, by hyper-dual numbers.
+#[derive(Clone, Debug)]
+pub struct CartPole {
+    /// Cart mass `M` (kg).
+    pub cart_mass: f64,
+    /// Pole tip mass `m` (kg).
+    pub pole_mass: f64,
+    /// Pole length `l` (m).
+    pub length: f64,
+    /// Gravity `g` (m/s²).
+    pub gravity: f64,
+}
+
+impl Default for CartPole {
+    /// acados' parameters: `M = 1`, `m = 0.1`, `l = 0.8`, `g = 9.81`.
+    fn default() -> Self {
+        Self { cart_mass: 1.0, pole_mass: 0.1, length: 0.8, gravity: 9.81 }
+    }
+}
+
+impl CartPole {
+    fn eval<T: Scalar>(&self, x: [T; 4], f: T) -> [T; 4] {
+        let (mm, m, l, g) = (
+            T::cst(self.cart_mass),
+            T::cst(self.pole_mass),
+            T::cst(self.length),
+            T::cst(self.gravity),
+        );
+        let (s, c) = (x[1].sin(), x[1].cos());
+        let w = x[3];
+        let den = mm + m - m * c * c;
+        let vdot = (-(m * l * s * w * w) + m * g * c * s + f) / den;
+        let wdot = (-(m * l * c * s * w * w) + f * c + (mm + m) * g * s) / (l * den);
+        [x[2], w, vdot, wdot]
+    }
+
+    fn seeded(&self, x: &[f64], u: &[f64], i: usize, j: Option<usize>) -> [HyperDual; 4] {
+        let mut z = [HyperDual::cst(0.0); 5];
+        for k in 0..4 {
+            z[k] = HyperDual::cst(x[k]);
+        }
+        z[4] = HyperDual::cst(u[0]);
+        z[i].a = 1.0;
+        if let Some(j) = j {
+            z[j].b = 1.0;
+        }
+        self.eval([z[0], z[1], z[2], z[3]], z[4])
+    }
+}
+
+impl Dynamics for CartPole {
+    fn nx(&self) -> usize {
+        4
+    }
+    fn nu(&self) -> usize {
+        1
+    }
+    fn rhs(&self, x: &[f64], u: &[f64], xdot: &mut [f64]) {
+        let r = self.eval([x[0], x[1], x[2], x[3]], u[0]);
+        xdot.copy_from_slice(&r);
+    }
+    fn jacobians(&self, x: &[f64], u: &[f64], fx: &mut DMatrix<f64>, fu: &mut DMatrix<f64>) {
+        for i in 0..5 {
+            let r = self.seeded(x, u, i, None);
+            for k in 0..4 {
+                if i < 4 {
+                    fx[(k, i)] = r[k].a;
+                } else {
+                    fu[(k, 0)] = r[k].a;
+                }
+            }
+        }
+    }
+    fn has_second_order(&self) -> bool {
+        true
+    }
+    fn weighted_hessian(&self, x: &[f64], u: &[f64], w: &[f64], out: &mut DMatrix<f64>) {
+        for i in 0..5 {
+            for j in i..5 {
+                let r = self.seeded(x, u, i, Some(j));
+                let v: f64 = (0..4).map(|k| w[k] * r[k].ab).sum();
+                out[(i, j)] = v;
+                out[(j, i)] = v;
+            }
+        }
+    }
+}
+
+/// A synthetic model with the modal ROM's structure (paper eqs. 14–21, theory.md §5):
+/// `ẋ = W x + N(x) x + B u` with `N(x) = Σ_l x_l Γ_l` linear in `x`, every `Γ_l` sparse and
+/// skew-symmetric (so `xᵀ N(x) x = 0`, the ROM's energy identity), `W` block diagonal with
+/// 2 × 2 oscillator blocks `[[−2ζω, −ω], [ω, 0]]` (two rigid pairs with `ω = 0`, the rest
+/// with frequencies growing quadratically up to `omega_max`), plus one extra state when `nx`
+/// is odd (a slow, purely nonlinear coordinate like the ROM's quaternion coefficients).
+#[derive(Clone, Debug)]
+pub struct ModalLike {
+    w: DMatrix<f64>,
+    b: DMatrix<f64>,
+    /// `(i, l, j, v)`: `(N(x)x)_i += v x_l x_j`.
+    gamma: Vec<(usize, usize, usize, f64)>,
+}
+
+impl ModalLike {
+    /// `nx ≥ 4` states, `nu ≥ 1` inputs, highest frequency `omega_max` (rad/s),
+    /// `gamma_scale` the size of the `Γ` entries (`|v| ≤ gamma_scale`), deterministic `seed`.
+    /// Each `Γ_l` has 3 skew pairs; damping ratio 0.5 %.
+    pub fn new(nx: usize, nu: usize, omega_max: f64, gamma_scale: f64, seed: u64) -> Result<Self> {
+        if nx < 4 {
+            return Err(invalid("nx", nx, "ModalLike needs at least 4 states"));
+        }
+        if nu == 0 {
+            return Err(invalid("nu", nu, "ModalLike needs at least 1 input"));
+        }
+        if !(omega_max > 0.0 && omega_max.is_finite()) {
+            return Err(invalid("omega_max", omega_max, "must be positive and finite"));
+        }
+        let mut rng = SplitMix64::new(seed);
+        let pairs = nx / 2;
+        let mut w = DMatrix::zeros(nx, nx);
+        for p in 0..pairs {
+            let omega =
+                if p < 2 { 0.0 } else { omega_max * ((p - 1) as f64 / (pairs - 2) as f64).powi(2) };
+            let (i, j) = (2 * p, 2 * p + 1);
+            w[(i, i)] = -2.0 * 0.005 * omega;
+            w[(i, j)] = -omega;
+            w[(j, i)] = omega;
+        }
+        let mut gamma = Vec::new();
+        for l in 0..nx {
+            for _ in 0..3 {
+                let i = rng.index(nx);
+                let mut j = rng.index(nx);
+                if j == i {
+                    j = (i + 1) % nx;
+                }
+                let v = gamma_scale * rng.uniform(-1.0, 1.0);
+                gamma.push((i, l, j, v));
+                gamma.push((j, l, i, -v));
+            }
+        }
+        let b = DMatrix::from_fn(nx, nu, |_, _| rng.uniform(-1.0, 1.0));
+        Ok(Self { w, b, gamma })
+    }
+
+    /// The paper-sized benchmark model: `nx = 61`, `nu = 5`, frequencies up to 175 rad/s.
+    pub fn paper_sized() -> Self {
+        Self::new(61, 5, 175.0, 3.0, 7).expect("valid constants")
+    }
+
+    /// `xᵀ N(x) x` (zero by construction, up to round-off).
+    pub fn nonlinear_power(&self, x: &[f64]) -> f64 {
+        self.gamma.iter().map(|&(i, l, j, v)| x[i] * v * x[l] * x[j]).sum()
+    }
+}
+
+impl Dynamics for ModalLike {
+    fn nx(&self) -> usize {
+        self.w.nrows()
+    }
+    fn nu(&self) -> usize {
+        self.b.ncols()
+    }
+    fn rhs(&self, x: &[f64], u: &[f64], xdot: &mut [f64]) {
+        let nx = x.len();
+        for i in 0..nx {
+            // W is block diagonal: at most 2 entries per row
+            let p = i / 2 * 2;
+            let mut acc = 0.0;
+            for j in p..(p + 2).min(nx) {
+                acc += self.w[(i, j)] * x[j];
+            }
+            xdot[i] = acc;
+        }
+        for &(i, l, j, v) in &self.gamma {
+            xdot[i] += v * x[l] * x[j];
+        }
+        crate::la::gemv(xdot, &self.b, u, 1.0, true);
+    }
+    fn jacobians(&self, x: &[f64], _u: &[f64], fx: &mut DMatrix<f64>, fu: &mut DMatrix<f64>) {
+        fx.copy_from(&self.w);
+        for &(i, l, j, v) in &self.gamma {
+            fx[(i, l)] += v * x[j];
+            fx[(i, j)] += v * x[l];
+        }
+        fu.copy_from(&self.b);
+    }
+    fn has_second_order(&self) -> bool {
+        true
+    }
+    fn weighted_hessian(&self, _x: &[f64], _u: &[f64], w: &[f64], out: &mut DMatrix<f64>) {
+        out.fill(0.0);
+        for &(i, l, j, v) in &self.gamma {
+            out[(l, j)] += w[i] * v;
+            out[(j, l)] += w[i] * v;
+        }
+    }
+    fn linear_part(&self) -> Option<DMatrix<f64>> {
+        Some(self.w.clone())
+    }
+}

@@ -1,0 +1,3 @@
+//! Integration tests of `ocp-transcription` (one binary).
+
+mod integrators;
