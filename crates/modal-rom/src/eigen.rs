@@ -1,0 +1,693 @@
+//! Constrained linear modes by second-order reduction (theory.md §4; paper eqs. 30–32).
+//!
+//! The linearised, undamped FE model at rest is `B Ẋ = A X`, `G X = 0` (31). Split into node
+//! values `X1` and element values `X2`, it reads
+//!
+//! ```text
+//!   B1 Ẋ1 =  D X2          (node rows:    w_n M ẋ1_n = x2 differences + h/2 E x2)
+//!   B2 Ẋ2 = −Dᵀ X1         (element rows: h_e C ẋ2_e = x1 differences − h Eᵀ x̄1)
+//!   G1 X1 = 0              (velocity rows of supports and joints, eq. 11)
+//! ```
+//!
+//! with the end values `x2_L/R` (reactions, eq. 12) dropping out: on velocities that satisfy
+//! `G1`, the reactions do no work (joints are power-free, theory.md §3). Eliminating `X2` where
+//! `B2` is invertible gives the symmetric definite problem
+//!
+//! ```text
+//!   ω² B1 φ1 = K φ1,   K = D B2⁻¹ Dᵀ,   φ1 ∈ null(G1) ∩ null(D_rᵀ) (rigid C rows),
+//! ```
+//!
+//! and massless rows (`B1 = 0`) add the constraint `(K φ1)_massless = 0`. All constraints are
+//! absorbed into a null-space basis `Z` (32); the reduced pencil `(ZᵀKZ, ZᵀB1Z)` is solved by a
+//! Cholesky transform `ZᵀB1Z = L Lᵀ` and faer's self-adjoint eigen solver on `L⁻¹ ZᵀKZ L⁻ᵀ`.
+//! Modes are real and exactly `B1`-orthonormal.
+//!
+//! **Force modes and sign.** `φ2 = +B2⁻¹ Dᵀ φ1 / ω` (elastic modes; rigid modes have
+//! `φ2 ≡ 0`). With this choice `⟨φ1i, D φ2j⟩ = +ω_j δij` and the modal equations are the
+//! paper's (15): `q̇1 = Ω q2`, `q̇2 = −Ω q1`.
+//!
+//! **Decoupling.** The problem is split into the connected components of the sparsity graph
+//! of `B1`, `B2`, `D`, `G1` (e.g. axial, torsion and the two bending families of a straight
+//! structure at 0°) and each block is solved on its own: exact, and much faster.
+
+use crate::error::{invalid, shape, ModalError, Result};
+use crate::layout::{FullIndex, Layout};
+use faer::linalg::solvers::Solve;
+use faer::{Mat, MatRef, Side};
+
+/// Settings of the constrained eigen solver.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EigenSettings {
+    /// An eigenvalue `ω²` is a rigid-body mode when `ω² ≤ rigid_tolerance · max ω²`.
+    /// Default `1e-10` (round-off gives `|ω²| ≈ 1e-16 · max ω²`; the lowest elastic mode of
+    /// the paper's scenes sits near `1e-7 · max ω²` at 2×50 elements). Range `(0, 1e-4]`.
+    pub rigid_tolerance: f64,
+    /// Relative singular-value cut-off for constraint rank and massless directions.
+    /// Default `1e-10`. Range `(0, 1e-3]`.
+    pub rank_tolerance: f64,
+}
+
+impl Default for EigenSettings {
+    fn default() -> Self {
+        EigenSettings { rigid_tolerance: 1e-10, rank_tolerance: 1e-10 }
+    }
+}
+
+impl EigenSettings {
+    /// Checks the ranges documented on each field.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.rigid_tolerance > 0.0 && self.rigid_tolerance <= 1e-4) {
+            return Err(invalid("rigid_tolerance", self.rigid_tolerance, "must lie in (0, 1e-4]"));
+        }
+        if !(self.rank_tolerance > 0.0 && self.rank_tolerance <= 1e-3) {
+            return Err(invalid("rank_tolerance", self.rank_tolerance, "must lie in (0, 1e-3]"));
+        }
+        Ok(())
+    }
+}
+
+/// The linearised FE operators in second-order form (see the module docs).
+#[derive(Clone, Debug)]
+pub struct SecondOrderProblem {
+    /// `B1` (n1 × n1): node mass blocks `w_n M`, symmetric positive semidefinite.
+    pub b1: Mat<f64>,
+    /// `B2` (n2 × n2): element compliance blocks `h_e C`, symmetric positive semidefinite.
+    pub b2: Mat<f64>,
+    /// `D` (n1 × n2): node rows, element columns of the skew operator `A`.
+    pub d: Mat<f64>,
+    /// `G1` (c × n1): velocity constraint rows (supports, joints, prescribed motion).
+    pub g: Mat<f64>,
+}
+
+fn check_finite(what: &str, m: MatRef<'_, f64>) -> Result<()> {
+    for j in 0..m.ncols() {
+        for i in 0..m.nrows() {
+            if !m[(i, j)].is_finite() {
+                return Err(ModalError::NonFinite {
+                    what: what.to_string(),
+                    index: j * m.nrows() + i,
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+impl SecondOrderProblem {
+    /// Builds the problem from its blocks, checking shapes, finiteness and symmetry of `B1`, `B2`.
+    pub fn new(b1: Mat<f64>, b2: Mat<f64>, d: Mat<f64>, g: Mat<f64>) -> Result<Self> {
+        let (n1, n2) = (b1.nrows(), b2.nrows());
+        if b1.ncols() != n1 {
+            return Err(shape("B1", (n1, n1), (b1.nrows(), b1.ncols())));
+        }
+        if b2.ncols() != n2 {
+            return Err(shape("B2", (n2, n2), (b2.nrows(), b2.ncols())));
+        }
+        if d.nrows() != n1 || d.ncols() != n2 {
+            return Err(shape("D", (n1, n2), (d.nrows(), d.ncols())));
+        }
+        if g.ncols() != n1 {
+            return Err(shape("G1", (g.nrows(), n1), (g.nrows(), g.ncols())));
+        }
+        for (what, m) in
+            [("B1", b1.as_ref()), ("B2", b2.as_ref()), ("D", d.as_ref()), ("G1", g.as_ref())]
+        {
+            check_finite(what, m)?;
+        }
+        for (what, m) in [("B1", b1.as_ref()), ("B2", b2.as_ref())] {
+            let scale = max_abs(m).max(f64::MIN_POSITIVE);
+            for j in 0..m.ncols() {
+                for i in 0..j {
+                    if (m[(i, j)] - m[(j, i)]).abs() > 1e-12 * scale {
+                        return Err(invalid(
+                            format!("{what}[({i}, {j})]"),
+                            m[(i, j)],
+                            format!("{what} must be symmetric"),
+                        ));
+                    }
+                }
+                if m[(j, j)] < 0.0 {
+                    return Err(invalid(
+                        format!("{what}[({j}, {j})]"),
+                        m[(j, j)],
+                        "diagonal must be ≥ 0",
+                    ));
+                }
+            }
+        }
+        Ok(SecondOrderProblem { b1, b2, d, g })
+    }
+
+    /// Builds the problem from the full FE operators in the LAYOUT.md ordering, given as
+    /// `(row, col, value)` entries (duplicates are summed): `B` (n_full²), the skew `A`
+    /// (n_full²) and `G` (`g_rows × n_full`).
+    ///
+    /// Rows of `G` on end values only (free-end and force-balance rows) close the reactions
+    /// and are not needed for the modes; rows on node values only are the velocity
+    /// constraints `G1`; a row on element values, or mixing node and end values, is rejected.
+    /// The element-row block of `A` must equal `−Dᵀ` (skew), to `1e-12` relative.
+    pub fn from_full_entries(
+        layout: &Layout,
+        b: impl IntoIterator<Item = (usize, usize, f64)>,
+        a: impl IntoIterator<Item = (usize, usize, f64)>,
+        g_rows: usize,
+        g: impl IntoIterator<Item = (usize, usize, f64)>,
+    ) -> Result<Self> {
+        let (n1, n2, nf) = (layout.n1(), layout.n2(), layout.n_full());
+        let mut b1 = Mat::<f64>::zeros(n1, n1);
+        let mut b2 = Mat::<f64>::zeros(n2, n2);
+        let mut d = Mat::<f64>::zeros(n1, n2);
+        let mut dt = Mat::<f64>::zeros(n2, n1);
+        let cls = |i: usize, what: &str| -> Result<FullIndex> {
+            match layout.classify_full(i) {
+                FullIndex::OutOfRange => {
+                    Err(invalid(what, i, format!("index past the FE vector length {nf}")))
+                }
+                c => Ok(c),
+            }
+        };
+        for (i, j, v) in b {
+            match (cls(i, "B row")?, cls(j, "B column")?) {
+                (FullIndex::X1(p), FullIndex::X1(q)) => b1[(p, q)] += v,
+                (FullIndex::X2(p), FullIndex::X2(q)) => b2[(p, q)] += v,
+                _ if v == 0.0 => {}
+                _ => {
+                    return Err(invalid(
+                        format!("B[({i}, {j})]"),
+                        v,
+                        "B must be block diagonal (nodes, elements, zero on end values)",
+                    ))
+                }
+            }
+        }
+        for (i, j, v) in a {
+            match (cls(i, "A row")?, cls(j, "A column")?) {
+                (FullIndex::X1(p), FullIndex::X2(q)) => d[(p, q)] += v,
+                (FullIndex::X2(p), FullIndex::X1(q)) => dt[(p, q)] += v,
+                _ => {}
+            }
+        }
+        let scale = max_abs(d.as_ref()).max(f64::MIN_POSITIVE);
+        for p in 0..n1 {
+            for q in 0..n2 {
+                if (d[(p, q)] + dt[(q, p)]).abs() > 1e-12 * scale {
+                    return Err(invalid(
+                        format!("A (node {p}, element {q})"),
+                        d[(p, q)],
+                        format!("A must be skew: the element-row entry is {}", dt[(q, p)]),
+                    ));
+                }
+            }
+        }
+        let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); g_rows];
+        let mut kinds = vec![(false, false); g_rows];
+        for (i, j, v) in g {
+            if i >= g_rows {
+                return Err(invalid("G row", i, format!("G has {g_rows} rows")));
+            }
+            if v == 0.0 {
+                continue;
+            }
+            match cls(j, "G column")? {
+                FullIndex::X1(q) => {
+                    rows[i].push((q, v));
+                    kinds[i].0 = true;
+                }
+                FullIndex::End => kinds[i].1 = true,
+                _ => {
+                    return Err(invalid(
+                        format!("G[({i}, {j})]"),
+                        v,
+                        "constraint rows on element values are not supported",
+                    ))
+                }
+            }
+        }
+        let kept: Vec<usize> = (0..g_rows).filter(|&r| kinds[r].0).collect();
+        if let Some(&r) = kept.iter().find(|&&r| kinds[r].1) {
+            return Err(invalid(
+                format!("G row {r}"),
+                "mixed",
+                "a row mixes node velocities and end values",
+            ));
+        }
+        let mut g1 = Mat::<f64>::zeros(kept.len(), n1);
+        for (new, &r) in kept.iter().enumerate() {
+            for &(q, v) in &rows[r] {
+                g1[(new, q)] += v;
+            }
+        }
+        SecondOrderProblem::new(b1, b2, d, g1)
+    }
+
+    /// `n1`, the length of `X1`.
+    pub fn n1(&self) -> usize {
+        self.b1.nrows()
+    }
+
+    /// `n2`, the length of `X2`.
+    pub fn n2(&self) -> usize {
+        self.b2.nrows()
+    }
+}
+
+/// Modes as computed: rigid first (in the canonical basis), then elastic by frequency.
+#[derive(Clone, Debug)]
+pub struct RawModes {
+    /// Eigenvalues `ω²` as computed (rigid ones may be ±round-off).
+    pub lambda: Vec<f64>,
+    /// Frequencies `ω ≥ 0` (exactly 0 for rigid modes).
+    pub omega: Vec<f64>,
+    /// Velocity modes (n1 × m), `B1`-orthonormal.
+    pub phi1: Mat<f64>,
+    /// Force modes (n2 × m), `φ2 = B2⁻¹Dᵀφ1/ω` (zero for rigid modes).
+    pub phi2: Mat<f64>,
+    /// Number of rigid-body modes (the first columns).
+    pub n_rigid: usize,
+    /// Largest eigenvalue `max ω²` (conditioning reference).
+    pub lambda_max: f64,
+    /// Sizes of the decoupled blocks solved (in `X1` unknowns after reduction).
+    pub block_sizes: Vec<usize>,
+}
+
+pub(crate) fn max_abs(m: MatRef<'_, f64>) -> f64 {
+    let mut out = 0.0f64;
+    for j in 0..m.ncols() {
+        for i in 0..m.nrows() {
+            out = out.max(m[(i, j)].abs());
+        }
+    }
+    out
+}
+
+fn gather(m: MatRef<'_, f64>, rows: &[usize], cols: &[usize]) -> Mat<f64> {
+    Mat::from_fn(rows.len(), cols.len(), |i, j| m[(rows[i], cols[j])])
+}
+
+fn symmetrize(m: &mut Mat<f64>) {
+    let n = m.nrows();
+    for j in 0..n {
+        for i in 0..j {
+            let s = 0.5 * (m[(i, j)] + m[(j, i)]);
+            m[(i, j)] = s;
+            m[(j, i)] = s;
+        }
+    }
+}
+
+/// Null-space basis of `c` (rows × n): identity on untouched columns, and the right singular
+/// vectors of the touched columns with singular value `≤ tol · σ_max`.
+pub(crate) fn null_space(c: MatRef<'_, f64>, tol: f64) -> Result<Mat<f64>> {
+    let n = c.ncols();
+    let touched: Vec<usize> =
+        (0..n).filter(|&j| (0..c.nrows()).any(|i| c[(i, j)] != 0.0)).collect();
+    let untouched: Vec<usize> = (0..n).filter(|j| touched.binary_search(j).is_err()).collect();
+    let mut null_cols: Vec<Vec<f64>> = Vec::new();
+    if !touched.is_empty() {
+        let rows: Vec<usize> = (0..c.nrows()).collect();
+        let sub = gather(c, &rows, &touched);
+        let svd = sub.svd().map_err(|e| ModalError::Numerical {
+            stage: "SVD of the constraint rows".into(),
+            reason: format!("{e:?}"),
+        })?;
+        let s = svd.S().column_vector();
+        let smax = (0..s.nrows()).map(|i| s[i]).fold(0.0f64, f64::max);
+        let rank = (0..s.nrows()).filter(|&i| s[i] > tol * smax).count();
+        let v = svd.V();
+        for col in rank..touched.len() {
+            null_cols.push((0..touched.len()).map(|i| v[(i, col)]).collect());
+        }
+    }
+    let mut z = Mat::<f64>::zeros(n, untouched.len() + null_cols.len());
+    for (col, &j) in untouched.iter().enumerate() {
+        z[(j, col)] = 1.0;
+    }
+    for (extra, vals) in null_cols.iter().enumerate() {
+        for (i, &t) in touched.iter().enumerate() {
+            z[(t, untouched.len() + extra)] = vals[i];
+        }
+    }
+    Ok(z)
+}
+
+struct UnionFind(Vec<usize>);
+
+impl UnionFind {
+    fn find(&mut self, mut a: usize) -> usize {
+        while self.0[a] != a {
+            self.0[a] = self.0[self.0[a]];
+            a = self.0[a];
+        }
+        a
+    }
+    fn union(&mut self, a: usize, b: usize) {
+        let (ra, rb) = (self.find(a), self.find(b));
+        if ra != rb {
+            let (lo, hi) = if ra < rb { (ra, rb) } else { (rb, ra) };
+            self.0[hi] = lo;
+        }
+    }
+}
+
+/// One decoupled block's solution before rigid/elastic classification.
+struct BlockSolution {
+    s1: Vec<usize>,
+    elastic_cols: Vec<usize>,
+    lambda: Vec<f64>,
+    phi1: Mat<f64>,
+    /// `B2e⁻¹ D_eᵀ` restricted to the block (|elastic| × |s1|).
+    flex: Mat<f64>,
+}
+
+fn solve_block(
+    p: &SecondOrderProblem,
+    s1: Vec<usize>,
+    s2: Vec<usize>,
+    g_rows: &[usize],
+    tol: f64,
+) -> Result<BlockSolution> {
+    let b1 = gather(p.b1.as_ref(), &s1, &s1);
+    let b2 = gather(p.b2.as_ref(), &s2, &s2);
+    let d = gather(p.d.as_ref(), &s1, &s2);
+    // Rigid element components: zero rows of B2 (C = 0 there, theory.md §1).
+    let rigid: Vec<usize> =
+        (0..s2.len()).filter(|&i| (0..s2.len()).all(|j| b2[(i, j)] == 0.0)).collect();
+    let elastic: Vec<usize> = (0..s2.len()).filter(|i| rigid.binary_search(i).is_err()).collect();
+    // Constraint rows: velocity rows, then D_rᵀ (rigid strain rows).
+    let mut cons = Mat::<f64>::zeros(g_rows.len() + rigid.len(), s1.len());
+    for (r, &gr) in g_rows.iter().enumerate() {
+        for (c, &gi) in s1.iter().enumerate() {
+            cons[(r, c)] = p.g[(gr, gi)];
+        }
+    }
+    for (r, &rc) in rigid.iter().enumerate() {
+        for c in 0..s1.len() {
+            cons[(g_rows.len() + r, c)] = d[(c, rc)];
+        }
+    }
+    let mut z = if cons.nrows() == 0 {
+        Mat::<f64>::identity(s1.len(), s1.len())
+    } else {
+        null_space(cons.as_ref(), tol)?
+    };
+    let b2e = gather(b2.as_ref(), &elastic, &elastic);
+    let all1: Vec<usize> = (0..s1.len()).collect();
+    let de = gather(d.as_ref(), &all1, &elastic);
+    let flex = if elastic.is_empty() {
+        Mat::<f64>::zeros(0, s1.len())
+    } else {
+        let llt = b2e.llt(Side::Lower).map_err(|e| ModalError::Numerical {
+            stage: "Cholesky of an element compliance block B2".into(),
+            reason: format!(
+                "{e:?} (a compliance matrix C must be positive definite on its non-rigid entries)"
+            ),
+        })?;
+        llt.solve(de.transpose().to_owned())
+    };
+    let k = &de * &flex;
+    let reduce = |z: &Mat<f64>| {
+        let mut b1r = z.transpose() * &b1 * z;
+        let mut kr = z.transpose() * &k * z;
+        symmetrize(&mut b1r);
+        symmetrize(&mut kr);
+        (b1r, kr)
+    };
+    let (mut b1r, mut kr) = reduce(&z);
+    if z.ncols() > 0 && b1r.llt(Side::Lower).is_err() {
+        // Massless directions: (K φ1) vanishes there (theory.md §4).
+        let eig = b1r.self_adjoint_eigen(Side::Lower).map_err(|e| ModalError::Numerical {
+            stage: "eigen of the reduced mass matrix".into(),
+            reason: format!("{e:?}"),
+        })?;
+        let s = eig.S().column_vector();
+        let smax = (0..s.nrows()).map(|i| s[i].abs()).fold(0.0f64, f64::max);
+        let idx: Vec<usize> = (0..s.nrows()).filter(|&i| s[i] <= tol * smax).collect();
+        let u = eig.U();
+        let n_mat = Mat::from_fn(b1r.nrows(), idx.len(), |i, j| u[(i, idx[j])]);
+        let cons2 = n_mat.transpose() * &kr;
+        let z2 = null_space(cons2.as_ref(), tol)?;
+        z = &z * &z2;
+        (b1r, kr) = reduce(&z);
+    }
+    let nz = z.ncols();
+    if nz == 0 {
+        return Ok(BlockSolution {
+            s1,
+            elastic_cols: elastic.iter().map(|&i| s2[i]).collect(),
+            lambda: vec![],
+            phi1: Mat::zeros(all1.len(), 0),
+            flex,
+        });
+    }
+    let llt = b1r.llt(Side::Lower).map_err(|e| ModalError::Numerical {
+        stage: "Cholesky of the reduced mass matrix ZᵀB1Z".into(),
+        reason: format!("{e:?} (massless directions left after elimination)"),
+    })?;
+    let l = llt.L().to_owned();
+    let mut x = kr.clone();
+    l.solve_lower_triangular_in_place(x.as_mut());
+    let mut a = x.transpose().to_owned();
+    l.solve_lower_triangular_in_place(a.as_mut());
+    symmetrize(&mut a);
+    let eig = a.self_adjoint_eigen(Side::Lower).map_err(|e| ModalError::Numerical {
+        stage: "self-adjoint eigen solve".into(),
+        reason: format!("{e:?}"),
+    })?;
+    let s = eig.S().column_vector();
+    let lambda: Vec<f64> = (0..nz).map(|i| s[i]).collect();
+    let mut y = eig.U().to_owned();
+    l.transpose().solve_upper_triangular_in_place(y.as_mut());
+    let phi1 = &z * &y;
+    Ok(BlockSolution {
+        s1,
+        elastic_cols: elastic.iter().map(|&i| s2[i]).collect(),
+        lambda,
+        phi1,
+        flex,
+    })
+}
+
+/// Solves the constrained eigenproblem (see the module docs).
+///
+/// `rigid_candidates` (columns of length n1, in priority order) fix the basis of the
+/// degenerate rigid-body eigenspace: each is projected onto it and made `B1`-orthogonal to
+/// the previous ones (theory.md §4: rotation about the root first, then joint by joint).
+/// Without candidates, or when they do not span the space, the projections of the unit
+/// vectors `e_0, e_1, …` are used, which is deterministic but not physically ordered.
+pub fn solve(
+    problem: &SecondOrderProblem,
+    settings: &EigenSettings,
+    rigid_candidates: Option<MatRef<'_, f64>>,
+) -> Result<RawModes> {
+    settings.validate()?;
+    let (n1, n2) = (problem.n1(), problem.n2());
+    if let Some(c) = rigid_candidates {
+        if c.nrows() != n1 {
+            return Err(shape("rigid_candidates", (n1, c.ncols()), (c.nrows(), c.ncols())));
+        }
+        check_finite("rigid_candidates", c)?;
+    }
+    // Connected components over X1 ∪ X2 unknowns.
+    let mut uf = UnionFind((0..n1 + n2).collect());
+    for j in 0..n1 {
+        for i in 0..n1 {
+            if problem.b1[(i, j)] != 0.0 {
+                uf.union(i, j);
+            }
+        }
+        for e in 0..n2 {
+            if problem.d[(j, e)] != 0.0 {
+                uf.union(j, n1 + e);
+            }
+        }
+    }
+    for j in 0..n2 {
+        for i in 0..n2 {
+            if problem.b2[(i, j)] != 0.0 {
+                uf.union(n1 + i, n1 + j);
+            }
+        }
+    }
+    let g = &problem.g;
+    let mut row_anchor = vec![None; g.nrows()];
+    for r in 0..g.nrows() {
+        let cols: Vec<usize> = (0..n1).filter(|&c| g[(r, c)] != 0.0).collect();
+        for w in cols.windows(2) {
+            uf.union(w[0], w[1]);
+        }
+        row_anchor[r] = cols.first().copied();
+    }
+    let mut roots: Vec<usize> = Vec::new();
+    let mut members1: Vec<Vec<usize>> = Vec::new();
+    let mut members2: Vec<Vec<usize>> = Vec::new();
+    let mut block_of_root = std::collections::HashMap::new();
+    for i in 0..n1 + n2 {
+        let r = uf.find(i);
+        let b = *block_of_root.entry(r).or_insert_with(|| {
+            roots.push(r);
+            members1.push(Vec::new());
+            members2.push(Vec::new());
+            roots.len() - 1
+        });
+        if i < n1 {
+            members1[b].push(i);
+        } else {
+            members2[b].push(i - n1);
+        }
+    }
+    let mut g_rows_of: Vec<Vec<usize>> = vec![Vec::new(); roots.len()];
+    for (r, anchor) in row_anchor.iter().enumerate() {
+        if let Some(a) = anchor {
+            let root = uf.find(*a);
+            g_rows_of[block_of_root[&root]].push(r);
+        }
+    }
+    let mut blocks = Vec::new();
+    for b in 0..roots.len() {
+        if members1[b].is_empty() {
+            continue;
+        }
+        blocks.push(solve_block(
+            problem,
+            members1[b].clone(),
+            members2[b].clone(),
+            &g_rows_of[b],
+            settings.rank_tolerance,
+        )?);
+    }
+    let lambda_max = blocks.iter().flat_map(|b| b.lambda.iter().copied()).fold(0.0f64, f64::max);
+    let threshold = settings.rigid_tolerance * lambda_max;
+    // (λ, block, column) of every mode.
+    let mut rigid_ids = Vec::new();
+    let mut elastic_ids = Vec::new();
+    for (bi, b) in blocks.iter().enumerate() {
+        for (ci, &l) in b.lambda.iter().enumerate() {
+            if l <= threshold {
+                rigid_ids.push((bi, ci));
+            } else {
+                elastic_ids.push((l, bi, ci));
+            }
+        }
+    }
+    elastic_ids.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+    let n_rigid = rigid_ids.len();
+    let m = n_rigid + elastic_ids.len();
+    let mut phi1 = Mat::<f64>::zeros(n1, m);
+    let mut phi2 = Mat::<f64>::zeros(n2, m);
+    let mut lambda = vec![0.0; m];
+    let mut omega = vec![0.0; m];
+    // Rigid eigenspace, then its canonical basis.
+    let mut rigid = Mat::<f64>::zeros(n1, n_rigid);
+    for (col, &(bi, ci)) in rigid_ids.iter().enumerate() {
+        let b = &blocks[bi];
+        for (li, &gi) in b.s1.iter().enumerate() {
+            rigid[(gi, col)] = b.phi1[(li, ci)];
+        }
+        lambda[col] = b.lambda[ci];
+    }
+    let canonical = canonical_rigid_basis(&problem.b1, &rigid, rigid_candidates)?;
+    for j in 0..n_rigid {
+        for i in 0..n1 {
+            phi1[(i, j)] = canonical[(i, j)];
+        }
+    }
+    for (k, &(l, bi, ci)) in elastic_ids.iter().enumerate() {
+        let col = n_rigid + k;
+        let b = &blocks[bi];
+        let w = l.sqrt();
+        lambda[col] = l;
+        omega[col] = w;
+        // Deterministic sign: the largest |component| of φ1 (first index on ties) positive.
+        let vals: Vec<f64> = (0..b.s1.len()).map(|i| b.phi1[(i, ci)]).collect();
+        let sign = sign_of_largest(&vals);
+        for (li, &gi) in b.s1.iter().enumerate() {
+            phi1[(gi, col)] = sign * vals[li];
+        }
+        for (le, &ge) in b.elastic_cols.iter().enumerate() {
+            let mut acc = 0.0;
+            for li in 0..b.s1.len() {
+                acc += b.flex[(le, li)] * vals[li];
+            }
+            phi2[(ge, col)] = sign * acc / w;
+        }
+    }
+    Ok(RawModes {
+        lambda,
+        omega,
+        phi1,
+        phi2,
+        n_rigid,
+        lambda_max,
+        block_sizes: blocks.iter().map(|b| b.phi1.ncols()).collect(),
+    })
+}
+
+/// `+1` or `−1` so that the largest-magnitude entry (first one within 1e-6 relative) is positive.
+pub(crate) fn sign_of_largest(vals: &[f64]) -> f64 {
+    let max = vals.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    match vals.iter().find(|v| v.abs() >= max * (1.0 - 1e-6)) {
+        Some(v) if *v < 0.0 => -1.0,
+        _ => 1.0,
+    }
+}
+
+/// Canonical basis of the rigid eigenspace spanned by the `B1`-orthonormal columns of `rigid`.
+fn canonical_rigid_basis(
+    b1: &Mat<f64>,
+    rigid: &Mat<f64>,
+    candidates: Option<MatRef<'_, f64>>,
+) -> Result<Mat<f64>> {
+    let (n1, r) = (rigid.nrows(), rigid.ncols());
+    if r == 0 {
+        return Ok(Mat::zeros(n1, 0));
+    }
+    let b1r = b1 * rigid; // n1 × r; coordinates of a vector c in the rigid basis: (B1 R)ᵀ c
+    let row_norm_max = (0..n1)
+        .map(|i| (0..r).map(|j| b1r[(i, j)].powi(2)).sum::<f64>().sqrt())
+        .fold(0.0f64, f64::max);
+    let mut accepted: Vec<Vec<f64>> = Vec::new();
+    let try_coords = |a: Vec<f64>, accepted: &mut Vec<Vec<f64>>| {
+        let norm0 = a.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if norm0 <= 1e-8 * row_norm_max.max(f64::MIN_POSITIVE) {
+            return;
+        }
+        let mut p = a;
+        for _ in 0..2 {
+            for q in accepted.iter() {
+                let dot: f64 = p.iter().zip(q).map(|(x, y)| x * y).sum();
+                for (x, y) in p.iter_mut().zip(q) {
+                    *x -= dot * y;
+                }
+            }
+        }
+        let norm = p.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if norm > 1e-6 * norm0 {
+            accepted.push(p.into_iter().map(|x| x / norm).collect());
+        }
+    };
+    if let Some(c) = candidates {
+        for col in 0..c.ncols() {
+            if accepted.len() == r {
+                break;
+            }
+            let a: Vec<f64> =
+                (0..r).map(|j| (0..n1).map(|i| b1r[(i, j)] * c[(i, col)]).sum()).collect();
+            try_coords(a, &mut accepted);
+        }
+    }
+    for i in 0..n1 {
+        if accepted.len() == r {
+            break;
+        }
+        let a: Vec<f64> = (0..r).map(|j| b1r[(i, j)]).collect();
+        try_coords(a, &mut accepted);
+    }
+    if accepted.len() != r {
+        return Err(ModalError::Numerical {
+            stage: "canonical rigid basis".into(),
+            reason: format!("found {} of {r} directions", accepted.len()),
+        });
+    }
+    let coords = Mat::from_fn(r, r, |i, j| accepted[j][i]);
+    Ok(rigid * &coords)
+}
