@@ -46,7 +46,10 @@ pub mod kinematics;
 pub mod loads;
 pub mod mesh;
 pub mod operators;
+pub mod problem;
+pub mod samples;
 pub mod section;
+pub mod sparse;
 #[cfg(test)]
 mod testing;
 
@@ -56,4 +59,5 @@ pub use error::{BeamError, Result};
 pub use kinematics::Kinematics;
 pub use loads::{Amplitude, DistributedLoad, LoadFrame, Loads, PointLoad};
 pub use mesh::Mesh;
+pub use problem::{BeamProblem, Counters, End, EndCondition, ImplicitMidpoint, NewtonSettings};
 pub use section::Section;

@@ -1,0 +1,384 @@
+//! Single-beam problems: end conditions closing the `2k` end unknowns, and the implicit
+//! midpoint integrator (Newton on the sparse step system, faer sparse LU with the symbolic
+//! factorisation reused).
+//!
+//! End rows (one per active component and end), evaluated for the step `t → t + dt`:
+//! * force component `a` (free end or applied end load `F`, local frame of the end node):
+//!   `x2_L[a] = −F_a(t + dt/2)` at s = 0 and `x2_R[a] = +F_a(t + dt/2)` at s = L (node 0's
+//!   equation contains `−x2_L`, node N's `+x2_R`, so `±x2` acts on the end node as `F`);
+//! * prescribed velocity component `a` (clamped, pinned translations, prescribed motion):
+//!   `x1_end[a](t + dt) = g_a(t + dt)` (the midpoint value is then the average of the end-point
+//!   values; for a massless component, whose slot holds the midpoint value, `g_a(t + dt/2)`);
+//!   the matching `x2_end[a]` is the reaction.
+
+use nalgebra::Vector6;
+
+use crate::beam::{Beam, StepInput};
+use crate::error::{check_len, BeamError, Result};
+use crate::kinematics::Kinematics;
+use crate::loads::{Amplitude, Loads};
+use crate::sparse::SparseLuSystem;
+
+/// Boundary condition at one end of a single beam (all values in the end node's local frame).
+#[derive(Clone, Debug, PartialEq)]
+pub enum EndCondition {
+    /// No force, no moment (`x2_end = 0`).
+    Free,
+    /// An applied external force/moment `[F, M]` at the end (follower), times `amplitude`.
+    Force {
+        /// `[force, moment]`, local frame.
+        value: Vector6<f64>,
+        /// Time history.
+        amplitude: Amplitude,
+    },
+    /// All velocities zero.
+    Clamped,
+    /// Translational velocities zero, moments zero (rotation free).
+    Pinned,
+    /// Prescribed end velocities `x1_end = value · amplitude(t)`.
+    Motion {
+        /// `[v, ω]`, local frame.
+        value: Vector6<f64>,
+        /// Time history.
+        amplitude: Amplitude,
+    },
+    /// Per component: `velocity[i]` prescribes `x1[i] = value[i] a(t)`, otherwise the applied
+    /// force/moment component is `value[i] a(t)`.
+    Mixed {
+        /// Which components have prescribed velocity.
+        velocity: [bool; 6],
+        /// Prescribed velocity or applied force per component.
+        value: Vector6<f64>,
+        /// Time history.
+        amplitude: Amplitude,
+    },
+}
+
+impl EndCondition {
+    /// `(velocity mask, value, amplitude)` of any condition.
+    pub fn resolve(&self) -> ([bool; 6], Vector6<f64>, Amplitude) {
+        match self {
+            Self::Free => ([false; 6], Vector6::zeros(), Amplitude::Constant),
+            Self::Force { value, amplitude } => ([false; 6], *value, amplitude.clone()),
+            Self::Clamped => ([true; 6], Vector6::zeros(), Amplitude::Constant),
+            Self::Pinned => {
+                ([true, true, true, false, false, false], Vector6::zeros(), Amplitude::Constant)
+            }
+            Self::Motion { value, amplitude } => ([true; 6], *value, amplitude.clone()),
+            Self::Mixed { velocity, value, amplitude } => (*velocity, *value, amplitude.clone()),
+        }
+    }
+}
+
+/// Which end of a beam.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum End {
+    /// s = 0.
+    Left,
+    /// s = L.
+    Right,
+}
+
+/// One beam with its two end conditions and loads.
+#[derive(Clone, Debug)]
+pub struct BeamProblem {
+    /// The discretised beam.
+    pub beam: Beam,
+    /// Condition at s = 0.
+    pub left: EndCondition,
+    /// Condition at s = L.
+    pub right: EndCondition,
+    /// External loads (may be modified between steps).
+    pub loads: Loads,
+}
+
+impl BeamProblem {
+    /// Builds and validates (loads on existing nodes, planar data for planar beams).
+    pub fn new(beam: Beam, left: EndCondition, right: EndCondition, loads: Loads) -> Result<Self> {
+        let p = Self { beam, left, right, loads };
+        p.validate()?;
+        Ok(p)
+    }
+
+    /// Checks loads and end conditions against the beam.
+    pub fn validate(&self) -> Result<()> {
+        self.loads.validate(self.beam.components(), self.beam.n_nodes())?;
+        for (name, c) in [("left end", &self.left), ("right end", &self.right)] {
+            let (_, value, amp) = c.resolve();
+            for i in 0..6 {
+                crate::error::check_finite(name, format!("value {i}"), value[i])?;
+            }
+            amp.validate(name)?;
+            self.beam.components().check_vector(name, &value)?;
+        }
+        Ok(())
+    }
+
+    /// Size of the single-beam step system, `k(2N+3)`.
+    pub fn dim(&self) -> usize {
+        self.beam.dim()
+    }
+
+    /// For end `end` and active component `a`: the unknown the end row constrains.
+    pub fn end_unknown(&self, end: End, a: usize) -> usize {
+        let beam = &self.beam;
+        let (cond, node) = match end {
+            End::Left => (&self.left, 0),
+            End::Right => (&self.right, beam.n_elements()),
+        };
+        let i6 = beam.components().indices()[a];
+        let (vel, _, _) = cond.resolve();
+        if vel[i6] {
+            beam.x1_index(node, a)
+        } else {
+            match end {
+                End::Left => beam.left_index(a),
+                End::Right => beam.right_index(a),
+            }
+        }
+    }
+
+    /// The value the end row sets the constrained unknown to, for a step from `time` by `dt`.
+    pub fn end_target(&self, end: End, a: usize, time: f64, dt: f64) -> f64 {
+        let beam = &self.beam;
+        let cond = match end {
+            End::Left => &self.left,
+            End::Right => &self.right,
+        };
+        let i6 = beam.components().indices()[a];
+        let (vel, value, amp) = cond.resolve();
+        if vel[i6] {
+            let col = self.end_unknown(end, a);
+            let t = if beam.is_algebraic(col) { time + 0.5 * dt } else { time + dt };
+            value[i6] * amp.at(t)
+        } else {
+            let sign = if end == End::Left { -1.0 } else { 1.0 };
+            sign * value[i6] * amp.at(time + 0.5 * dt)
+        }
+    }
+
+    /// Pattern of the full step system (beam rows, then `k` left and `k` right end rows).
+    pub fn step_pattern(&self) -> Vec<(usize, usize)> {
+        let mut pattern = Vec::with_capacity(self.beam.jacobian_nnz() + 2 * self.beam.k());
+        self.beam.jacobian_pattern(0, 0, &mut pattern);
+        let rows = self.beam.n_rows();
+        let k = self.beam.k();
+        for a in 0..k {
+            pattern.push((rows + a, self.end_unknown(End::Left, a)));
+        }
+        for a in 0..k {
+            pattern.push((rows + k + a, self.end_unknown(End::Right, a)));
+        }
+        pattern
+    }
+}
+
+/// Newton settings of the implicit midpoint step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NewtonSettings {
+    /// Converged when `‖Δx‖∞ ≤ tolerance · max(1, ‖x‖∞)` (default `1e-12`; quadratic
+    /// convergence then leaves a residual near round-off). Valid: `(0, 1e-2]`.
+    pub tolerance: f64,
+    /// Maximum Newton iterations per step (default 30). Valid: `≥ 1`.
+    pub max_iterations: usize,
+}
+
+impl Default for NewtonSettings {
+    fn default() -> Self {
+        Self { tolerance: 1e-12, max_iterations: 30 }
+    }
+}
+
+impl NewtonSettings {
+    /// Checks the ranges above.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.tolerance > 0.0 && self.tolerance <= 1e-2) {
+            return Err(BeamError::InvalidSetting {
+                field: "NewtonSettings.tolerance".into(),
+                value: self.tolerance,
+                reason: "must be in (0, 1e-2]".into(),
+            });
+        }
+        if self.max_iterations == 0 {
+            return Err(BeamError::InvalidSetting {
+                field: "NewtonSettings.max_iterations".into(),
+                value: 0.0,
+                reason: "must be at least 1".into(),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Counters of an integrator run.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Counters {
+    /// Steps taken.
+    pub steps: usize,
+    /// Newton iterations (residual + Jacobian evaluations).
+    pub newton_iterations: usize,
+    /// Numeric LU factorisations.
+    pub factorizations: usize,
+}
+
+/// Implicit midpoint integration of a [`BeamProblem`] with kinematics.
+#[derive(Debug)]
+pub struct ImplicitMidpoint {
+    problem: BeamProblem,
+    settings: NewtonSettings,
+    state: Vec<f64>,
+    kinematics: Kinematics,
+    time: f64,
+    system: SparseLuSystem,
+    new: Vec<f64>,
+    residual: Vec<f64>,
+    values: Vec<f64>,
+    counters: Counters,
+}
+
+impl ImplicitMidpoint {
+    /// Starts at `time = 0` from `state` (beam vector) and `kinematics`.
+    pub fn new(
+        problem: BeamProblem,
+        state: Vec<f64>,
+        kinematics: Kinematics,
+        settings: NewtonSettings,
+    ) -> Result<Self> {
+        settings.validate()?;
+        problem.validate()?;
+        check_len("initial state", problem.dim(), state.len())?;
+        check_len("kinematics nodes", problem.beam.n_nodes(), kinematics.xi.len())?;
+        if let Some(i) = state.iter().position(|v| !v.is_finite()) {
+            return Err(BeamError::NonFinite {
+                field: "initial state".into(),
+                index: format!("{i}"),
+                value: state[i],
+            });
+        }
+        let pattern = problem.step_pattern();
+        let system = SparseLuSystem::new(problem.dim(), &pattern)?;
+        let n = problem.dim();
+        Ok(Self {
+            values: vec![0.0; pattern.len()],
+            residual: vec![0.0; n],
+            new: state.clone(),
+            problem,
+            settings,
+            state,
+            kinematics,
+            time: 0.0,
+            system,
+            counters: Counters::default(),
+        })
+    }
+
+    /// Current state (beam vector; algebraic slots hold the last step's midpoint values).
+    pub fn state(&self) -> &[f64] {
+        &self.state
+    }
+
+    /// Current kinematics.
+    pub fn kinematics(&self) -> &Kinematics {
+        &self.kinematics
+    }
+
+    /// Current time.
+    pub fn time(&self) -> f64 {
+        self.time
+    }
+
+    /// The problem (its loads may be changed with [`ImplicitMidpoint::problem_mut`]).
+    pub fn problem(&self) -> &BeamProblem {
+        &self.problem
+    }
+
+    /// Mutable access to the loads and end conditions (the sparsity pattern must not change:
+    /// do not switch a component between force and velocity control).
+    pub fn loads_mut(&mut self) -> &mut Loads {
+        &mut self.problem.loads
+    }
+
+    /// Counters so far.
+    pub fn counters(&self) -> Counters {
+        self.counters
+    }
+
+    /// Discrete energy of the current state.
+    pub fn energy(&self) -> f64 {
+        self.problem.beam.energy(&self.state).expect("state has the beam's size")
+    }
+
+    /// Full step residual (beam rows then end rows) at `new`.
+    fn eval_residual(&mut self, dt: f64) -> Result<()> {
+        let beam = &self.problem.beam;
+        let input = StepInput {
+            time: self.time,
+            dt,
+            loads: &self.problem.loads,
+            kinematics: &self.kinematics,
+        };
+        let rows = beam.n_rows();
+        beam.step_residual(&input, &self.state, &self.new, &mut self.residual[..rows])?;
+        let k = beam.k();
+        for (e, end) in [End::Left, End::Right].into_iter().enumerate() {
+            for a in 0..k {
+                let col = self.problem.end_unknown(end, a);
+                self.residual[rows + e * k + a] =
+                    self.new[col] - self.problem.end_target(end, a, self.time, dt);
+            }
+        }
+        Ok(())
+    }
+
+    /// One step of size `dt`; returns the Newton iterations used. On failure the state is
+    /// unchanged.
+    pub fn step(&mut self, dt: f64) -> Result<usize> {
+        if !crate::error::positive_finite(dt) {
+            return Err(BeamError::NonPositiveTime { field: "dt".into(), value: dt });
+        }
+        self.new.copy_from_slice(&self.state);
+        let nnz_beam = self.problem.beam.jacobian_nnz();
+        let mut last = f64::INFINITY;
+        for iteration in 1..=self.settings.max_iterations {
+            self.eval_residual(dt)?;
+            {
+                let beam = &self.problem.beam;
+                let input = StepInput {
+                    time: self.time,
+                    dt,
+                    loads: &self.problem.loads,
+                    kinematics: &self.kinematics,
+                };
+                beam.jacobian_values(&input, &self.state, &self.new, &mut self.values[..nnz_beam])?;
+                self.values[nnz_beam..].iter_mut().for_each(|v| *v = 1.0);
+            }
+            self.system.factorize(&self.values)?;
+            self.counters.factorizations += 1;
+            self.counters.newton_iterations += 1;
+            self.system.solve(&mut self.residual)?;
+            let mut dmax: f64 = 0.0;
+            let mut xmax: f64 = 1.0;
+            for (x, d) in self.new.iter_mut().zip(&self.residual) {
+                *x -= d;
+                dmax = dmax.max(d.abs());
+                xmax = xmax.max(x.abs());
+            }
+            last = dmax / xmax;
+            if !last.is_finite() {
+                break;
+            }
+            if last <= self.settings.tolerance {
+                self.kinematics.advance(&self.problem.beam, &self.state, &self.new, dt)?;
+                std::mem::swap(&mut self.state, &mut self.new);
+                self.time += dt;
+                self.counters.steps += 1;
+                return Ok(iteration);
+            }
+        }
+        Err(BeamError::NewtonFailed {
+            iterations: self.settings.max_iterations,
+            residual: last,
+            tolerance: self.settings.tolerance,
+        })
+    }
+}
