@@ -294,6 +294,17 @@ impl JointKind {
     /// about e2): translation axes in the plane and the rotation axis along e2. An axis that
     /// is neither in nor normal to the plane is an error.
     pub fn planar_axes(&self, owner: &str, n_ends: usize) -> Result<Vec<Axis>> {
+        if let JointKind::Hinge { axis, .. } = self {
+            let a = unit(owner, *axis)?;
+            if (a.y.abs() - 1.0).abs() > 1e-12 {
+                return Err(MultibodyError::NotPlanar {
+                    owner: owner.to_string(),
+                    what: format!(
+                        "hinge axis {axis:?} (a planar hinge turns about e2 = [0, 1, 0])"
+                    ),
+                });
+            }
+        }
         let mut out = Vec::with_capacity(3);
         for ax in self.axes(owner, n_ends)? {
             let y = ax.direction.y.abs();

@@ -36,8 +36,12 @@ pub struct PlantSettings {
     pub max_newton_iterations: usize,
     /// Relative step of the central differences in `ω_mid` for `∂T/∂ω` (default `1e-6`).
     pub fd_step: f64,
-    /// Start Newton from the linear extrapolation `2 x_n − x_{n−1}` (default `true`).
+    /// Start Newton from the quadratic extrapolation `3 x_n − 3 x_{n−1} + x_{n−2}` of the
+    /// last states (default `true`).
     pub extrapolate: bool,
+    /// Keep the factorised Jacobian across iterations and steps while Newton contracts by at
+    /// least 10× per iteration (default `true`); `false`: full Newton.
+    pub reuse_jacobian: bool,
 }
 
 impl Default for PlantSettings {
@@ -48,6 +52,7 @@ impl Default for PlantSettings {
             max_newton_iterations: 25,
             fd_step: 1e-6,
             extrapolate: true,
+            reuse_jacobian: true,
         }
     }
 }
@@ -56,16 +61,16 @@ impl PlantSettings {
     /// Checks the ranges documented on each field.
     pub fn validate(&self) -> Result<()> {
         let bad = |field, value, reason| Err(MultibodyError::BadSetting { field, value, reason });
-        if !(self.dt > 0.0) || !self.dt.is_finite() {
+        if !(self.dt.is_finite() && self.dt > 0.0) {
             return bad("dt", self.dt, "must be positive and finite");
         }
-        if !(self.newton_tolerance > 0.0) || self.newton_tolerance >= 1.0 {
+        if !(self.newton_tolerance > 0.0 && self.newton_tolerance < 1.0) {
             return bad("newton_tolerance", self.newton_tolerance, "must be in (0, 1)");
         }
         if self.max_newton_iterations == 0 {
             return bad("max_newton_iterations", 0.0, "must be at least 1");
         }
-        if !(self.fd_step > 0.0) || self.fd_step >= 1e-2 {
+        if !(self.fd_step > 0.0 && self.fd_step < 1e-2) {
             return bad("fd_step", self.fd_step, "must be in (0, 1e-2)");
         }
         Ok(())
@@ -77,6 +82,8 @@ impl PlantSettings {
 pub struct StepReport {
     /// Newton iterations.
     pub iterations: usize,
+    /// Jacobian factorisations in this step.
+    pub factorizations: usize,
     /// Last Newton update (max-norm, relative).
     pub update: f64,
     /// Largest violation of a compatibility row at the midpoint (velocity units).
@@ -104,6 +111,7 @@ pub struct Plant {
     time: f64,
     state: Vec<f64>,
     previous: Option<Vec<f64>>,
+    previous2: Option<Vec<f64>>,
     kinematics: Vec<Kinematics>,
     loads: Vec<Loads>,
     gravity: Vector3<f64>,
@@ -118,6 +126,8 @@ pub struct Plant {
     argsort: Argsort<usize>,
     symbolic_lu: SymbolicLu<usize>,
     values: Vec<f64>,
+    lu: Option<Lu<usize, f64>>,
+    rhs: Mat<f64>,
     mid: Vec<f64>,
     weight: Vec<f64>,
     residual: Vec<f64>,
@@ -198,6 +208,7 @@ impl Plant {
             time: 0.0,
             state: vec![0.0; dim],
             previous: None,
+            previous2: None,
             loads: vec![Loads::none(); n_beams],
             step_loads: vec![Loads::none(); n_beams],
             gravity: Vector3::zeros(),
@@ -210,6 +221,8 @@ impl Plant {
             symbolic,
             argsort,
             symbolic_lu,
+            lu: None,
+            rhs: Mat::zeros(dim, 1),
             mid: vec![0.0; dim],
             weight,
             residual: vec![0.0; dim],
@@ -273,6 +286,7 @@ impl Plant {
         }
         self.state.copy_from_slice(x);
         self.previous = None;
+        self.previous2 = None;
         Ok(())
     }
 
@@ -587,25 +601,39 @@ impl Plant {
     pub fn step(&mut self) -> Result<StepReport> {
         self.prepare_loads()?;
         let old = self.state.clone();
-        let mut new = match (&self.previous, self.settings.extrapolate) {
-            (Some(p), true) => old.iter().zip(p).map(|(a, b)| 2.0 * a - b).collect(),
+        let mut new = match (&self.previous, &self.previous2, self.settings.extrapolate) {
+            (Some(p), Some(q), true) => {
+                old.iter().zip(p).zip(q).map(|((a, b), c)| 3.0 * a - 3.0 * b + c).collect()
+            }
+            (Some(p), None, true) => old.iter().zip(p).map(|(a, b)| 2.0 * a - b).collect(),
             _ => old.clone(),
         };
         let mut report = StepReport::default();
         let mut converged = false;
         let mut last_update = f64::INFINITY;
+        let mut refresh = self.lu.is_none() || !self.settings.reuse_jacobian;
+        let mut fresh = false;
         for it in 0..self.settings.max_newton_iterations {
             self.compute_mid(&old, &new)?;
             self.assemble_residual(&old, &new)?;
-            self.assemble_jacobian(&old, &new)?;
-            let lu = self.factor()?;
-            let mut rhs = Mat::<f64>::from_fn(self.residual.len(), 1, |i, _| -self.residual[i]);
-            lu.solve_in_place(rhs.as_mut());
+            if refresh || it >= self.settings.max_newton_iterations / 2 {
+                self.assemble_jacobian(&old, &new)?;
+                self.lu = Some(self.factor()?);
+                report.factorizations += 1;
+                refresh = !self.settings.reuse_jacobian;
+                fresh = true;
+            }
+            let lu = self.lu.as_ref().expect("factorised above");
+            for i in 0..self.residual.len() {
+                self.rhs[(i, 0)] = -self.residual[i];
+            }
+            lu.solve_in_place(self.rhs.as_mut());
             let mut du = 0.0f64;
             let mut xmax = 0.0f64;
             for i in 0..new.len() {
-                let d = rhs[(i, 0)];
+                let d = self.rhs[(i, 0)];
                 if !d.is_finite() {
+                    self.lu = None;
                     return Err(MultibodyError::LinearSolve(format!(
                         "non-finite Newton update at t = {} (singular step matrix)",
                         self.time
@@ -618,18 +646,27 @@ impl Plant {
             let rel = du / xmax.max(1.0);
             report.iterations = it + 1;
             report.update = rel;
-            if rel <= self.settings.newton_tolerance {
-                converged = true;
-                break;
-            }
-            // Round-off floor: the update no longer shrinks and is already tiny.
-            if it >= 2
-                && rel > 0.5 * last_update
-                && rel < self.settings.newton_tolerance.sqrt() * 1e-2
+            let rate = rel / last_update;
+            // Converged when the update, or the error left after it (`rate · update` for a
+            // contraction), is below the tolerance.
+            if rel <= self.settings.newton_tolerance
+                || (it >= 1
+                    && rate < 0.5
+                    && rel * rate / (1.0 - rate) <= self.settings.newton_tolerance)
             {
                 converged = true;
                 break;
             }
+            // Round-off floor: the update no longer shrinks and is already tiny.
+            if it >= 2 && rate > 0.5 && rel < self.settings.newton_tolerance.sqrt() * 1e-2 {
+                converged = true;
+                break;
+            }
+            // A reused Jacobian that converges slowly (or not at all) is refreshed.
+            if it >= 1 && rate > 0.1 && !fresh {
+                refresh = true;
+            }
+            fresh = false;
             last_update = rel;
         }
         if !converged {
@@ -655,6 +692,7 @@ impl Plant {
                 self.settings.dt,
             )?;
         }
+        self.previous2 = self.previous.take();
         self.previous = Some(old);
         self.state = new;
         self.time += self.settings.dt;

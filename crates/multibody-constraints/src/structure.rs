@@ -178,7 +178,7 @@ impl Structure {
         supports: Vec<Support>,
         settings: StructureSettings,
     ) -> Result<Self> {
-        if !(settings.placement_tolerance > 0.0) || !settings.placement_tolerance.is_finite() {
+        if !(settings.placement_tolerance.is_finite() && settings.placement_tolerance > 0.0) {
             return Err(MultibodyError::BadSetting {
                 field: "placement_tolerance",
                 value: settings.placement_tolerance,
@@ -336,7 +336,7 @@ impl Structure {
                 let start = match &b.placement {
                     Placement::At { origin, quaternion } => {
                         let n = quaternion.norm();
-                        if !(n > 0.0) || !n.is_finite() || origin.iter().any(|x| !x.is_finite()) {
+                        if !(n.is_finite() && n > 0.0) || origin.iter().any(|x| !x.is_finite()) {
                             return Err(MultibodyError::BadPlacement {
                                 beam: b.name.clone(),
                                 reason: format!(
@@ -364,16 +364,18 @@ impl Structure {
                                     "its start is not an end of joint `{joint}`"
                                 )))
                             }
-                            Some(0) => return Err(bad(format!(
+                            Some(0) => {
+                                return Err(bad(format!(
                                 "it is the first end of joint `{joint}`; place that one explicitly"
-                            ))),
+                            )))
+                            }
                             _ => {}
                         }
                         if !angle.is_finite() {
                             return Err(bad(format!("angle {angle} is not finite")));
                         }
                         let ax = Vector3::from(*axis);
-                        if !(ax.norm() > 1e-12) || !ax.norm().is_finite() {
+                        if !(ax.norm().is_finite() && ax.norm() > 1e-12) {
                             return Err(MultibodyError::ZeroAxis {
                                 owner: format!("placement of beam `{}`", b.name),
                                 axis: *axis,
