@@ -362,6 +362,37 @@ impl Integrator {
         self.backward(model, u, lambda, out)
     }
 
+    /// [`Integrator::integrate_with_sensitivities`] and [`Integrator::adjoint_hessian`] in one
+    /// forward pass (the taped pass also yields `A` and `B`).
+    pub fn integrate_with_hessian<D: Dynamics + ?Sized>(
+        &mut self,
+        model: &D,
+        x0: &[f64],
+        u: &[f64],
+        lambda: &[f64],
+        x_end: &mut [f64],
+        a: &mut DMatrix<f64>,
+        b: &mut DMatrix<f64>,
+        hessian: &mut DMatrix<f64>,
+    ) -> Result<()> {
+        self.check_args(x0, u, x_end)?;
+        check_dim("lambda", self.nx, lambda.len())?;
+        let nz = self.nx + self.nu;
+        check_dim("a", self.nx * self.nx, a.len())?;
+        check_dim("b", self.nx * self.nu, b.len())?;
+        check_dim("hessian", nz * nz, hessian.len())?;
+        if self.tape_x.len() != 4 * self.substeps {
+            return Err(OcpError::Unsupported {
+                what: "integrate_with_hessian before enable_second_order",
+            });
+        }
+        self.run(model, x0, u, true, true)?;
+        x_end.copy_from_slice(&self.x);
+        a.copy_from(&self.s.columns(0, self.nx));
+        b.copy_from(&self.s.columns(self.nx, self.nu));
+        self.backward(model, u, lambda, hessian)
+    }
+
     fn run<D: Dynamics + ?Sized>(
         &mut self,
         model: &D,

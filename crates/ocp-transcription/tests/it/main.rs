@@ -1,3 +1,4 @@
 //! Integration tests of `ocp-transcription` (one binary).
 
 mod integrators;
+mod sqp;

@@ -1,0 +1,279 @@
+//! SQP: the LQR identity, the cart-pole swing-up (cold start, exact Hessian, active bounds),
+//! and the failure statuses.
+
+use nalgebra::{DMatrix, DVector};
+use ocp_transcription::samples::{CartPole, LinearModel};
+use ocp_transcription::{
+    Dynamics, Globalisation, HessianApproximation, Integrator, IntegratorKind, IntegratorSettings,
+    Ocp, QpForm, SqpMode, SqpSettings, SqpSolver, SqpStatus,
+};
+
+fn lqr_problem() -> (LinearModel, Ocp) {
+    let model = LinearModel::spring_chain(3, 2);
+    let mut ocp = Ocp::new(6, 2, 3.0, 15).unwrap();
+    ocp.r = DMatrix::identity(2, 2) * 0.5;
+    ocp.terminal = DMatrix::identity(6, 6) * 2.0;
+    (model, ocp)
+}
+
+/// Discrete-time Riccati recursion on the integrator's own `A`, `B` with the OCP's
+/// trapezoidal node weights; returns the closed-loop states and controls from `x0`.
+fn riccati(
+    model: &LinearModel,
+    ocp: &Ocp,
+    settings: &IntegratorSettings,
+    x0: &DVector<f64>,
+) -> (Vec<DVector<f64>>, Vec<DVector<f64>>) {
+    let (nx, nu, n) = (6, 2, ocp.intervals);
+    let dt = ocp.interval();
+    let mut int = Integrator::new(model, settings, dt).unwrap();
+    let mut a = DMatrix::zeros(nx, nx);
+    let mut b = DMatrix::zeros(nx, nu);
+    let mut xe = vec![0.0; nx];
+    int.integrate_with_sensitivities(model, &[0.0; 6], &[0.0; 2], &mut xe, &mut a, &mut b).unwrap();
+    let rd = &ocp.r * dt;
+    let mut p = &ocp.q * (0.5 * dt) + &ocp.terminal;
+    let mut gains = vec![DMatrix::zeros(nu, nx); n];
+    for k in (0..n).rev() {
+        let btp = b.transpose() * &p;
+        let k_gain = (&rd + &btp * &b).cholesky().unwrap().solve(&(&btp * &a));
+        let qk = &ocp.q * if k == 0 { 0.5 * dt } else { dt };
+        p = qk + a.transpose() * &p * (&a - &b * &k_gain);
+        p = 0.5 * (&p + p.transpose());
+        gains[k] = k_gain;
+    }
+    let mut xs = vec![x0.clone()];
+    let mut us = Vec::new();
+    for k in 0..n {
+        let u = -&gains[k] * &xs[k];
+        xs.push(&a * &xs[k] + &b * &u);
+        us.push(u);
+    }
+    (xs, us)
+}
+
+#[test]
+fn lq_problem_equals_riccati_in_one_iteration() {
+    let (model, ocp) = lqr_problem();
+    let x0 = DVector::from_vec(vec![0.5, -0.3, 0.2, 0.0, 0.4, -0.1]);
+    for form in [QpForm::Auto, QpForm::CondensedClarabel, QpForm::SparseClarabel] {
+        for mode in [SqpMode::Sqp, SqpMode::LinearQuadratic] {
+            let settings = SqpSettings { qp_form: form, mode, ..SqpSettings::default() };
+            let (xs, us) = riccati(&model, &ocp, &settings.integrator, &x0);
+            let mut solver = SqpSolver::new(&model, ocp.clone(), settings).unwrap();
+            let stats = solver.solve(x0.as_slice()).unwrap();
+            assert_eq!(stats.status, SqpStatus::Solved, "{form:?} {mode:?}");
+            assert_eq!(stats.iterations, 1, "{form:?} {mode:?}: one QP");
+            let mut err = 0.0_f64;
+            for k in 0..ocp.intervals {
+                err = err.max((&solver.controls()[k] - &us[k]).amax());
+                err = err.max((&solver.states()[k + 1] - &xs[k + 1]).amax());
+            }
+            // both are exact solutions of the same linear system of optimality conditions
+            // (condition number ~1e3); the QP tolerance is 1e-11
+            assert!(err < 1e-8, "{form:?} {mode:?}: deviation from Riccati {err:e}");
+        }
+    }
+}
+
+/// Swing-up from hanging (θ = π) to upright in 1.5 s with |F| ≤ 25 N.
+fn swing_up_ocp() -> Ocp {
+    let mut ocp = Ocp::new(4, 1, 1.5, 30).unwrap();
+    ocp.q = DMatrix::from_diagonal(&DVector::from_vec(vec![10.0, 10.0, 0.1, 0.1]));
+    ocp.r = DMatrix::identity(1, 1) * 1e-3;
+    ocp.terminal = DMatrix::from_diagonal(&DVector::from_vec(vec![100.0, 100.0, 10.0, 10.0]));
+    ocp.u_min[0] = -25.0;
+    ocp.u_max[0] = 25.0;
+    ocp
+}
+
+fn swing_up(
+    hessian: HessianApproximation,
+    form: QpForm,
+) -> (SqpSolver<CartPole>, ocp_transcription::SqpStats) {
+    let model = CartPole::default();
+    let ocp = swing_up_ocp();
+    let settings = SqpSettings {
+        hessian,
+        qp_form: form,
+        max_iterations: 100,
+        integrator: IntegratorSettings::new(IntegratorKind::Rk4, 2),
+        ..SqpSettings::default()
+    };
+    let mut solver = SqpSolver::new(model, ocp, settings).unwrap();
+    let x0 = [0.0, std::f64::consts::PI, 0.0, 0.0];
+    solver.initialize_constant(&x0, &[0.0]).unwrap();
+    let stats = solver.solve(&x0).unwrap();
+    (solver, stats)
+}
+
+#[test]
+fn cartpole_swing_up_converges_with_active_bounds() {
+    for (hessian, form) in [
+        (HessianApproximation::GaussNewton, QpForm::Auto),
+        (HessianApproximation::Exact, QpForm::Auto),
+        (HessianApproximation::GaussNewton, QpForm::SparseClarabel),
+    ] {
+        let (solver, stats) = swing_up(hessian, form);
+        for l in solver.log() {
+            println!(
+                "{hessian:?} {form:?} it {:2} J {:.6e} kkt {:.3e} viol {:.3e} |dw| {:.3e} t {:.3} qp {}",
+                l.iteration, l.cost, l.kkt, l.constraint_violation, l.step_norm, l.step_length, l.qp_iterations
+            );
+        }
+        println!("{stats:?}");
+        assert_eq!(stats.status, SqpStatus::Solved, "{hessian:?} {form:?}");
+        assert!(stats.kkt <= 1e-8);
+        // the swing-up saturates the force
+        let active = solver.controls().iter().filter(|u| (u[0].abs() - 25.0).abs() < 1e-9).count();
+        assert!(active >= 2, "{hessian:?}: {active} active bounds");
+        // the pole ends upright
+        assert!(solver.states()[30][1].abs() < 0.2, "final angle {}", solver.states()[30][1]);
+        if hessian == HessianApproximation::Exact {
+            // quadratic convergence: the last two KKT reductions satisfy e⁺ ≤ 10 e²
+            let mut e: Vec<f64> = solver.log().iter().map(|l| l.kkt).collect();
+            e.push(stats.kkt);
+            let m = e.len();
+            for w in e[m - 3..].windows(2) {
+                assert!(w[1] <= 10.0 * w[0] * w[0], "not quadratic: {} -> {}", w[0], w[1]);
+            }
+            assert!(stats.iterations < 45, "exact Hessian took {} iterations", stats.iterations);
+        }
+    }
+}
+
+/// A model that returns NaN once the cart leaves |p| < 0.5.
+struct Fragile(CartPole);
+impl Dynamics for Fragile {
+    fn nx(&self) -> usize {
+        4
+    }
+    fn nu(&self) -> usize {
+        1
+    }
+    fn rhs(&self, x: &[f64], u: &[f64], xdot: &mut [f64]) {
+        self.0.rhs(x, u, xdot);
+        if x[0].abs() > 0.5 {
+            xdot[2] = f64::NAN;
+        }
+    }
+    fn jacobians(&self, x: &[f64], u: &[f64], fx: &mut DMatrix<f64>, fu: &mut DMatrix<f64>) {
+        self.0.jacobians(x, u, fx, fu)
+    }
+}
+
+#[test]
+fn failures_end_in_a_status() {
+    let x0 = [0.0, std::f64::consts::PI, 0.0, 0.0];
+    let ocp = swing_up_ocp();
+    // NaN from the dynamics at the initial guess (p = 0.6 is outside the model's domain)
+    let settings = SqpSettings { globalisation: Globalisation::FullStep, ..SqpSettings::default() };
+    let mut solver =
+        SqpSolver::new(Fragile(CartPole::default()), ocp.clone(), settings.clone()).unwrap();
+    solver.initialize_constant(&[0.6, 3.0, 0.0, 0.0], &[0.0]).unwrap();
+    let stats = solver.solve(&x0).unwrap();
+    assert_eq!(stats.status, SqpStatus::NonFiniteDynamics);
+    assert!(!stats.status.has_iterate());
+    assert!(solver.controls().iter().all(|u| u[0].is_finite()));
+    // iteration limit
+    let settings = SqpSettings { max_iterations: 3, ..SqpSettings::default() };
+    let mut solver = SqpSolver::new(CartPole::default(), ocp.clone(), settings).unwrap();
+    solver.initialize_constant(&x0, &[0.0]).unwrap();
+    let stats = solver.solve(&x0).unwrap();
+    assert_eq!(stats.status, SqpStatus::MaxIterations);
+    assert_eq!(stats.iterations, 3);
+    assert!(stats.kkt > 1e-8);
+    // infeasible QP: the cart must be at p ≥ 10 after the first interval (|F| ≤ 25)
+    let mut bad = ocp.clone();
+    bad.x_min[0] = 10.0;
+    for form in [QpForm::Auto, QpForm::CondensedClarabel, QpForm::SparseClarabel] {
+        let settings = SqpSettings { qp_form: form, ..SqpSettings::default() };
+        let mut solver = SqpSolver::new(CartPole::default(), bad.clone(), settings).unwrap();
+        solver.initialize_constant(&x0, &[0.0]).unwrap();
+        let stats = solver.solve(&x0).unwrap();
+        assert_eq!(stats.status, SqpStatus::QpInfeasible, "{form:?}");
+    }
+    // bad input is an Err, not a status
+    assert!(solver.solve(&[0.0; 3]).is_err());
+    assert!(solver.solve(&[f64::NAN, 0.0, 0.0, 0.0]).is_err());
+}
+
+#[test]
+fn bad_settings_are_rejected() {
+    let ocp = Ocp::new(4, 1, 1.0, 10).unwrap();
+    let bad = [
+        SqpSettings { max_iterations: 0, ..SqpSettings::default() },
+        SqpSettings {
+            globalisation: Globalisation::FixedRelaxation { alpha: 1.5 },
+            ..SqpSettings::default()
+        },
+        SqpSettings { levenberg_marquardt: -1.0, ..SqpSettings::default() },
+        SqpSettings {
+            integrator: IntegratorSettings::new(IntegratorKind::Rk4, 0),
+            ..SqpSettings::default()
+        },
+        SqpSettings {
+            hessian: HessianApproximation::Exact,
+            integrator: IntegratorSettings::new(IntegratorKind::ImplicitMidpoint, 2),
+            ..SqpSettings::default()
+        },
+    ];
+    for s in bad {
+        assert!(SqpSolver::new(CartPole::default(), ocp.clone(), s.clone()).is_err(), "{s:?}");
+    }
+    let mut wrong = ocp.clone();
+    wrong.u_min[0] = 1.0;
+    wrong.u_max[0] = -1.0;
+    assert!(SqpSolver::new(CartPole::default(), wrong, SqpSettings::default()).is_err());
+    assert!(SqpSolver::new(
+        CartPole::default(),
+        Ocp::new(3, 1, 1.0, 10).unwrap(),
+        SqpSettings::default()
+    )
+    .is_err());
+}
+
+/// Warm start by shifting and real-time iterations track the swing-up solution.
+#[test]
+fn shift_and_real_time_iteration() {
+    let (mut solver, stats) = swing_up(HessianApproximation::GaussNewton, QpForm::Auto);
+    assert_eq!(stats.status, SqpStatus::Solved);
+    // re-solving from the converged point takes no QP
+    let x0 = [0.0, std::f64::consts::PI, 0.0, 0.0];
+    let again = solver.solve(&x0).unwrap();
+    assert_eq!((again.status, again.iterations), (SqpStatus::Solved, 0));
+    // shift by one interval and solve from the predicted state: far fewer iterations than cold
+    let x1: Vec<f64> = solver.states()[1].iter().copied().collect();
+    solver.shift(1);
+    let warm = solver.solve(&x1).unwrap();
+    assert_eq!(warm.status, SqpStatus::Solved);
+    assert!(
+        warm.iterations < stats.iterations / 2,
+        "warm {} vs cold {}",
+        warm.iterations,
+        stats.iterations
+    );
+    // fractional shift keeps the controls within bounds and finite
+    solver.shift_time(0.03).unwrap();
+    assert!(solver.controls().iter().all(|u| u[0].abs() <= 25.0));
+}
+
+#[test]
+fn real_time_iteration_does_one_step() {
+    let model = CartPole::default();
+    let mut ocp = Ocp::new(4, 1, 1.5, 30).unwrap();
+    ocp.u_min[0] = -25.0;
+    ocp.u_max[0] = 25.0;
+    let settings = SqpSettings { mode: SqpMode::RealTimeIteration, ..SqpSettings::default() };
+    let mut solver = SqpSolver::new(model, ocp, settings).unwrap();
+    let x0 = [0.0, 0.3, 0.0, 0.0];
+    solver.initialize_constant(&x0, &[0.0]).unwrap();
+    let mut kkt = Vec::new();
+    for _ in 0..8 {
+        let s = solver.solve(&x0).unwrap();
+        assert_eq!((s.status, s.iterations), (SqpStatus::RealTimeIteration, 1));
+        kkt.push(s.kkt);
+    }
+    // repeated RTI steps at a fixed x0 converge (the KKT residual is measured before each step)
+    assert!(kkt[7] < 1e-3 * kkt[0], "{kkt:?}");
+}
