@@ -1,8 +1,305 @@
 //! Verification cases of the `ocp-transcription` crate (names `ocp-transcription/<case>`).
 
-use crate::Case;
+use crate::{Case, CaseOutcome, Metric, Tier};
+use nalgebra::{DMatrix, DVector};
+use ocp_transcription::samples::{CartPole, LinearModel, ModalLike, SplitMix64};
+use ocp_transcription::{
+    Dynamics, Globalisation, HessianApproximation, Integrator, IntegratorKind, IntegratorSettings,
+    Ocp, QpForm, SqpSettings, SqpSolver, SqpStatus,
+};
 
 /// The cases of `ocp-transcription`.
 pub fn cases() -> Vec<Case> {
-    Vec::new()
+    vec![
+        Case {
+            name: "ocp-transcription/sensitivities-vs-finite-differences",
+            tier: Tier::Quick,
+            run: sensitivities,
+        },
+        Case { name: "ocp-transcription/integrator-orders", tier: Tier::Quick, run: orders },
+        Case { name: "ocp-transcription/lq-equals-riccati", tier: Tier::Quick, run: lq_riccati },
+        Case { name: "ocp-transcription/cartpole-swing-up", tier: Tier::Quick, run: swing_up },
+        Case { name: "ocp-transcription/failure-statuses", tier: Tier::Quick, run: statuses },
+    ]
+}
+
+fn err<E: std::fmt::Display>(e: E) -> String {
+    e.to_string()
+}
+
+/// Max relative deviation of `A`, `B` from central differences (step 1e-6).
+fn fd_error<D: Dynamics>(
+    model: &D,
+    kind: IntegratorKind,
+    x: &[f64],
+    u: &[f64],
+) -> Result<f64, String> {
+    let (nx, nu) = (model.nx(), model.nu());
+    let mut int = Integrator::new(model, &IntegratorSettings::new(kind, 3), 0.1).map_err(err)?;
+    let (mut xe, mut xp, mut xm) = (vec![0.0; nx], vec![0.0; nx], vec![0.0; nx]);
+    let mut a = DMatrix::zeros(nx, nx);
+    let mut b = DMatrix::zeros(nx, nu);
+    int.integrate_with_sensitivities(model, x, u, &mut xe, &mut a, &mut b).map_err(err)?;
+    let eps = 1e-6;
+    let mut e = 0.0_f64;
+    for j in 0..nx + nu {
+        let (mut x1, mut u1, mut x2, mut u2) = (x.to_vec(), u.to_vec(), x.to_vec(), u.to_vec());
+        if j < nx {
+            x1[j] += eps;
+            x2[j] -= eps;
+        } else {
+            u1[j - nx] += eps;
+            u2[j - nx] -= eps;
+        }
+        int.integrate(model, &x1, &u1, &mut xp).map_err(err)?;
+        int.integrate(model, &x2, &u2, &mut xm).map_err(err)?;
+        for i in 0..nx {
+            let an = if j < nx { a[(i, j)] } else { b[(i, j - nx)] };
+            e = e.max(((xp[i] - xm[i]) / (2.0 * eps) - an).abs() / (1.0 + an.abs()));
+        }
+    }
+    Ok(e)
+}
+
+fn sensitivities() -> CaseOutcome {
+    let model = ModalLike::new(10, 2, 30.0, 1.0, 5).map_err(err)?;
+    let mut rng = SplitMix64::new(42);
+    let mut out = Vec::new();
+    for kind in [IntegratorKind::Rk4, IntegratorKind::ImplicitMidpoint, IntegratorKind::LawsonRk4] {
+        let mut e = 0.0_f64;
+        for _ in 0..16 {
+            let x: Vec<f64> = (0..10).map(|_| rng.uniform(-1.0, 1.0)).collect();
+            let u: Vec<f64> = (0..2).map(|_| rng.uniform(-1.0, 1.0)).collect();
+            e = e.max(fd_error(&model, kind, &x, &u)?);
+        }
+        // central differences: truncation ~1e-12, round-off ~1e-10
+        out.push(Metric::at_most(
+            format!("{kind:?}: max rel. deviation of A, B from central FD"),
+            e,
+            1e-6,
+        ));
+    }
+    Ok(out)
+}
+
+/// Observed order of the one-interval error against a fine Lawson reference.
+fn orders() -> CaseOutcome {
+    let model = ModalLike::new(21, 3, 60.0, 1.0, 9).map_err(err)?;
+    let x: Vec<f64> = (0..21).map(|i| 0.4 * ((i as f64) * 0.7).sin()).collect();
+    let u = [0.3, -0.2, 0.1];
+    let dt = 0.25;
+    let mut reference = vec![0.0; 21];
+    let mut int =
+        Integrator::new(&model, &IntegratorSettings::new(IntegratorKind::LawsonRk4, 2048), dt)
+            .map_err(err)?;
+    int.integrate(&model, &x, &u, &mut reference).map_err(err)?;
+    let mut out = Vec::new();
+    for (kind, n0, expected) in [
+        (IntegratorKind::Rk4, 64, 4.0),
+        (IntegratorKind::LawsonRk4, 16, 4.0),
+        (IntegratorKind::ImplicitMidpoint, 64, 2.0),
+    ] {
+        let mut errs = Vec::new();
+        for n in [n0, 2 * n0] {
+            let mut int =
+                Integrator::new(&model, &IntegratorSettings::new(kind, n), dt).map_err(err)?;
+            let mut xe = vec![0.0; 21];
+            int.integrate(&model, &x, &u, &mut xe).map_err(err)?;
+            let e = xe.iter().zip(&reference).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+            errs.push(e);
+        }
+        let order = (errs[0] / errs[1]).log2();
+        // asymptotic regime: the observed order is within 0.3 of the method's order
+        out.push(Metric::at_least(
+            format!("{kind:?}: observed order (n = {n0} → {})", 2 * n0),
+            order,
+            expected - 0.3,
+        ));
+    }
+    Ok(out)
+}
+
+fn lq_riccati() -> CaseOutcome {
+    let model = LinearModel::spring_chain(3, 2);
+    let mut ocp = Ocp::new(6, 2, 3.0, 15).map_err(err)?;
+    ocp.r = DMatrix::identity(2, 2) * 0.5;
+    ocp.terminal = DMatrix::identity(6, 6) * 2.0;
+    let x0 = DVector::from_vec(vec![0.5, -0.3, 0.2, 0.0, 0.4, -0.1]);
+    let (nx, nu, n, dt) = (6, 2, 15, ocp.interval());
+    let settings = SqpSettings::default();
+    let mut int = Integrator::new(&model, &settings.integrator, dt).map_err(err)?;
+    let (mut a, mut b, mut xe) = (DMatrix::zeros(nx, nx), DMatrix::zeros(nx, nu), vec![0.0; nx]);
+    int.integrate_with_sensitivities(&model, &[0.0; 6], &[0.0; 2], &mut xe, &mut a, &mut b)
+        .map_err(err)?;
+    let rd = &ocp.r * dt;
+    let mut p = &ocp.q * (0.5 * dt) + &ocp.terminal;
+    let mut gains = vec![DMatrix::zeros(nu, nx); n];
+    for k in (0..n).rev() {
+        let btp = b.transpose() * &p;
+        let gain = (&rd + &btp * &b).cholesky().ok_or("Riccati: not PD")?.solve(&(&btp * &a));
+        let qk = &ocp.q * if k == 0 { 0.5 * dt } else { dt };
+        p = qk + a.transpose() * &p * (&a - &b * &gain);
+        p = 0.5 * (&p + p.transpose());
+        gains[k] = gain;
+    }
+    let mut out = Vec::new();
+    for form in [QpForm::CondensedDense, QpForm::CondensedClarabel, QpForm::SparseClarabel] {
+        let mut solver = SqpSolver::new(
+            &model,
+            ocp.clone(),
+            SqpSettings { qp_form: form, ..SqpSettings::default() },
+        )
+        .map_err(err)?;
+        let stats = solver.solve(x0.as_slice()).map_err(err)?;
+        if stats.status != SqpStatus::Solved {
+            return Err(format!("{form:?}: status {:?}", stats.status));
+        }
+        let mut x = x0.clone();
+        let mut dev = 0.0_f64;
+        for k in 0..n {
+            let u = -&gains[k] * &x;
+            x = &a * &x + &b * &u;
+            dev = dev
+                .max((&solver.controls()[k] - &u).amax())
+                .max((&solver.states()[k + 1] - &x).amax());
+        }
+        out.push(Metric::at_most(format!("{form:?}: max |SQP − Riccati|"), dev, 1e-8));
+        out.push(Metric::at_most(
+            format!("{form:?}: SQP iterations"),
+            stats.iterations as f64,
+            1.0,
+        ));
+    }
+    Ok(out)
+}
+
+fn swing_up_ocp() -> Result<Ocp, String> {
+    let mut ocp = Ocp::new(4, 1, 1.5, 30).map_err(err)?;
+    ocp.q = DMatrix::from_diagonal(&DVector::from_vec(vec![10.0, 10.0, 0.1, 0.1]));
+    ocp.r = DMatrix::identity(1, 1) * 1e-3;
+    ocp.terminal = DMatrix::from_diagonal(&DVector::from_vec(vec![100.0, 100.0, 10.0, 10.0]));
+    ocp.u_min[0] = -25.0;
+    ocp.u_max[0] = 25.0;
+    Ok(ocp)
+}
+
+fn swing_up() -> CaseOutcome {
+    let x0 = [0.0, std::f64::consts::PI, 0.0, 0.0];
+    let mut out = Vec::new();
+    for hessian in [HessianApproximation::GaussNewton, HessianApproximation::Exact] {
+        let settings = SqpSettings {
+            hessian,
+            max_iterations: 100,
+            integrator: IntegratorSettings::new(IntegratorKind::Rk4, 2),
+            ..SqpSettings::default()
+        };
+        let mut solver =
+            SqpSolver::new(CartPole::default(), swing_up_ocp()?, settings).map_err(err)?;
+        solver.initialize_constant(&x0, &[0.0]).map_err(err)?;
+        let stats = solver.solve(&x0).map_err(err)?;
+        if stats.status != SqpStatus::Solved {
+            return Err(format!("{hessian:?}: status {:?}", stats.status));
+        }
+        out.push(Metric::at_most(format!("{hessian:?}: final KKT residual"), stats.kkt, 1e-8));
+        let active = solver.controls().iter().filter(|u| (u[0].abs() - 25.0).abs() < 1e-9).count();
+        out.push(Metric::at_least(
+            format!("{hessian:?}: controls at the bound |F| = 25"),
+            active as f64,
+            2.0,
+        ));
+        out.push(Metric::at_most(
+            format!("{hessian:?}: |θ(τp)| (upright)"),
+            solver.states()[30][1].abs(),
+            0.2,
+        ));
+        if hessian == HessianApproximation::Exact {
+            let mut e: Vec<f64> = solver.log().iter().map(|l| l.kkt).collect();
+            e.push(stats.kkt);
+            let m = e.len();
+            let c = (e[m - 1] / (e[m - 2] * e[m - 2])).max(e[m - 2] / (e[m - 3] * e[m - 3]));
+            out.push(Metric::at_most(
+                "Exact: max e⁺/e² over the last two iterations (quadratic)",
+                c,
+                10.0,
+            ));
+            out.push(Metric::at_most(
+                "Exact: SQP iterations from cold start",
+                stats.iterations as f64,
+                45.0,
+            ));
+        } else {
+            out.push(Metric::at_most(
+                "GaussNewton: SQP iterations from cold start",
+                stats.iterations as f64,
+                80.0,
+            ));
+        }
+    }
+    Ok(out)
+}
+
+struct Fragile(CartPole);
+impl Dynamics for Fragile {
+    fn nx(&self) -> usize {
+        4
+    }
+    fn nu(&self) -> usize {
+        1
+    }
+    fn rhs(&self, x: &[f64], u: &[f64], xdot: &mut [f64]) {
+        self.0.rhs(x, u, xdot);
+        if x[0].abs() > 0.5 {
+            xdot[2] = f64::NAN;
+        }
+    }
+    fn jacobians(&self, x: &[f64], u: &[f64], fx: &mut DMatrix<f64>, fu: &mut DMatrix<f64>) {
+        self.0.jacobians(x, u, fx, fu)
+    }
+}
+
+fn statuses() -> CaseOutcome {
+    let x0 = [0.0, std::f64::consts::PI, 0.0, 0.0];
+    let ocp = swing_up_ocp()?;
+    let flag = |ok: bool| if ok { 1.0 } else { 0.0 };
+    let mut out = Vec::new();
+    let settings = SqpSettings { globalisation: Globalisation::FullStep, ..SqpSettings::default() };
+    let mut s = SqpSolver::new(Fragile(CartPole::default()), ocp.clone(), settings).map_err(err)?;
+    s.initialize_constant(&[0.6, 3.0, 0.0, 0.0], &[0.0]).map_err(err)?;
+    let st = s.solve(&x0).map_err(err)?.status;
+    out.push(Metric::at_least(
+        "NaN dynamics → NonFiniteDynamics",
+        flag(st == SqpStatus::NonFiniteDynamics),
+        1.0,
+    ));
+    let mut s = SqpSolver::new(
+        CartPole::default(),
+        ocp.clone(),
+        SqpSettings { max_iterations: 3, ..SqpSettings::default() },
+    )
+    .map_err(err)?;
+    s.initialize_constant(&x0, &[0.0]).map_err(err)?;
+    let st = s.solve(&x0).map_err(err)?.status;
+    out.push(Metric::at_least(
+        "3 iterations → MaxIterations",
+        flag(st == SqpStatus::MaxIterations),
+        1.0,
+    ));
+    let mut bad = ocp;
+    bad.x_min[0] = 10.0;
+    for form in [QpForm::CondensedClarabel, QpForm::SparseClarabel] {
+        let mut s = SqpSolver::new(
+            CartPole::default(),
+            bad.clone(),
+            SqpSettings { qp_form: form, ..SqpSettings::default() },
+        )
+        .map_err(err)?;
+        s.initialize_constant(&x0, &[0.0]).map_err(err)?;
+        let st = s.solve(&x0).map_err(err)?.status;
+        out.push(Metric::at_least(
+            format!("{form:?}: unreachable state bound → QpInfeasible"),
+            flag(st == SqpStatus::QpInfeasible),
+            1.0,
+        ));
+    }
+    Ok(out)
 }
