@@ -361,6 +361,7 @@ struct BlockSolution {
 
 fn solve_block(
     p: &SecondOrderProblem,
+    g: &Mat<f64>,
     s1: Vec<usize>,
     s2: Vec<usize>,
     g_rows: &[usize],
@@ -377,7 +378,7 @@ fn solve_block(
     let mut cons = Mat::<f64>::zeros(g_rows.len() + rigid.len(), s1.len());
     for (r, &gr) in g_rows.iter().enumerate() {
         for (c, &gi) in s1.iter().enumerate() {
-            cons[(r, c)] = p.g[(gr, gi)];
+            cons[(r, c)] = g[(gr, gi)];
         }
     }
     for (r, &rc) in rigid.iter().enumerate() {
@@ -470,10 +471,12 @@ fn solve_block(
 /// Solves the constrained eigenproblem (see the module docs).
 ///
 /// `rigid_candidates` (columns of length n1, in priority order) fix the basis of the
-/// degenerate rigid-body eigenspace: each is projected onto it and made `B1`-orthogonal to
-/// the previous ones (theory.md §4: rotation about the root first, then joint by joint).
-/// Without candidates, or when they do not span the space, the projections of the unit
-/// vectors `e_0, e_1, …` are used, which is deterministic but not physically ordered.
+/// degenerate rigid-body eigenspace: those that are exact mechanism motions of the discrete
+/// model (`G1 c = 0`, `Dᵀ c = 0`) become the first rigid modes, `B1`-orthonormalised in order
+/// (theory.md §4: rotation about the root first, then joint by joint), and the elastic
+/// problem is solved `B1`-orthogonal to them. Any rigid direction they miss is found by the
+/// eigen solver and fixed by projecting the unit vectors `e_0, e_1, …` (deterministic but not
+/// physically ordered).
 pub fn solve(
     problem: &SecondOrderProblem,
     settings: &EigenSettings,
@@ -486,6 +489,20 @@ pub fn solve(
             return Err(shape("rigid_candidates", (n1, c.ncols()), (c.nrows(), c.ncols())));
         }
         check_finite("rigid_candidates", c)?;
+    }
+    // Exact rigid fields among the candidates; the elastic problem is solved B1-orthogonal
+    // to them (extra constraint rows), so they are exact rigid modes.
+    let exact = exact_rigid_fields(problem, rigid_candidates);
+    let mut g_ext = Mat::<f64>::zeros(problem.g.nrows() + exact.len(), n1);
+    for r in 0..problem.g.nrows() {
+        for c in 0..n1 {
+            g_ext[(r, c)] = problem.g[(r, c)];
+        }
+    }
+    for (e, (_, bv)) in exact.iter().enumerate() {
+        for c in 0..n1 {
+            g_ext[(problem.g.nrows() + e, c)] = bv[c];
+        }
     }
     // Connected components over X1 ∪ X2 unknowns.
     let mut uf = UnionFind((0..n1 + n2).collect());
@@ -508,7 +525,7 @@ pub fn solve(
             }
         }
     }
-    let g = &problem.g;
+    let g = &g_ext;
     let mut row_anchor = vec![None; g.nrows()];
     for r in 0..g.nrows() {
         let cols: Vec<usize> = (0..n1).filter(|&c| g[(r, c)] != 0.0).collect();
@@ -549,6 +566,7 @@ pub fn solve(
         }
         blocks.push(solve_block(
             problem,
+            &g_ext,
             members1[b].clone(),
             members2[b].clone(),
             &g_rows_of[b],
@@ -570,25 +588,31 @@ pub fn solve(
         }
     }
     elastic_ids.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
-    let n_rigid = rigid_ids.len();
+    let n_exact = exact.len();
+    let n_rigid = n_exact + rigid_ids.len();
     let m = n_rigid + elastic_ids.len();
     let mut phi1 = Mat::<f64>::zeros(n1, m);
     let mut phi2 = Mat::<f64>::zeros(n2, m);
     let mut lambda = vec![0.0; m];
     let mut omega = vec![0.0; m];
-    // Rigid eigenspace, then its canonical basis.
-    let mut rigid = Mat::<f64>::zeros(n1, n_rigid);
+    // Rigid modes: the exact fields, then a canonical basis of what is left of the space.
+    for (j, (v, _)) in exact.iter().enumerate() {
+        for i in 0..n1 {
+            phi1[(i, j)] = v[i];
+        }
+    }
+    let mut rigid = Mat::<f64>::zeros(n1, rigid_ids.len());
     for (col, &(bi, ci)) in rigid_ids.iter().enumerate() {
         let b = &blocks[bi];
         for (li, &gi) in b.s1.iter().enumerate() {
             rigid[(gi, col)] = b.phi1[(li, ci)];
         }
-        lambda[col] = b.lambda[ci];
+        lambda[n_exact + col] = b.lambda[ci];
     }
-    let canonical = canonical_rigid_basis(&problem.b1, &rigid, rigid_candidates)?;
-    for j in 0..n_rigid {
+    let canonical = canonical_rigid_basis(&problem.b1, &rigid)?;
+    for j in 0..rigid_ids.len() {
         for i in 0..n1 {
-            phi1[(i, j)] = canonical[(i, j)];
+            phi1[(i, n_exact + j)] = canonical[(i, j)];
         }
     }
     for (k, &(l, bi, ci)) in elastic_ids.iter().enumerate() {
@@ -631,29 +655,79 @@ pub(crate) fn sign_of_largest(vals: &[f64]) -> f64 {
     }
 }
 
-/// Canonical basis of the rigid eigenspace spanned by the `B1`-orthonormal columns of `rigid`.
-fn canonical_rigid_basis(
-    b1: &Mat<f64>,
-    rigid: &Mat<f64>,
+/// Admissible rigid candidates (`G1 c = 0`, `Dᵀ c = 0` to round-off: exact mechanism motions
+/// of the discrete model), made `B1`-orthonormal in order: `(field, B1 field)` pairs.
+fn exact_rigid_fields(
+    problem: &SecondOrderProblem,
     candidates: Option<MatRef<'_, f64>>,
-) -> Result<Mat<f64>> {
+) -> Vec<(Vec<f64>, Vec<f64>)> {
+    let Some(c) = candidates else { return Vec::new() };
+    let n1 = problem.n1();
+    let (gmax, dmax) = (max_abs(problem.g.as_ref()), max_abs(problem.d.as_ref()));
+    let mut done: Vec<(Vec<f64>, Vec<f64>)> = Vec::new();
+    for col in 0..c.ncols() {
+        let v0: Vec<f64> = (0..n1).map(|i| c[(i, col)]).collect();
+        let vmax = v0.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+        if vmax == 0.0 {
+            continue;
+        }
+        let gres = (0..problem.g.nrows())
+            .map(|row| (0..n1).map(|i| problem.g[(row, i)] * v0[i]).sum::<f64>().abs())
+            .fold(0.0f64, f64::max);
+        let dres = (0..problem.d.ncols())
+            .map(|e| (0..n1).map(|i| problem.d[(i, e)] * v0[i]).sum::<f64>().abs())
+            .fold(0.0f64, f64::max);
+        if gres > 1e-10 * gmax * vmax || dres > 1e-10 * dmax * vmax {
+            continue;
+        }
+        let bnorm = |v: &[f64]| -> (Vec<f64>, f64) {
+            let bv: Vec<f64> =
+                (0..n1).map(|i| (0..n1).map(|k| problem.b1[(i, k)] * v[k]).sum()).collect();
+            let n = bv.iter().zip(v).map(|(x, y)| x * y).sum::<f64>().max(0.0).sqrt();
+            (bv, n)
+        };
+        let (_, n0) = bnorm(&v0);
+        let mut v = v0;
+        for _ in 0..2 {
+            for (q, bq) in &done {
+                let a: f64 = bq.iter().zip(&v).map(|(x, y)| x * y).sum();
+                for (x, y) in v.iter_mut().zip(q) {
+                    *x -= a * y;
+                }
+            }
+        }
+        let (bv, n) = bnorm(&v);
+        if n > 1e-6 * n0 {
+            done.push((v.iter().map(|x| x / n).collect(), bv.iter().map(|x| x / n).collect()));
+        }
+    }
+    done
+}
+
+/// Canonical basis of the rigid eigenspace spanned by the `B1`-orthonormal columns of `rigid`:
+/// the projections of the unit vectors `e_0, e_1, …` onto it, orthonormalised in order.
+fn canonical_rigid_basis(b1: &Mat<f64>, rigid: &Mat<f64>) -> Result<Mat<f64>> {
     let (n1, r) = (rigid.nrows(), rigid.ncols());
     if r == 0 {
         return Ok(Mat::zeros(n1, 0));
     }
-    let b1r = b1 * rigid; // n1 × r; coordinates of a vector c in the rigid basis: (B1 R)ᵀ c
+    let b1r = b1 * rigid; // coordinates of c in the rigid basis: (B1 R)ᵀ c
     let row_norm_max = (0..n1)
         .map(|i| (0..r).map(|j| b1r[(i, j)].powi(2)).sum::<f64>().sqrt())
         .fold(0.0f64, f64::max);
-    let mut accepted: Vec<Vec<f64>> = Vec::new();
-    let try_coords = |a: Vec<f64>, accepted: &mut Vec<Vec<f64>>| {
+    let mut coords: Vec<Vec<f64>> = Vec::new();
+    for i in 0..n1 {
+        if coords.len() == r {
+            break;
+        }
+        let a: Vec<f64> = (0..r).map(|j| b1r[(i, j)]).collect();
         let norm0 = a.iter().map(|x| x * x).sum::<f64>().sqrt();
-        if norm0 <= 1e-8 * row_norm_max.max(f64::MIN_POSITIVE) {
-            return;
+        if norm0 <= 1e-8 * row_norm_max {
+            continue;
         }
         let mut p = a;
         for _ in 0..2 {
-            for q in accepted.iter() {
+            for q in coords.iter() {
                 let dot: f64 = p.iter().zip(q).map(|(x, y)| x * y).sum();
                 for (x, y) in p.iter_mut().zip(q) {
                     *x -= dot * y;
@@ -662,32 +736,15 @@ fn canonical_rigid_basis(
         }
         let norm = p.iter().map(|x| x * x).sum::<f64>().sqrt();
         if norm > 1e-6 * norm0 {
-            accepted.push(p.into_iter().map(|x| x / norm).collect());
-        }
-    };
-    if let Some(c) = candidates {
-        for col in 0..c.ncols() {
-            if accepted.len() == r {
-                break;
-            }
-            let a: Vec<f64> =
-                (0..r).map(|j| (0..n1).map(|i| b1r[(i, j)] * c[(i, col)]).sum()).collect();
-            try_coords(a, &mut accepted);
+            coords.push(p.into_iter().map(|x| x / norm).collect());
         }
     }
-    for i in 0..n1 {
-        if accepted.len() == r {
-            break;
-        }
-        let a: Vec<f64> = (0..r).map(|j| b1r[(i, j)]).collect();
-        try_coords(a, &mut accepted);
-    }
-    if accepted.len() != r {
+    if coords.len() != r {
         return Err(ModalError::Numerical {
             stage: "canonical rigid basis".into(),
-            reason: format!("found {} of {r} directions", accepted.len()),
+            reason: format!("found {} of {r} directions", coords.len()),
         });
     }
-    let coords = Mat::from_fn(r, r, |i, j| accepted[j][i]);
+    let coords = Mat::from_fn(r, r, |i, j| coords[j][i]);
     Ok(rigid * &coords)
 }

@@ -60,6 +60,12 @@ pub enum ModalError {
         /// Underlying error.
         source: std::io::Error,
     },
+    /// An error of the multibody layer (structure, constraints).
+    #[error(transparent)]
+    Multibody(#[from] multibody_constraints::MultibodyError),
+    /// An error of the beam layer.
+    #[error(transparent)]
+    Beam(#[from] intrinsic_beam::BeamError),
     /// A malformed exported file.
     #[error("malformed file {path}: {reason}")]
     Format {

@@ -63,9 +63,9 @@ pub struct BeamLayout {
     pub reference_quaternions: Vec<[f64; 4]>,
     /// Reference position `r̄_n` (global) of each node `n = 0…N`.
     pub reference_positions: Vec<[f64; 3]>,
-    /// Index of an earlier beam whose end (`s = L`) this beam starts from, for rebuilding
-    /// positions from strains; `None`: the beam starts at its reference position `r̄_0`.
-    pub start_from: Option<usize>,
+    /// `(beam, node)` of an earlier beam whose node this beam's `s = 0` end is joined to, for
+    /// rebuilding positions from strains; `None`: the beam starts at its reference `r̄_0`.
+    pub start_from: Option<(usize, usize)>,
 }
 
 impl BeamLayout {
@@ -189,12 +189,12 @@ impl Layout {
                     ));
                 }
             }
-            if let Some(p) = beam.start_from {
-                if p >= b {
+            if let Some((p, n)) = beam.start_from {
+                if p >= b || n >= self.beams[p].n_nodes() {
                     return Err(invalid(
                         format!("beams[{b}].start_from"),
-                        p,
-                        "must name an earlier beam",
+                        format!("({p}, {n})"),
+                        "must name a node of an earlier beam",
                     ));
                 }
             }

@@ -6,6 +6,13 @@ pub mod layout;
 pub use error::{ModalError, Result};
 #[cfg(test)]
 mod basis_tests;
+pub mod projection;
 pub mod rigid;
+pub mod rom;
+#[cfg(test)]
+mod rom_tests;
+pub mod samples;
+pub mod structure;
+pub mod tensor;
 #[cfg(test)]
 pub(crate) mod testing;

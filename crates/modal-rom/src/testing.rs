@@ -123,7 +123,7 @@ pub fn two_link_layout(components: Components, n: usize, angle: f64) -> Layout {
     let a = BeamLayout::straight("a", 1.0, n, [0.0; 3], [1.0, 0.0, 0.0, 0.0]);
     // rotation about e2 by −angle turns e1 towards +e3
     let mut b = BeamLayout::straight("b", 1.0, n, [1.0, 0.0, 0.0], quat_e2(-angle));
-    b.start_from = Some(0);
+    b.start_from = Some((0, n));
     Layout::new(components, vec![a, b]).unwrap()
 }
 

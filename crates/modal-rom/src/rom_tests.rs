@@ -1,0 +1,200 @@
+//! Unit tests of the modal model on the paper's structures (beam + multibody crates' operators).
+
+use crate::basis::{BasisSettings, ModeKind, ModeSelection};
+use crate::rom::RomOptions;
+use crate::samples::{self, paper_2d_selection, paper_3d_selection};
+use crate::testing;
+use faer::Mat;
+use proptest::prelude::*;
+use proptest::test_runner::{Config, RngSeed};
+use std::sync::OnceLock;
+
+fn rom2d() -> &'static samples::Sample {
+    static S: OnceLock<samples::Sample> = OnceLock::new();
+    S.get_or_init(|| {
+        samples::paper_2d(20, 0.0, false, &paper_2d_selection(), &RomOptions::default()).unwrap()
+    })
+}
+
+fn rom3d() -> &'static samples::Sample {
+    static S: OnceLock<samples::Sample> = OnceLock::new();
+    S.get_or_init(|| {
+        samples::paper_3d(10, 0.3, false, &paper_3d_selection(), &RomOptions::default()).unwrap()
+    })
+}
+
+#[test]
+fn structure_operators_match_the_independent_assembly() {
+    // The multibody crate's G and the beam crate's operators against testing.rs (theory.md §2–3).
+    for angle in [0.0, 0.7] {
+        let s =
+            samples::paper_2d(12, angle, false, &ModeSelection::Lowest(12), &RomOptions::default())
+                .unwrap();
+        let (layout, p) = testing::two_link_2d(12, angle);
+        let b =
+            crate::basis::ModalBasis::compute(layout, &p, &BasisSettings::default(), None).unwrap();
+        assert_eq!(s.basis.n_rigid(), 2);
+        for j in 2..12 {
+            let (a, c) = (s.basis.lambda()[j], b.lambda()[j]);
+            // eigenvalues of a symmetric problem carry an absolute error ~ ε·λmax (λmax ≈ 1e10
+            // here: thickness-shear GA/ρI), so compare ω² to that scale
+            let tol = 64.0 * f64::EPSILON * b.lambda_max();
+            assert!((a - c).abs() <= tol, "angle {angle} mode {j}: {a} vs {c} (tol {tol})");
+        }
+    }
+}
+
+#[test]
+fn paper_sets_and_quaternion_mode_counts() {
+    let s = rom2d();
+    assert_eq!(s.rom.n_modes(), 10);
+    assert_eq!(s.rom.n_rigid(), 2);
+    assert_eq!(s.rom.n_q2(), 8);
+    // ξ̄ + 2 rigid + 4 bending; axial modes of the straight structure rotate nothing.
+    assert_eq!(s.rom.n_xi(), 7);
+    let s3 =
+        samples::paper_3d(10, 0.0, false, &paper_3d_selection(), &RomOptions::default()).unwrap();
+    assert_eq!(s3.basis.n_rigid(), 4);
+    assert_eq!(s3.rom.n_xi(), 17, "3D: 17 of 21 quaternion modes kept");
+    let kinds = s3.rom.kinds();
+    assert_eq!(kinds.iter().filter(|k| **k == ModeKind::Torsion).count(), 4);
+}
+
+#[test]
+fn damping_is_symmetric_negative_semidefinite() {
+    let s =
+        samples::paper_2d(20, 0.0, true, &paper_2d_selection(), &RomOptions::default()).unwrap();
+    let sig = s.rom.sigma();
+    let eig = sig.self_adjoint_eigenvalues(faer::Side::Lower).unwrap();
+    let scale = eig.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    assert!(scale > 0.0);
+    assert!(eig.iter().all(|v| *v <= 1e-12 * scale), "{eig:?}");
+    for i in 0..s.rom.n_rigid() {
+        for j in 0..s.rom.n_modes() {
+            assert!(sig[(i, j)].abs() <= 1e-12 * scale, "rigid modes are undamped");
+        }
+    }
+}
+
+fn state(seed: &[f64], n: usize) -> Vec<f64> {
+    (0..n).map(|i| seed[i % seed.len()] * (1.0 + 0.37 * i as f64).sin()).collect()
+}
+
+#[test]
+fn midpoint_conserves_modal_energy() {
+    for s in [rom2d(), rom3d()] {
+        let rom = &s.rom;
+        let mut q = rom.reference_state();
+        let init = state(&[0.8, -0.5, 0.3], rom.xi_offset());
+        q[..rom.xi_offset()].copy_from_slice(&init);
+        let u = vec![0.0; rom.n_inputs()];
+        let e0 = rom.energy(&q);
+        for _ in 0..200 {
+            rom.midpoint_step(&mut q, &u, 0.01, 1e-14, 30).unwrap();
+        }
+        let drift = (rom.energy(&q) - e0).abs() / e0;
+        // midpoint conserves quadratic invariants exactly; what is left is Newton's 1e-14
+        // stopping tolerance and round-off over 200 steps
+        assert!(drift < 1e-12, "relative drift {drift}");
+    }
+}
+
+fn cfg() -> Config {
+    Config { cases: 64, rng_seed: RngSeed::Fixed(20_261_121), ..Config::default() }
+}
+
+proptest! {
+    #![proptest_config(cfg())]
+
+    #[test]
+    fn energy_neutrality_of_the_quadratic_terms(v in prop::collection::vec(-2.0f64..2.0, 60)) {
+        for s in [rom2d(), rom3d()] {
+            let rom = &s.rom;
+            let q = state(&v, rom.n_state());
+            let n = rom.energy_neutrality(&q).unwrap();
+            let scale = rom.gamma1().max_abs().max(rom.gamma2().max_abs())
+                * q.iter().map(|x| x.abs()).sum::<f64>().powi(3);
+            // exact in arithmetic; round-off of the sum of ~nnz products
+            prop_assert!(n.abs() <= 1e-14 * scale, "qᵀN(q)q = {n} (scale {scale})");
+        }
+    }
+
+    #[test]
+    fn jacobian_matches_central_differences(v in prop::collection::vec(-1.5f64..1.5, 60), w in prop::collection::vec(-3.0f64..3.0, 5)) {
+        for s in [rom2d(), rom3d()] {
+            let rom = &s.rom;
+            let n = rom.n_state();
+            let q = state(&v, n);
+            let u: Vec<f64> = (0..rom.n_inputs()).map(|i| w[i % w.len()]).collect();
+            let mut jq = Mat::<f64>::zeros(n, n);
+            let mut ju = Mat::<f64>::zeros(n, rom.n_inputs());
+            rom.jacobian(&q, &u, jq.as_mut(), ju.as_mut()).unwrap();
+            let h = 1e-5;
+            let (mut fp, mut fm) = (vec![0.0; n], vec![0.0; n]);
+            let mut worst = 0.0f64;
+            let mut scale = 1.0f64;
+            for c in 0..n + rom.n_inputs() {
+                let (mut qp, mut qm, mut up, mut um) = (q.clone(), q.clone(), u.clone(), u.clone());
+                if c < n { qp[c] += h; qm[c] -= h; } else { up[c - n] += h; um[c - n] -= h; }
+                rom.rhs(&qp, &up, &mut fp).unwrap();
+                rom.rhs(&qm, &um, &mut fm).unwrap();
+                for r in 0..n {
+                    let fd = (fp[r] - fm[r]) / (2.0 * h);
+                    let exact = if c < n { jq[(r, c)] } else { ju[(r, c - n)] };
+                    worst = worst.max((fd - exact).abs());
+                    scale = scale.max(exact.abs());
+                }
+            }
+            // f is quadratic: central differences are exact up to round-off ε|f|/h
+            prop_assert!(worst <= 1e-8 * scale, "FD mismatch {worst} (scale {scale})");
+        }
+    }
+
+    #[test]
+    fn project_reconstruct_project_round_trip(v in prop::collection::vec(-1.0f64..1.0, 60)) {
+        for s in [rom2d(), rom3d()] {
+            let rom = &s.rom;
+            let mut q = state(&v, rom.n_state());
+            // a unit-ish quaternion field: qξ near e0
+            let ox = rom.xi_offset();
+            for i in ox..rom.n_state() { q[i] *= 0.1; }
+            q[ox] = 1.0;
+            let f = rom.reconstruct(&q).unwrap();
+            // raw (unnormalised) quaternion field for the round trip
+            let qm = rom.quaternion().unwrap();
+            let raw: Vec<[f64; 4]> = (0..qm.weights.len()).map(|n| {
+                let mut a = [0.0; 4];
+                for (c, x) in a.iter_mut().enumerate() {
+                    *x = (0..qm.kept.len()).map(|k| qm.phi_xi[(4 * n + c, k)] * q[ox + k]).sum();
+                }
+                a
+            }).collect();
+            let back = rom.project(&f.x1, &f.x2, Some(&raw)).unwrap();
+            let err = q.iter().zip(&back).fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
+            prop_assert!(err < 1e-10, "round trip error {err}");
+        }
+    }
+}
+
+#[test]
+fn reference_state_reconstructs_the_reference_geometry() {
+    for s in [rom2d(), rom3d()] {
+        let rom = &s.rom;
+        let q = rom
+            .project(&vec![0.0; rom.layout().n1()], &vec![0.0; rom.layout().n2()], None)
+            .unwrap();
+        let r = rom.reference_state();
+        let err = q.iter().zip(&r).fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
+        assert!(err < 1e-12, "undeformed field projects to qξ = e0: {err}");
+        let pos = rom.positions(&q).unwrap();
+        for (b, beam) in rom.layout().beams.iter().enumerate() {
+            for n in 0..beam.n_nodes() {
+                let d: f64 = (0..3)
+                    .map(|a| (pos[b][n][a] - beam.reference_positions[n][a]).powi(2))
+                    .sum::<f64>()
+                    .sqrt();
+                assert!(d < 1e-12, "beam {b} node {n}: {d}");
+            }
+        }
+    }
+}
