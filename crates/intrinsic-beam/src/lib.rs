@@ -45,8 +45,12 @@ pub mod error;
 pub mod kinematics;
 pub mod loads;
 pub mod mesh;
+pub mod modes;
 pub mod operators;
 pub mod problem;
+#[cfg(test)]
+mod proptests;
+pub mod rk4;
 pub mod samples;
 pub mod section;
 pub mod sparse;

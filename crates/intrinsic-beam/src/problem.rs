@@ -181,11 +181,29 @@ pub struct NewtonSettings {
     pub tolerance: f64,
     /// Maximum Newton iterations per step (default 30). Valid: `≥ 1`.
     pub max_iterations: usize,
+    /// Keep the LU factorisation of the step Jacobian across iterations and steps (a
+    /// simplified Newton method), refreshing it when the iteration contracts slower than
+    /// `contraction_limit`, when `dt` changes, or on divergence (default `true`). The converged
+    /// step solves the same equations either way; only the cost changes.
+    pub reuse_jacobian: bool,
+    /// Largest accepted ratio of successive Newton updates with a reused Jacobian before it is
+    /// refreshed (default 0.25). Valid: `(0, 1)`.
+    pub contraction_limit: f64,
+    /// Start Newton from the linear extrapolation of the last two states when the step size is
+    /// unchanged (default `false`: states with stiff oscillations that flip sign every step,
+    /// `ω dt ≫ 1`, are predicted worse by extrapolation than by the last state).
+    pub extrapolate: bool,
 }
 
 impl Default for NewtonSettings {
     fn default() -> Self {
-        Self { tolerance: 1e-12, max_iterations: 30 }
+        Self {
+            tolerance: 1e-12,
+            max_iterations: 30,
+            reuse_jacobian: true,
+            contraction_limit: 0.25,
+            extrapolate: false,
+        }
     }
 }
 
@@ -197,6 +215,13 @@ impl NewtonSettings {
                 field: "NewtonSettings.tolerance".into(),
                 value: self.tolerance,
                 reason: "must be in (0, 1e-2]".into(),
+            });
+        }
+        if !(self.contraction_limit > 0.0 && self.contraction_limit < 1.0) {
+            return Err(BeamError::InvalidSetting {
+                field: "NewtonSettings.contraction_limit".into(),
+                value: self.contraction_limit,
+                reason: "must be in (0, 1)".into(),
             });
         }
         if self.max_iterations == 0 {
@@ -234,6 +259,10 @@ pub struct ImplicitMidpoint {
     residual: Vec<f64>,
     values: Vec<f64>,
     counters: Counters,
+    /// `dt` of the current factorisation (`None`: no valid factorisation).
+    factor_dt: Option<f64>,
+    /// State before the last step and that step's size (for extrapolation).
+    previous: Option<(Vec<f64>, f64)>,
 }
 
 impl ImplicitMidpoint {
@@ -269,6 +298,8 @@ impl ImplicitMidpoint {
             time: 0.0,
             system,
             counters: Counters::default(),
+            factor_dt: None,
+            previous: None,
         })
     }
 
@@ -330,30 +361,62 @@ impl ImplicitMidpoint {
         Ok(())
     }
 
+    /// Factorises the step Jacobian at the current iterate `new`.
+    fn refresh_jacobian(&mut self, dt: f64) -> Result<()> {
+        let nnz_beam = self.problem.beam.jacobian_nnz();
+        let beam = &self.problem.beam;
+        let input = StepInput {
+            time: self.time,
+            dt,
+            loads: &self.problem.loads,
+            kinematics: &self.kinematics,
+        };
+        beam.jacobian_values(&input, &self.state, &self.new, &mut self.values[..nnz_beam])?;
+        self.values[nnz_beam..].iter_mut().for_each(|v| *v = 1.0);
+        self.factor_dt = None;
+        self.system.factorize(&self.values)?;
+        self.factor_dt = Some(dt);
+        self.counters.factorizations += 1;
+        Ok(())
+    }
+
+    /// Initial Newton iterate: the current state, or its linear extrapolation.
+    fn predict(&mut self, dt: f64) {
+        self.new.copy_from_slice(&self.state);
+        if !self.settings.extrapolate {
+            return;
+        }
+        if let Some((prev, prev_dt)) = &self.previous {
+            if *prev_dt == dt {
+                for i in 0..self.new.len() {
+                    if !self.problem.beam.is_algebraic(i) {
+                        self.new[i] = 2.0 * self.state[i] - prev[i];
+                    }
+                }
+            }
+        }
+    }
+
     /// One step of size `dt`; returns the Newton iterations used. On failure the state is
     /// unchanged.
     pub fn step(&mut self, dt: f64) -> Result<usize> {
         if !crate::error::positive_finite(dt) {
             return Err(BeamError::NonPositiveTime { field: "dt".into(), value: dt });
         }
-        self.new.copy_from_slice(&self.state);
-        let nnz_beam = self.problem.beam.jacobian_nnz();
+        self.predict(dt);
         let mut last = f64::INFINITY;
+        let mut previous_update = f64::INFINITY;
+        let mut fresh = false;
+        if !self.settings.reuse_jacobian || self.factor_dt != Some(dt) {
+            self.refresh_jacobian(dt)?;
+            fresh = true;
+        }
         for iteration in 1..=self.settings.max_iterations {
             self.eval_residual(dt)?;
-            {
-                let beam = &self.problem.beam;
-                let input = StepInput {
-                    time: self.time,
-                    dt,
-                    loads: &self.problem.loads,
-                    kinematics: &self.kinematics,
-                };
-                beam.jacobian_values(&input, &self.state, &self.new, &mut self.values[..nnz_beam])?;
-                self.values[nnz_beam..].iter_mut().for_each(|v| *v = 1.0);
+            if iteration > 1 && !self.settings.reuse_jacobian {
+                self.refresh_jacobian(dt)?;
+                fresh = true;
             }
-            self.system.factorize(&self.values)?;
-            self.counters.factorizations += 1;
             self.counters.newton_iterations += 1;
             self.system.solve(&mut self.residual)?;
             let mut dmax: f64 = 0.0;
@@ -365,15 +428,40 @@ impl ImplicitMidpoint {
             }
             last = dmax / xmax;
             if !last.is_finite() {
-                break;
+                if fresh {
+                    break;
+                }
+                // a stale factorisation diverged: restart from the prediction, fresh Jacobian
+                self.predict(dt);
+                self.refresh_jacobian(dt)?;
+                fresh = true;
+                previous_update = f64::INFINITY;
+                continue;
             }
             if last <= self.settings.tolerance {
                 self.kinematics.advance(&self.problem.beam, &self.state, &self.new, dt)?;
-                std::mem::swap(&mut self.state, &mut self.new);
+                let old = std::mem::replace(&mut self.state, self.new.clone());
+                self.previous = Some((old, dt));
                 self.time += dt;
                 self.counters.steps += 1;
                 return Ok(iteration);
             }
+            if self.settings.reuse_jacobian
+                && last > self.settings.contraction_limit * previous_update
+            {
+                if last > previous_update && !fresh {
+                    self.predict(dt);
+                    previous_update = f64::INFINITY;
+                    self.refresh_jacobian(dt)?;
+                    fresh = true;
+                    continue;
+                }
+                self.refresh_jacobian(dt)?;
+                fresh = true;
+            } else {
+                fresh = false;
+            }
+            previous_update = last;
         }
         Err(BeamError::NewtonFailed {
             iterations: self.settings.max_iterations,

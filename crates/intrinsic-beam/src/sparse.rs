@@ -3,7 +3,8 @@
 //! numeric factorisation.
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
-use faer::sparse::linalg::lu::{factorize_symbolic_lu, NumericLu, SymbolicLu};
+use faer::sparse::linalg::lu::{factorize_symbolic_lu, LuSymbolicParams, NumericLu, SymbolicLu};
+pub use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::{Pair, SparseColMatRef, SymbolicSparseColMat};
 use faer::{Conj, MatMut, Par};
 
@@ -36,6 +37,15 @@ impl std::fmt::Debug for SparseLuSystem {
 impl SparseLuSystem {
     /// Builds the structure from `(row, col)` entries (duplicates are summed).
     pub fn new(n: usize, pattern: &[(usize, usize)]) -> Result<Self> {
+        Self::with_threshold(n, pattern, SupernodalThreshold::AUTO)
+    }
+
+    /// As [`SparseLuSystem::new`] with an explicit simplicial/supernodal choice.
+    pub fn with_threshold(
+        n: usize,
+        pattern: &[(usize, usize)],
+        threshold: SupernodalThreshold,
+    ) -> Result<Self> {
         let pairs: Vec<Pair<usize, usize>> =
             pattern.iter().map(|&(r, c)| Pair::new(r, c)).collect();
         let (symbolic, _) = SymbolicSparseColMat::try_new_from_indices(n, n, &pairs)
@@ -50,7 +60,9 @@ impl SparseLuSystem {
             })
             .collect();
         let nnz = row_idx.len();
-        let lu_symbolic = factorize_symbolic_lu(symbolic.as_ref(), Default::default())
+        let params =
+            LuSymbolicParams { supernodal_flop_ratio_threshold: threshold, ..Default::default() };
+        let lu_symbolic = factorize_symbolic_lu(symbolic.as_ref(), params)
             .map_err(|e| BeamError::LinearSolve { reason: format!("symbolic LU: {e:?}") })?;
         let req = StackReq::any_of(&[
             lu_symbolic.factorize_numeric_lu_scratch::<f64>(Par::Seq, Default::default()),
