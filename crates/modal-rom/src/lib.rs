@@ -1,18 +1,61 @@
-//! Constrained linear modes and the nonlinear modal model (paper eqs. 13–32).
+//! Constrained linear modes and the nonlinear modal reduced-order model of intrinsic beam
+//! structures with joints (paper §3, eqs. 13–32; implementer notes theory.md §4–7).
+//!
+//! **Constrained modes (30)–(32).** At rest, the staggered FE model of a structure is
+//! `B Ẋ = A X`, `G X = 0`. With node velocities `X1`, element forces `X2`, the skew operator's
+//! node/element block `D` and the velocity rows `G1` of supports and joints, the modes solve
+//!
+//! ```text
+//!   ω² B1 φ1 = D B2⁻¹ Dᵀ φ1,   φ1 ∈ null(G1) (+ rigid C rows, massless M rows),
+//!   φ2 = +B2⁻¹ Dᵀ φ1 / ω,      ⟨φ1i, B1 φ1j⟩ = δij,   ⟨φ1i, D φ2j⟩ = ω_j δij,
+//! ```
+//!
+//! ([`eigen`], [`basis::ModalBasis`]): rigid modes first (exact rotations about the root, then
+//! joint by joint), then elastic modes by frequency, labelled from their energy split.
+//!
+//! **Modal model (14)–(21).** `x1 = φ1j q1j`, `x2 = φ2j q2j`:
+//!
+//! ```text
+//!   q̇ = W q + N(q) q + [η; 0],   W = [[Σ, Ω], [−Ω, 0]],
+//!   N(q) = [[−q1l Γ1^l, −q2l Γ2^l], [q2l (Γ2^l)ᵀ, 0]],
+//!   Γ1^l_ij = ⟨φ1i, L1(φ1j) M φ1l⟩,  Γ2^l_ij = ⟨φ1i, L2(φ2j) C φ2l⟩,  η = B_u u,
+//! ```
+//!
+//! with `ε = ½ qᵀq` conserved without damping and input (`qᵀN(q)q = 0`).
+//!
+//! **Quaternion modes (22)–(29).** `ξ = φξj qξj`, `φξ0 = ξ̄`, `φξj = Uω(ξ̄) φωj`,
+//! `Aξ q̇ξ = qξl Γξ^l q1`, `Aξ = ⟨φξi, φξj⟩`, `Γξ^l_ij = ⟨φξi, U(φωj) φξl⟩`; zero or dependent
+//! quaternion modes are dropped so `Aξ` is invertible ([`rom::ModalRom`]).
+//!
+//! Also: projection of FE states and reconstruction of fields and positions
+//! ([`projection`]), export to JSON + `.npy` and a reader ([`export`]), a mode report for
+//! the CLI ([`report`]) and the paper's canonical models ([`samples`]).
+
 pub mod basis;
 pub mod eigen;
 pub mod error;
+pub mod export;
 pub mod layout;
-pub use error::{ModalError, Result};
-#[cfg(test)]
-mod basis_tests;
+pub mod npy;
 pub mod projection;
+pub mod report;
 pub mod rigid;
 pub mod rom;
-#[cfg(test)]
-mod rom_tests;
 pub mod samples;
 pub mod structure;
 pub mod tensor;
+
+pub use basis::{BasisSettings, KindCounts, ModalBasis, ModeKind, ModeSelection};
+pub use eigen::{EigenSettings, SecondOrderProblem};
+pub use error::{ModalError, Result};
+pub use layout::{BeamLayout, Components, Layout};
+pub use report::{mode_report, ModeReport};
+pub use rom::{Input, ModalRom, RomOptions};
+pub use structure::StructureModel;
+
+#[cfg(test)]
+mod basis_tests;
+#[cfg(test)]
+mod rom_tests;
 #[cfg(test)]
 pub(crate) mod testing;

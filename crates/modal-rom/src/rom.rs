@@ -812,6 +812,18 @@ fn quaternion_model(layout: &Layout, phi1: &Mat<f64>, tol: f64) -> Result<Quater
         }
     }
     let gamma_xi = SparseTensor3::from_dense((nx, m, nx), &dense, 0.0);
+    let gamma_xi_scaled = scale_gamma_xi(&a_xi_inv, &dense, nx, m);
+    let phi_xi = Mat::from_fn(4 * nodes, nx, |r, c| fields[c][r / 4][r % 4]);
+    Ok(QuaternionModel { kept, a_xi, a_xi_inv, gamma_xi, gamma_xi_scaled, phi_xi, weights })
+}
+
+/// `Aξ⁻¹ Γξ^l` from the dense `Γξ` indexed `[(l·nx + i)·m + j]`.
+pub(crate) fn scale_gamma_xi(
+    a_xi_inv: &Mat<f64>,
+    dense: &[f64],
+    nx: usize,
+    m: usize,
+) -> SparseTensor3 {
     let mut scaled = vec![0.0; nx * m * nx];
     for l in 0..nx {
         for i in 0..nx {
@@ -824,7 +836,5 @@ fn quaternion_model(layout: &Layout, phi1: &Mat<f64>, tol: f64) -> Result<Quater
             }
         }
     }
-    let gamma_xi_scaled = SparseTensor3::from_dense((nx, m, nx), &scaled, 0.0);
-    let phi_xi = Mat::from_fn(4 * nodes, nx, |r, c| fields[c][r / 4][r % 4]);
-    Ok(QuaternionModel { kept, a_xi, a_xi_inv, gamma_xi, gamma_xi_scaled, phi_xi, weights })
+    SparseTensor3::from_dense((nx, m, nx), &scaled, 0.0)
 }

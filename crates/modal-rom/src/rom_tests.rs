@@ -198,3 +198,70 @@ fn reference_state_reconstructs_the_reference_geometry() {
         }
     }
 }
+
+#[test]
+fn export_then_read_is_identical() {
+    for s in [rom2d(), rom3d()] {
+        let rom = &s.rom;
+        let dir = std::env::temp_dir().join(format!(
+            "modal-rom-export-{}-{}",
+            std::process::id(),
+            rom.n_modes()
+        ));
+        let meta = rom.export(&dir).unwrap();
+        assert_eq!(meta.frequencies_rad_s, rom.omega());
+        let back = crate::rom::ModalRom::read(&dir).unwrap();
+        assert_eq!(back.omega(), rom.omega());
+        assert_eq!(back.sigma(), rom.sigma());
+        assert_eq!(back.gamma1(), rom.gamma1());
+        assert_eq!(back.gamma2(), rom.gamma2());
+        assert_eq!(back.b_u(), rom.b_u());
+        let (a, b) = (back.quaternion().unwrap(), rom.quaternion().unwrap());
+        assert_eq!(a.a_xi, b.a_xi);
+        assert_eq!(a.gamma_xi, b.gamma_xi);
+        assert_eq!(a.gamma_xi_scaled, b.gamma_xi_scaled);
+        assert_eq!(a.phi_xi, b.phi_xi);
+        // same dynamics, bit for bit
+        let q: Vec<f64> = (0..rom.n_state()).map(|i| (i as f64 * 0.7).sin()).collect();
+        let u: Vec<f64> = (0..rom.n_inputs()).map(|i| i as f64 - 1.0).collect();
+        let (mut f1, mut f2) = (vec![0.0; rom.n_state()], vec![0.0; rom.n_state()]);
+        rom.rhs(&q, &u, &mut f1).unwrap();
+        back.rhs(&q, &u, &mut f2).unwrap();
+        assert_eq!(f1, f2);
+        let x = rom.reconstruct(&q).unwrap();
+        assert_eq!(
+            back.project(&x.x1, &x.x2, None).unwrap(),
+            rom.project(&x.x1, &x.x2, None).unwrap()
+        );
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
+
+#[test]
+fn reading_a_corrupted_export_is_an_error() {
+    let rom = &rom2d().rom;
+    let dir = std::env::temp_dir().join(format!("modal-rom-bad-{}", std::process::id()));
+    rom.export(&dir).unwrap();
+    std::fs::write(
+        dir.join("sigma.npy"),
+        crate::npy::to_bytes(&crate::npy::NpyArray { shape: vec![2], data: vec![0.0; 2] }),
+    )
+    .unwrap();
+    let err = crate::rom::ModalRom::read(&dir).unwrap_err().to_string();
+    assert!(err.contains("sigma"), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn mode_report_lists_rigid_then_elastic() {
+    let structure =
+        multibody_constraints::samples::paper_2d(intrinsic_beam::Section::paper_2d(), 20, 0.0)
+            .unwrap();
+    let r = crate::report::mode_report(&structure, 7, &BasisSettings::default()).unwrap();
+    assert_eq!(r.labels[..2], ["rigid".to_string(), "rigid".to_string()]);
+    assert_eq!(r.frequencies_rad_s[..2], [0.0, 0.0]);
+    assert!(r.frequencies_rad_s.windows(2).all(|w| w[0] <= w[1]));
+    assert_eq!(r.shapes[3].beams.len(), 2);
+    let json = serde_json::to_value(&r).unwrap();
+    assert!(json["frequencies_rad_s"].is_array() && json["labels"].is_array());
+}
