@@ -1,2 +1,272 @@
-//! Criterion benches of the SQP (filled in later).
-fn main() {}
+//! Criterion benches of the SQP on a model with the modal ROM's structure, plus the tables
+//! of docs/ocp-transcription.md (integrator error against cost, QP forms, time per iteration
+//! against nx and Nc). Run: `cargo bench -p ocp-transcription` (tables are printed first;
+//! `OCP_BENCH_TABLES=int,qp,sweep` selects them, `OCP_BENCH_TABLES=0` skips them).
+
+use criterion::Criterion;
+use nalgebra::{DMatrix, DVector};
+use ocp_transcription::samples::{ModalLike, SplitMix64};
+use ocp_transcription::{
+    Dynamics, Integrator, IntegratorKind, IntegratorSettings, Ocp, QpForm, SqpMode, SqpSettings,
+    SqpSolver,
+};
+use std::time::Instant;
+
+/// The operating point: a random state with entries in [−a, a] and controls in [−1, 1].
+fn operating_point(nx: usize, nu: usize, a: f64) -> (Vec<f64>, Vec<f64>) {
+    let mut rng = SplitMix64::new(2024);
+    let x = (0..nx).map(|_| rng.uniform(-a, a)).collect();
+    let u = (0..nu).map(|_| rng.uniform(-1.0, 1.0)).collect();
+    (x, u)
+}
+
+fn model(nx: usize) -> ModalLike {
+    ModalLike::new(nx, 5, 175.0, 3.0, 7).expect("valid")
+}
+
+/// The paper's OCP sizes: τp = 6 s, Nc = 24, |u| ≤ 5, small state weight.
+fn ocp(nx: usize, nc: usize) -> Ocp {
+    let mut ocp = Ocp::new(nx, 5, 6.0, nc).expect("valid");
+    ocp.q = DMatrix::identity(nx, nx);
+    ocp.r = DMatrix::identity(5, 5) * 0.1;
+    ocp.u_min = DVector::from_element(5, -5.0);
+    ocp.u_max = DVector::from_element(5, 5.0);
+    ocp
+}
+
+fn integrator(kind: IntegratorKind, substeps: usize) -> IntegratorSettings {
+    IntegratorSettings::new(kind, substeps)
+}
+
+/// CPU time of the calling thread in seconds (Linux `/proc/thread-self/schedstat`; the
+/// machine is shared, so wall time overstates the cost); falls back to wall time.
+fn cpu_time() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
+    let ns: f64 = s.split_whitespace().next()?.parse().ok()?;
+    Some(ns * 1e-9)
+}
+
+/// Runs `f` and returns its CPU seconds (wall seconds when unavailable).
+fn timed<R>(f: impl FnOnce() -> R) -> (f64, R) {
+    let (c0, w0) = (cpu_time(), Instant::now());
+    let r = f();
+    let t = match (c0, cpu_time()) {
+        (Some(a), Some(b)) => b - a,
+        _ => w0.elapsed().as_secs_f64(),
+    };
+    (t, r)
+}
+
+/// Mean CPU seconds of `f`: batches of runs until at least 0.3 s of CPU time has been
+/// accumulated (the scheduler's CPU clock ticks coarsely), at least `reps` runs.
+fn median_time(reps: usize, mut f: impl FnMut()) -> f64 {
+    f();
+    let (mut total, mut runs) = (0.0, 0usize);
+    while total < 0.3 || runs < reps {
+        total += timed(&mut f).0;
+        runs += 1;
+    }
+    total / runs as f64
+}
+
+fn integrator_table() {
+    let m = model(61);
+    let dt = 0.25;
+    println!("\n## One-interval error (Δt = 0.25 s) against cost, nx = 61, nu = 5, ω ≤ 175 rad/s");
+    for amp in [0.3, 1.0] {
+        let (x, u) = operating_point(61, 5, amp);
+        let mut reference = vec![0.0; 61];
+        let mut int =
+            Integrator::new(&m, &integrator(IntegratorKind::LawsonRk4, 8192), dt).unwrap();
+        int.integrate(&m, &x, &u, &mut reference).unwrap();
+        let rn = reference.iter().fold(0.0_f64, |a, v| a.max(v.abs()));
+        println!("\nstate amplitude {amp} (‖x⁺‖∞ = {rn:.3}); error = ‖x⁺ − x⁺_ref‖∞ / ‖x⁺_ref‖∞; time with sensitivities");
+        println!("| method | substeps | rel. error | µs per interval (state + A, B) |");
+        println!("|---|---|---|---|");
+        for kind in
+            [IntegratorKind::Rk4, IntegratorKind::LawsonRk4, IntegratorKind::ImplicitMidpoint]
+        {
+            for n in [2, 4, 8, 12, 16, 20, 24, 32, 64] {
+                let mut int = Integrator::new(&m, &integrator(kind, n), dt).unwrap();
+                let mut xe = vec![0.0; 61];
+                let err = match int.integrate(&m, &x, &u, &mut xe) {
+                    Ok(()) => {
+                        xe.iter().zip(&reference).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max)
+                            / rn
+                    }
+                    Err(_) => f64::NAN,
+                };
+                let mut a = DMatrix::zeros(61, 61);
+                let mut b = DMatrix::zeros(61, 5);
+                let t = median_time(15, || {
+                    let _ = int.integrate_with_sensitivities(&m, &x, &u, &mut xe, &mut a, &mut b);
+                });
+                println!("| {kind:?} | {n} | {err:.2e} | {:.0} |", t * 1e6);
+            }
+        }
+    }
+}
+
+/// A solver at the operating point, warm started by simulation with u = 0.
+fn solver(nx: usize, nc: usize, settings: SqpSettings) -> (SqpSolver<ModalLike>, Vec<f64>) {
+    let (x, _) = operating_point(nx, 5, 0.3);
+    let mut s = SqpSolver::new(model(nx), ocp(nx, nc), settings).expect("valid");
+    s.initialize_by_simulation(&x, &[0.0; 5]).expect("finite");
+    (s, x)
+}
+
+/// Median (total, integration, condensing, QP) ms of one real-time iteration from the same
+/// iterate: total is CPU time, the split scales it by the solver's wall-clock shares.
+fn time_iteration(
+    nx: usize,
+    nc: usize,
+    settings: SqpSettings,
+    reps: usize,
+) -> (f64, f64, f64, f64, usize) {
+    let (mut s, x) = solver(nx, nc, settings);
+    let states: Vec<DVector<f64>> = s.states().to_vec();
+    let controls: Vec<DVector<f64>> = s.controls().to_vec();
+    let (mut cpu, mut wall, mut ti, mut tc, mut tq, mut qi, mut runs) =
+        (0.0, 0.0, 0.0, 0.0, 0.0, 0, 0usize);
+    while cpu < 0.3 || runs < reps {
+        s.states_mut().clone_from_slice(&states);
+        s.controls_mut().clone_from_slice(&controls);
+        let (c, st) = timed(|| s.solve(&x).expect("valid x0"));
+        cpu += c;
+        wall += st.time_total;
+        ti += st.time_integration;
+        tc += st.time_condensing;
+        tq += st.time_qp;
+        qi = st.qp_iterations;
+        runs += 1;
+    }
+    let per = 1e3 / runs as f64;
+    let f = cpu / wall;
+    (cpu * per, f * ti * per, f * tc * per, f * tq * per, qi)
+}
+
+fn rti(kind: IntegratorKind, substeps: usize, form: QpForm) -> SqpSettings {
+    SqpSettings {
+        mode: SqpMode::RealTimeIteration,
+        qp_form: form,
+        integrator: integrator(kind, substeps),
+        ..SqpSettings::default()
+    }
+}
+
+fn qp_table() {
+    println!("\n## One SQP iteration (RTI), nx = 61, nu = 5, Nc = 24, τp = 6 s: QP forms (ms)");
+    println!("| integrator | QP form | total | integration | condensing | QP | QP iterations |");
+    println!("|---|---|---|---|---|---|---|");
+    for (kind, n) in [
+        (IntegratorKind::LawsonRk4, 20),
+        (IntegratorKind::LawsonRk4, 24),
+        (IntegratorKind::Rk4, 64),
+    ] {
+        for form in [QpForm::CondensedDense, QpForm::CondensedClarabel, QpForm::SparseClarabel] {
+            let reps = if form == QpForm::SparseClarabel { 3 } else { 7 };
+            let (t, ti, tc, tq, qi) = time_iteration(61, 24, rti(kind, n, form), reps);
+            println!("| {kind:?} × {n} | {form:?} | {t:.1} | {ti:.1} | {tc:.1} | {tq:.1} | {qi} |");
+        }
+    }
+    // wall clock with the intervals on the thread pool (2 cores here)
+    for n in [20, 24] {
+        let settings = SqpSettings {
+            parallel_intervals: true,
+            ..rti(IntegratorKind::LawsonRk4, n, QpForm::CondensedDense)
+        };
+        let (mut s, x) = solver(61, 24, settings);
+        let states: Vec<DVector<f64>> = s.states().to_vec();
+        let controls: Vec<DVector<f64>> = s.controls().to_vec();
+        let mut walls: Vec<f64> = (0..21)
+            .map(|_| {
+                s.states_mut().clone_from_slice(&states);
+                s.controls_mut().clone_from_slice(&controls);
+                s.solve(&x).expect("valid x0").time_total * 1e3
+            })
+            .collect();
+        walls.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        println!("| LawsonRk4 × {n}, parallel intervals | CondensedDense | {:.1} (wall, median) | | | | |", walls[10]);
+    }
+}
+
+fn sweep_table() {
+    println!("\n## Time per SQP iteration (RTI, Lawson RK4 × 20, condensed dense QP), ms: total (integration / condensing / QP)");
+    print!("| nx \\ Nc |");
+    let ncs = [10, 24, 50];
+    for nc in ncs {
+        print!(" {nc} |");
+    }
+    println!();
+    println!("|---|---|---|---|");
+    for nx in [11, 31, 61, 91, 121] {
+        print!("| {nx} |");
+        for nc in ncs {
+            let (t, ti, tc, tq, _) = time_iteration(
+                nx,
+                nc,
+                rti(IntegratorKind::LawsonRk4, 20, QpForm::CondensedDense),
+                3,
+            );
+            print!(" {t:.1} ({ti:.1} / {tc:.1} / {tq:.1}) |");
+        }
+        println!();
+    }
+}
+
+fn bench_sqp(c: &mut Criterion) {
+    let mut g = c.benchmark_group("sqp_iteration_nx61_nu5_nc24");
+    g.sample_size(20);
+    for (kind, n, form) in [
+        (IntegratorKind::LawsonRk4, 20, QpForm::CondensedDense),
+        (IntegratorKind::LawsonRk4, 20, QpForm::CondensedClarabel),
+        (IntegratorKind::Rk4, 64, QpForm::CondensedDense),
+    ] {
+        let (mut s, x) = solver(61, 24, rti(kind, n, form));
+        let states: Vec<DVector<f64>> = s.states().to_vec();
+        let controls: Vec<DVector<f64>> = s.controls().to_vec();
+        g.bench_function(format!("{kind:?}x{n}_{form:?}"), |b| {
+            b.iter(|| {
+                s.states_mut().clone_from_slice(&states);
+                s.controls_mut().clone_from_slice(&controls);
+                s.solve(&x).expect("valid x0")
+            })
+        });
+    }
+    g.finish();
+    let m = model(61);
+    let (x, u) = operating_point(61, 5, 0.3);
+    let mut g = c.benchmark_group("interval_with_sensitivities_nx61");
+    for (kind, n) in [(IntegratorKind::LawsonRk4, 20), (IntegratorKind::Rk4, 64)] {
+        let mut int = Integrator::new(&m, &integrator(kind, n), 0.25).unwrap();
+        let mut xe = vec![0.0; 61];
+        let mut a = DMatrix::zeros(61, 61);
+        let mut b = DMatrix::zeros(61, 5);
+        g.bench_function(format!("{kind:?}x{n}"), |bch| {
+            bch.iter(|| int.integrate_with_sensitivities(&m, &x, &u, &mut xe, &mut a, &mut b))
+        });
+    }
+    g.finish();
+    let _ = m.nx();
+}
+
+/// Runs the criterion benches.
+fn benches() {
+    let mut c = Criterion::default().configure_from_args();
+    bench_sqp(&mut c);
+    c.final_summary();
+}
+
+fn main() {
+    let tables = std::env::var("OCP_BENCH_TABLES").unwrap_or_else(|_| "all".to_string());
+    if tables == "all" || tables.contains("int") {
+        integrator_table();
+    }
+    if tables == "all" || tables.contains("qp") {
+        qp_table();
+    }
+    if tables == "all" || tables.contains("sweep") {
+        sweep_table();
+    }
+    benches();
+}

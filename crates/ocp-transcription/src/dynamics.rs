@@ -10,7 +10,10 @@ use nalgebra::DMatrix;
 /// `u.len() == nu`, `fx` is `nx × nx`, `fu` is `nx × nu`, every buffer is overwritten).
 /// A model may return NaN or infinity (e.g. outside its domain); the integrators detect it
 /// and the SQP reports [`crate::SqpStatus::NonFiniteDynamics`].
-pub trait Dynamics {
+///
+/// Models are `Sync` so that the shooting intervals can be integrated in parallel
+/// ([`crate::SqpSettings::parallel_intervals`]).
+pub trait Dynamics: Sync {
     /// State dimension `nx`.
     fn nx(&self) -> usize;
     /// Control dimension `nu`.

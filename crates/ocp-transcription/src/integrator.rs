@@ -147,6 +147,7 @@ pub struct Integrator {
     sx: DMatrix<f64>,
     tm: DMatrix<f64>,
     ks: [DMatrix<f64>; 4],
+    tcm: DMatrix<f64>,
     lu: DMatrix<f64>,
     perm: Vec<usize>,
     perm_inv: Vec<usize>,
@@ -218,7 +219,9 @@ impl Integrator {
             lu_solve::solve_in_place_scratch::<usize, f64>(nx, nz, Par::Seq),
         ]);
         let zv = || vec![0.0; nx];
-        let zm = || DMatrix::zeros(nx, nz);
+        // sensitivities are stored transposed, `Sᵀ` (`(nx+nu) × nx`): row i of `S` is a
+        // contiguous column, so sparse Jacobians and block-diagonal propagators act by axpys
+        let zm = || DMatrix::zeros(nz, nx);
         Ok(Self {
             kind: settings.kind,
             nx,
@@ -239,6 +242,11 @@ impl Integrator {
             sx: zm(),
             tm: zm(),
             ks: [zm(), zm(), zm(), zm()],
+            tcm: if settings.kind == IntegratorKind::ImplicitMidpoint {
+                DMatrix::zeros(nx, nz)
+            } else {
+                DMatrix::zeros(0, 0)
+            },
             lu: if settings.kind == IntegratorKind::ImplicitMidpoint {
                 DMatrix::zeros(nx, nx)
             } else {
@@ -287,7 +295,7 @@ impl Integrator {
         let nz = self.nx + self.nu;
         if self.tape_x.len() != n {
             self.tape_x = vec![vec![0.0; self.nx]; n];
-            self.tape_s = vec![DMatrix::zeros(self.nx, nz); n];
+            self.tape_s = vec![DMatrix::zeros(nz, self.nx); n];
             self.whess = DMatrix::zeros(nz, nz);
             self.shat = DMatrix::zeros(nz, nz);
             self.zz = DMatrix::zeros(nz, nz);
@@ -332,8 +340,7 @@ impl Integrator {
         check_dim("b columns", self.nu, b.ncols())?;
         self.run(model, x0, u, true, false)?;
         x_end.copy_from_slice(&self.x);
-        a.copy_from(&self.s.columns(0, self.nx));
-        b.copy_from(&self.s.columns(self.nx, self.nu));
+        self.write_ab(a, b);
         Ok(())
     }
 
@@ -388,8 +395,7 @@ impl Integrator {
         }
         self.run(model, x0, u, true, true)?;
         x_end.copy_from_slice(&self.x);
-        a.copy_from(&self.s.columns(0, self.nx));
-        b.copy_from(&self.s.columns(self.nx, self.nu));
+        self.write_ab(a, b);
         self.backward(model, u, lambda, hessian)
     }
 
@@ -424,6 +430,19 @@ impl Integrator {
             return Err(OcpError::NonFiniteDynamics { stage: "sensitivity" });
         }
         Ok(())
+    }
+
+    /// `A = S[:, ..nx]`, `B = S[:, nx..]` from the transposed storage.
+    fn write_ab(&self, a: &mut DMatrix<f64>, b: &mut DMatrix<f64>) {
+        let nx = self.nx;
+        for i in 0..nx {
+            for j in 0..nx {
+                a[(i, j)] = self.s[(j, i)];
+            }
+            for c in 0..self.nu {
+                b[(i, c)] = self.s[(nx + c, i)];
+            }
+        }
     }
 
     /// `dst = alpha * E^p * src` (+= when add); identity for plain RK4.
@@ -469,7 +488,7 @@ impl Integrator {
                     Pow::E1 => &lw.e,
                     Pow::E2 => &lw.e2,
                 };
-                op.apply(dst, src, alpha, add)
+                op.apply_right_t(dst, src, alpha, add)
             }
             None => {
                 if add {
@@ -530,12 +549,13 @@ impl Integrator {
             if let Some(lw) = &self.lawson {
                 self.fx -= &lw.l;
             }
-            if !all_finite(self.fx.as_slice()) || !all_finite(self.fu.as_slice()) {
-                return Err(OcpError::NonFiniteDynamics { stage: "jacobian" });
+            // a NaN/∞ in the Jacobians propagates into the sensitivities, checked once per interval
+            crate::la::mul_right_t(&mut self.ks[j], &self.sx, &self.fx);
+            for c in 0..self.nu {
+                for i in 0..self.nx {
+                    self.ks[j][(self.nx + c, i)] += self.fu[(i, c)];
+                }
             }
-            gemm(&mut self.ks[j], &self.fx, &self.sx, 1.0, false);
-            let mut kb = self.ks[j].columns_mut(self.nx, self.nu);
-            kb += &self.fu;
         }
         Ok(())
     }
@@ -711,17 +731,26 @@ impl Integrator {
             }
             self.factor_newton()?;
             // (I − h/2 fx) ∂m/∂z = S + h/2 [0 | fu];  S⁺ = 2 ∂m/∂z − S
-            self.tm.copy_from(&self.s);
-            axpy(&mut self.tm.as_mut_slice()[nx * nx..], 0.5 * h, self.fu.as_slice());
             let m = self.nx + self.nu;
+            for j in 0..m {
+                for i in 0..nx {
+                    self.tcm[(i, j)] = self.s[(j, i)];
+                }
+            }
+            axpy(&mut self.tcm.as_mut_slice()[nx * nx..], 0.5 * h, self.fu.as_slice());
             Self::solve_newton(
                 &self.lu,
                 &self.perm,
                 &self.perm_inv,
                 &mut self.mem,
-                self.tm.as_mut_slice(),
+                self.tcm.as_mut_slice(),
                 m,
             );
+            for j in 0..m {
+                for i in 0..nx {
+                    self.tm[(j, i)] = self.tcm[(i, j)];
+                }
+            }
             self.s *= -1.0;
             axpy(self.s.as_mut_slice(), 2.0, self.tm.as_slice());
         }
@@ -783,7 +812,11 @@ impl Integrator {
                     return Err(OcpError::NonFiniteDynamics { stage: "hessian" });
                 }
                 self.shat.fill(0.0);
-                self.shat.view_mut((0, 0), (nx, nz)).copy_from(&self.tape_s[base + j]);
+                for c in 0..nz {
+                    for r in 0..nx {
+                        self.shat[(r, c)] = self.tape_s[base + j][(c, r)];
+                    }
+                }
                 for i in nx..nz {
                     self.shat[(i, i)] = 1.0;
                 }
@@ -819,5 +852,26 @@ impl Integrator {
         }
         gemv_t(&mut self.xbar[j], &self.fx, &self.kbar[j], 1.0, false);
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::samples::ModalLike;
+
+    /// The exponential of the block-diagonal modal `W` keeps its block structure, so the
+    /// Lawson propagators are applied sparsely.
+    #[test]
+    fn lawson_propagator_of_block_diagonal_w_is_sparse() {
+        let m = ModalLike::new(61, 5, 175.0, 3.0, 7).unwrap();
+        let int = Integrator::new(&m, &IntegratorSettings::new(IntegratorKind::LawsonRk4, 8), 0.25)
+            .unwrap();
+        let lw = int.lawson.as_ref().unwrap();
+        for op in [&lw.e, &lw.e2] {
+            let nnz = op.dense().iter().filter(|v| **v != 0.0).count();
+            assert!(matches!(op, Operator::BlockDiagonal { .. }), "nnz {nnz}");
+            assert!(nnz <= 4 * 30 + 1, "nnz {nnz}");
+        }
     }
 }

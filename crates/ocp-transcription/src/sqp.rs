@@ -91,6 +91,9 @@ pub struct SqpSettings {
     pub qp_max_iterations: usize,
     /// Integrator inside the shooting intervals [RK4, 4 substeps].
     pub integrator: IntegratorSettings,
+    /// Integrate the shooting intervals of a linearisation on the rayon thread pool
+    /// (Gauss–Newton path; exact-Hessian sweeps and line-search trials stay sequential) [false].
+    pub parallel_intervals: bool,
 }
 
 impl Default for SqpSettings {
@@ -106,6 +109,7 @@ impl Default for SqpSettings {
             qp_tolerance: 1e-11,
             qp_max_iterations: 200,
             integrator: IntegratorSettings::default(),
+            parallel_intervals: false,
         }
     }
 }
@@ -595,7 +599,30 @@ impl<D: Dynamics> SqpSolver<D> {
         let n = self.n;
         let exact = with_hessian && self.settings.hessian == HessianApproximation::Exact;
         let t0 = Instant::now();
+        if self.settings.parallel_intervals && !exact && self.lq.is_none() {
+            use rayon::prelude::*;
+            let (model, s, u) = (&self.model, &self.s, &self.u);
+            self.integrators
+                .par_iter_mut()
+                .zip(self.phi.par_iter_mut())
+                .zip(self.lin.a.par_iter_mut())
+                .zip(self.lin.b.par_iter_mut())
+                .enumerate()
+                .try_for_each(|(k, (((int, phi), a), b))| {
+                    int.integrate_with_sensitivities(
+                        model,
+                        s[k].as_slice(),
+                        u[k].as_slice(),
+                        phi.as_mut_slice(),
+                        a,
+                        b,
+                    )
+                })?;
+        }
         for k in 0..n {
+            if self.settings.parallel_intervals && !exact && self.lq.is_none() {
+                break;
+            }
             if let Some(lq) = &self.lq {
                 let (phi, a, b) = (&mut self.phi[k], &mut self.lin.a[k], &mut self.lin.b[k]);
                 a.copy_from(&lq.a);

@@ -277,3 +277,24 @@ fn real_time_iteration_does_one_step() {
     // repeated RTI steps at a fixed x0 converge (the KKT residual is measured before each step)
     assert!(kkt[7] < 1e-3 * kkt[0], "{kkt:?}");
 }
+
+/// Integrating the intervals on the thread pool gives bit-identical iterates.
+#[test]
+fn parallel_intervals_match_sequential() {
+    let x0 = [0.0, std::f64::consts::PI, 0.0, 0.0];
+    let mut results = Vec::new();
+    for parallel in [false, true] {
+        let settings = SqpSettings {
+            parallel_intervals: parallel,
+            max_iterations: 100,
+            integrator: IntegratorSettings::new(IntegratorKind::Rk4, 2),
+            ..SqpSettings::default()
+        };
+        let mut solver = SqpSolver::new(CartPole::default(), swing_up_ocp(), settings).unwrap();
+        solver.initialize_constant(&x0, &[0.0]).unwrap();
+        let stats = solver.solve(&x0).unwrap();
+        assert_eq!(stats.status, SqpStatus::Solved);
+        results.push((stats.iterations, solver.controls().to_vec()));
+    }
+    assert_eq!(results[0], results[1]);
+}
