@@ -773,7 +773,7 @@ pub fn l1t_jacobian(y: &Vector6<f64>) -> Matrix6<f64> {
 mod tests {
     use super::*;
     use crate::loads::{Amplitude, DistributedLoad, PointLoad};
-    use crate::testing::{random_section, random_vec, Lcg};
+    use crate::random::{random_section, random_vec, Lcg};
     use nalgebra::{DMatrix, Vector3};
 
     fn setup(

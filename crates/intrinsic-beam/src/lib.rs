@@ -50,12 +50,12 @@ pub mod operators;
 pub mod problem;
 #[cfg(test)]
 mod proptests;
+pub(crate) mod random;
 pub mod rk4;
 pub mod samples;
 pub mod section;
 pub mod sparse;
-#[cfg(test)]
-mod testing;
+pub mod studies;
 
 pub use beam::{Beam, LinearOperators, StepInput, StepPower};
 pub use components::Components;

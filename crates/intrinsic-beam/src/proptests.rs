@@ -11,7 +11,7 @@ use crate::kinematics::Kinematics;
 use crate::loads::{LoadFrame, Loads};
 use crate::mesh::Mesh;
 use crate::operators::{e_matrix, l1, l2};
-use crate::testing::{random_section, random_vec, Lcg};
+use crate::random::{random_section, random_vec, Lcg};
 
 fn config() -> Config {
     Config {

@@ -1,11 +1,12 @@
-//! Test helpers: a tiny deterministic generator and random valid sections/states.
+//! Deterministic random data for property checks: a small LCG, random valid sections
+//! (full SPD matrices, curvature, dissipative damping) and random states.
 
 use nalgebra::{Matrix6, Vector3};
 
 use crate::components::Components;
 use crate::section::Section;
 
-/// Deterministic linear congruential generator (tests only; fixed seeds).
+/// Deterministic linear congruential generator (fixed seeds, reproducible).
 pub(crate) struct Lcg(u64);
 
 impl Lcg {
