@@ -1,0 +1,1235 @@
+//! Scene files (TOML): sections, beams and meshes, joints, supports, loads and inputs,
+//! initial conditions, run settings — parsed with serde and turned into a
+//! [`multibody_constraints::Plant`]. Every error names the file, the line and the field.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use intrinsic_beam::{Amplitude, Beam, Components, LoadFrame, Mesh, PointLoad, Section};
+use multibody_constraints::joint::{End, EndRef, Frame, Freedom, Joint, JointKind, Support};
+use multibody_constraints::structure::{
+    axis_angle, Placement, Structure, StructureBeam, StructureSettings,
+};
+use multibody_constraints::{Plant, PlantSettings};
+use nalgebra::{Matrix6, Vector3, Vector6};
+use serde::Deserialize;
+use toml::Spanned;
+
+/// A scene error: file, line (1-based, when known), field path and message.
+#[derive(Debug)]
+pub struct SceneError {
+    /// The scene file.
+    pub file: PathBuf,
+    /// Line of the offending entry (1-based), if known.
+    pub line: Option<usize>,
+    /// Field path, e.g. `joints[1].ends`.
+    pub field: String,
+    /// What is wrong and what is allowed.
+    pub message: String,
+}
+
+impl fmt::Display for SceneError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.line {
+            Some(l) => {
+                write!(f, "{}:{}: field `{}`: {}", self.file.display(), l, self.field, self.message)
+            }
+            None => write!(f, "{}: field `{}`: {}", self.file.display(), self.field, self.message),
+        }
+    }
+}
+
+impl std::error::Error for SceneError {}
+
+/// A section: a preset of the paper or explicit diagonals.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SectionSpec {
+    /// `paper-2d` or `paper-3d` (theory.md §9), or absent for explicit values.
+    pub preset: Option<String>,
+    /// Remove all damping (default false).
+    #[serde(default)]
+    pub undamped: bool,
+    /// Diagonal of `M` (6 entries; 0 = massless).
+    pub mass: Option<[f64; 6]>,
+    /// Diagonal of `C⁻¹` (6 entries; `inf` = rigid).
+    pub stiffness: Option<[f64; 6]>,
+    /// Diagonal of `D2` (6 entries, ≥ 0).
+    pub d2: Option<[f64; 6]>,
+    /// Multiply every stiffness by this factor (default 1).
+    pub stiffness_factor: Option<f64>,
+    /// Initial curvature/twist `κ0` (local frame, 3 entries).
+    pub kappa0: Option<[f64; 3]>,
+}
+
+/// A rotation by an angle (degrees) about an axis.
+#[derive(Debug, Deserialize, Clone, Copy)]
+#[serde(deny_unknown_fields)]
+pub struct RotationSpec {
+    /// Axis (any non-zero length).
+    pub axis: [f64; 3],
+    /// Angle in degrees.
+    pub angle_deg: f64,
+}
+
+/// Attachment of a beam's start to a joint.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AttachSpec {
+    /// Joint name.
+    pub joint: String,
+    /// Axis in the joint's first end frame (default e2).
+    #[serde(default = "default_axis")]
+    pub axis: [f64; 3],
+    /// Reference joint angle (degrees, default 0).
+    #[serde(default)]
+    pub angle_deg: f64,
+}
+
+fn default_axis() -> [f64; 3] {
+    [0.0, 1.0, 0.0]
+}
+
+/// A beam.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BeamSpec {
+    /// Unique name.
+    pub name: String,
+    /// Name of a `[sections.*]` entry.
+    pub section: String,
+    /// Length (> 0).
+    pub length: f64,
+    /// Number of elements (≥ 1).
+    pub elements: usize,
+    /// Position of the `s = 0` end (default origin); exclusive with `attach`.
+    pub origin: Option<[f64; 3]>,
+    /// Orientation of the `s = 0` end (default: along global e1).
+    pub rotation: Option<RotationSpec>,
+    /// Place the start at a joint instead.
+    pub attach: Option<AttachSpec>,
+}
+
+/// A joint or support kind with its parameters.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointSpec {
+    /// Unique name.
+    pub name: String,
+    /// `weld`, `ball`, `hinge`, `universal` or `custom`.
+    pub kind: String,
+    /// Joints: the ends, `"beam:start"` / `"beam:end"` (at least 2).
+    pub ends: Option<Vec<String>>,
+    /// Supports: the end, `"beam:start"` / `"beam:end"`.
+    pub end: Option<String>,
+    /// Hinge axis.
+    pub axis: Option<[f64; 3]>,
+    /// Frame of the hinge axis / custom axes: `global`, `each-end`, or `end-N` (N-th end).
+    pub frame: Option<String>,
+    /// Custom: `rigid`/`free` per translation axis.
+    pub translation: Option<[String; 3]>,
+    /// Custom: `rigid`/`free` per rotation axis.
+    pub rotation: Option<[String; 3]>,
+    /// Custom: frame of the rotation axes (default: `frame`).
+    pub rotation_frame: Option<String>,
+}
+
+/// A time history of an input.
+#[derive(Debug, Deserialize, Clone)]
+#[serde(deny_unknown_fields)]
+pub struct AmplitudeSpec {
+    /// Linear ramp from 0 to 1 over this many seconds.
+    pub ramp: Option<f64>,
+    /// Piecewise linear `[[t, a], …]`.
+    pub table: Option<Vec<[f64; 2]>>,
+}
+
+/// A node of a beam: an index or `start`/`end`.
+#[derive(Debug, Deserialize, Clone)]
+#[serde(untagged)]
+pub enum NodeSpec {
+    /// Node index `0..=N`.
+    Index(usize),
+    /// `start` or `end`.
+    Named(String),
+}
+
+/// A point load.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LoadSpec {
+    /// Optional name (CSV column `input:<name>`).
+    pub name: Option<String>,
+    /// Beam name.
+    pub beam: String,
+    /// Node.
+    pub node: NodeSpec,
+    /// `follower` (local frame) or `dead` (global frame).
+    pub frame: String,
+    /// Force (3 components; default 0).
+    pub force: Option<[f64; 3]>,
+    /// Moment (3 components; default 0).
+    pub moment: Option<[f64; 3]>,
+    /// Time history (default constant 1).
+    pub amplitude: Option<AmplitudeSpec>,
+}
+
+/// A torque at a joint or support about its free rotation axis.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TorqueSpec {
+    /// Joint or support name.
+    pub joint: String,
+    /// Active-axis index if the joint has several free rotation axes.
+    pub axis: Option<usize>,
+    /// Torque value.
+    pub value: f64,
+    /// Time history (default constant 1).
+    pub amplitude: Option<AmplitudeSpec>,
+}
+
+/// A rigid-body velocity field on some beams.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RigidSpec {
+    /// Beams it applies to (default: all).
+    pub beams: Option<Vec<String>>,
+    /// Angular velocity (global, rad/s).
+    pub omega: [f64; 3],
+    /// Centre of rotation (default origin).
+    pub center: Option<[f64; 3]>,
+}
+
+/// Initial conditions.
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct InitialSpec {
+    /// Rigid rotations (added in order; later entries overwrite their beams).
+    #[serde(default)]
+    pub rigid: Vec<Spanned<RigidSpec>>,
+}
+
+/// Run settings.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunSpec {
+    /// Time step (s).
+    pub dt: f64,
+    /// Duration (s).
+    pub duration: f64,
+    /// Write every this many steps (default 10).
+    pub output_every: Option<usize>,
+    /// Newton tolerance (default 1e-12).
+    pub newton_tolerance: Option<f64>,
+}
+
+/// Output options.
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct OutputSpec {
+    /// CSV columns to plot in `plot.svg` (e.g. `b.end.z`).
+    #[serde(default)]
+    pub plot: Vec<String>,
+    /// Title of the plot.
+    pub title: Option<String>,
+}
+
+/// A whole scene.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneSpec {
+    /// Free text.
+    pub description: Option<String>,
+    /// `planar` or `spatial`.
+    pub components: String,
+    /// Allow disconnected structures (default false).
+    #[serde(default)]
+    pub allow_disconnected: bool,
+    /// Named sections.
+    pub sections: std::collections::BTreeMap<String, Spanned<SectionSpec>>,
+    /// Beams.
+    pub beams: Vec<Spanned<BeamSpec>>,
+    /// Joints between beams.
+    #[serde(default)]
+    pub joints: Vec<Spanned<JointSpec>>,
+    /// Supports to the ground.
+    #[serde(default)]
+    pub supports: Vec<Spanned<JointSpec>>,
+    /// Gravity (global).
+    pub gravity: Option<[f64; 3]>,
+    /// Point loads.
+    #[serde(default)]
+    pub loads: Vec<Spanned<LoadSpec>>,
+    /// Joint torques.
+    #[serde(default)]
+    pub torques: Vec<Spanned<TorqueSpec>>,
+    /// Initial conditions.
+    #[serde(default)]
+    pub initial: InitialSpec,
+    /// Run settings.
+    pub run: Spanned<RunSpec>,
+    /// Outputs.
+    #[serde(default)]
+    pub output: OutputSpec,
+}
+
+/// An input applied during the run (for the CSV).
+#[derive(Debug, Clone)]
+pub enum InputKind {
+    /// Point load index on a beam.
+    Load {
+        /// Beam index.
+        beam: usize,
+        /// Index into the beam's point loads.
+        index: usize,
+    },
+    /// Joint torque.
+    Torque {
+        /// Joint name.
+        joint: String,
+        /// Axis.
+        axis: Option<usize>,
+        /// Value.
+        value: f64,
+        /// History.
+        amplitude: Amplitude,
+    },
+}
+
+/// A named input.
+#[derive(Debug, Clone)]
+pub struct Input {
+    /// Column name.
+    pub name: String,
+    /// What it drives.
+    pub kind: InputKind,
+}
+
+/// A scene ready to run.
+pub struct Scene {
+    /// Source file.
+    pub file: PathBuf,
+    /// The plant, in its initial state.
+    pub plant: Plant,
+    /// Number of steps.
+    pub steps: usize,
+    /// Output stride.
+    pub output_every: usize,
+    /// Inputs (for the CSV and for torque histories).
+    pub inputs: Vec<Input>,
+    /// Plot columns.
+    pub plot: Vec<String>,
+    /// Plot title.
+    pub title: String,
+    /// Description.
+    pub description: String,
+}
+
+struct Ctx<'a> {
+    file: &'a Path,
+    text: &'a str,
+}
+
+impl Ctx<'_> {
+    fn line(&self, offset: usize) -> usize {
+        self.text[..offset.min(self.text.len())].matches('\n').count() + 1
+    }
+
+    /// An error at the entry `span`; the line is that of the field's own `key = …` line
+    /// inside the entry when there is one, else the entry's first line.
+    fn err<T>(
+        &self,
+        span: Option<std::ops::Range<usize>>,
+        field: impl Into<String>,
+        message: impl Into<String>,
+    ) -> Result<T, SceneError> {
+        let field = field.into();
+        let key = field
+            .rsplit('.')
+            .next()
+            .unwrap_or("")
+            .split('[')
+            .next()
+            .unwrap_or("")
+            .trim()
+            .to_string();
+        let line = span.map(|s| {
+            // The entry runs from its span to the next table header (spans of array-of-table
+            // entries may cover the header only).
+            let start = s.start.min(self.text.len());
+            let first_nl =
+                self.text[start..].find('\n').map(|i| start + i + 1).unwrap_or(self.text.len());
+            let end = self.text[first_nl..]
+                .match_indices('\n')
+                .map(|(i, _)| first_nl + i + 1)
+                .find(|&i| self.text[i..].trim_start_matches([' ', '\t']).starts_with('['))
+                .unwrap_or(self.text.len())
+                .max(s.end.min(self.text.len()));
+            let body = &self.text[start..end];
+            let mut off = s.start;
+            for l in body.split_inclusive('\n') {
+                let t = l.trim_start();
+                if !key.is_empty()
+                    && field.contains('.')
+                    && t.starts_with(&key)
+                    && t[key.len()..].trim_start().starts_with('=')
+                {
+                    return self.line(off);
+                }
+                off += l.len();
+            }
+            self.line(s.start)
+        });
+        // Top-level keys without a span: their own line.
+        let line = line.or_else(|| {
+            self.text
+                .lines()
+                .position(|l| {
+                    let t = l.trim_start();
+                    !field.contains('.')
+                        && t.starts_with(field.as_str())
+                        && t[field.len()..].trim_start().starts_with('=')
+                })
+                .map(|i| i + 1)
+        });
+        Err(SceneError { file: self.file.to_path_buf(), line, field, message: message.into() })
+    }
+}
+
+/// Reads and parses a scene file (syntax and types), without building it.
+pub fn parse(file: &Path) -> Result<(SceneSpec, String), SceneError> {
+    let text = std::fs::read_to_string(file).map_err(|e| SceneError {
+        file: file.to_path_buf(),
+        line: None,
+        field: "(file)".into(),
+        message: format!("cannot read: {e}"),
+    })?;
+    parse_str(file, &text).map(|s| (s, text))
+}
+
+/// Parses scene text; `file` is used in errors.
+pub fn parse_str(file: &Path, text: &str) -> Result<SceneSpec, SceneError> {
+    toml::from_str::<SceneSpec>(text).map_err(|e| {
+        let ctx = Ctx { file, text };
+        let line = e.span().map(|s| ctx.line(s.start));
+        // toml's message names the field (e.g. "missing field `dt`", "unknown field `lenght`").
+        let message = e.message().trim().to_string();
+        let field = field_from_message(&message)
+            .map(|f| match e.span().and_then(|s| table_at(text, s.start)) {
+                Some(t) if !message.contains("missing") || !t.is_empty() => format!("{t}.{f}"),
+                _ => f,
+            })
+            .or_else(|| e.span().map(|s| field_at(text, s.start)))
+            .unwrap_or_else(|| "(syntax)".into());
+        SceneError { file: file.to_path_buf(), line, field, message }
+    })
+}
+
+/// The table path (e.g. `beams[1]`) in effect at byte `offset`.
+fn table_at(text: &str, offset: usize) -> Option<String> {
+    let mut current: Option<String> = None;
+    let mut counts: std::collections::HashMap<String, usize> = std::collections::HashMap::new();
+    let mut pos = 0;
+    for line in text.split_inclusive('\n') {
+        if pos > offset {
+            break;
+        }
+        let t = line.trim();
+        if let Some(name) = t.strip_prefix("[[").and_then(|r| r.split("]]").next()) {
+            let c = counts.entry(name.trim().to_string()).or_insert(0);
+            current = Some(format!("{}[{}]", name.trim(), *c));
+            *c += 1;
+        } else if let Some(name) = t.strip_prefix('[').and_then(|r| r.split(']').next()) {
+            current = Some(name.trim().to_string());
+        }
+        pos += line.len();
+    }
+    current
+}
+
+/// The dotted field path (`table.key`) of the `key = value` line containing byte `offset`.
+fn field_at(text: &str, offset: usize) -> String {
+    let start = text[..offset.min(text.len())].rfind('\n').map(|i| i + 1).unwrap_or(0);
+    let line = text[start..].lines().next().unwrap_or("");
+    let key = line.split('=').next().unwrap_or("").trim().to_string();
+    match (table_at(text, offset), key.is_empty() || !line.contains('=')) {
+        (Some(t), false) => format!("{t}.{key}"),
+        (None, false) => key,
+        (Some(t), true) => t,
+        (None, true) => "(syntax)".into(),
+    }
+}
+
+fn field_from_message(m: &str) -> Option<String> {
+    let start = m.find('`')?;
+    let rest = &m[start + 1..];
+    let end = rest.find('`')?;
+    Some(rest[..end].to_string())
+}
+
+fn section_of(
+    ctx: &Ctx<'_>,
+    name: &str,
+    spec: &Spanned<SectionSpec>,
+) -> Result<Section, SceneError> {
+    let span = Some(spec.span());
+    let s = spec.get_ref();
+    let field = |f: &str| format!("sections.{name}.{f}");
+    let mut section = match (&s.preset, &s.mass, &s.stiffness) {
+        (Some(p), None, None) => match p.as_str() {
+            "paper-2d" => Section::paper_2d(),
+            "paper-3d" => Section::paper_3d(),
+            other => {
+                return ctx.err(
+                    span,
+                    field("preset"),
+                    format!("unknown preset `{other}` (allowed: paper-2d, paper-3d)"),
+                )
+            }
+        },
+        (None, Some(m), Some(k)) => {
+            let f = s.stiffness_factor.unwrap_or(1.0);
+            let k = k.map(|x| x * f);
+            match Section::from_diagonals(*m, k) {
+                Ok(sec) => sec,
+                Err(e) => return ctx.err(span, field("mass/stiffness"), e.to_string()),
+            }
+        }
+        (Some(_), _, _) => {
+            return ctx.err(
+                span,
+                field("preset"),
+                "give either `preset` or `mass` and `stiffness`, not both",
+            )
+        }
+        _ => return ctx.err(
+            span,
+            field("mass"),
+            "give `preset` (paper-2d, paper-3d) or both `mass` and `stiffness` (6 entries each)",
+        ),
+    };
+    if s.preset.is_some() {
+        if let Some(f) = s.stiffness_factor {
+            if !(f.is_finite() && f > 0.0) {
+                return ctx.err(
+                    span,
+                    field("stiffness_factor"),
+                    format!("must be positive, got {f}"),
+                );
+            }
+            section.compliance /= f;
+        }
+    }
+    if s.undamped {
+        section = section.undamped();
+    }
+    if let Some(d2) = s.d2 {
+        let d = Matrix6::from_diagonal(&Vector6::from(d2));
+        section = match section.clone().with_damping(section.d0, section.d1, d) {
+            Ok(x) => x,
+            Err(e) => return ctx.err(span, field("d2"), e.to_string()),
+        };
+    }
+    if let Some(k0) = s.kappa0 {
+        section = match section.with_kappa0(Vector3::from(k0)) {
+            Ok(x) => x,
+            Err(e) => return ctx.err(span, field("kappa0"), e.to_string()),
+        };
+    }
+    Ok(section)
+}
+
+fn parse_end(
+    ctx: &Ctx<'_>,
+    span: std::ops::Range<usize>,
+    field: &str,
+    text: &str,
+    beams: &[String],
+) -> Result<EndRef, SceneError> {
+    let Some((b, e)) = text.split_once(':') else {
+        return ctx.err(
+            Some(span),
+            field,
+            format!("`{text}` is not of the form \"beam:start\" or \"beam:end\""),
+        );
+    };
+    if !beams.iter().any(|x| x == b) {
+        return ctx.err(
+            Some(span),
+            field,
+            format!("unknown beam `{b}` (beams: {})", beams.join(", ")),
+        );
+    }
+    let end = match End::parse(field, e) {
+        Ok(end) => end,
+        Err(_) => {
+            return ctx.err(Some(span), field, format!("unknown end `{e}` (allowed: start, end)"))
+        }
+    };
+    Ok(EndRef::new(b, end))
+}
+
+fn parse_frame(
+    ctx: &Ctx<'_>,
+    span: std::ops::Range<usize>,
+    field: &str,
+    text: &str,
+) -> Result<Frame, SceneError> {
+    match text {
+        "global" => Ok(Frame::Global),
+        "each-end" => Ok(Frame::EachEnd),
+        t if t.starts_with("end-") => match t[4..].parse::<usize>() {
+            Ok(i) => Ok(Frame::End(i)),
+            Err(_) => ctx.err(
+                Some(span),
+                field,
+                format!("bad frame `{t}` (allowed: global, each-end, end-N)"),
+            ),
+        },
+        t => ctx.err(
+            Some(span),
+            field,
+            format!("unknown frame `{t}` (allowed: global, each-end, end-N)"),
+        ),
+    }
+}
+
+fn joint_kind(
+    ctx: &Ctx<'_>,
+    spec: &Spanned<JointSpec>,
+    field: &str,
+    support: bool,
+) -> Result<JointKind, SceneError> {
+    let span = spec.span();
+    let j = spec.get_ref();
+    let default_frame = if support { "global" } else { "end-0" };
+    let frame = parse_frame(
+        ctx,
+        span.clone(),
+        &format!("{field}.frame"),
+        j.frame.as_deref().unwrap_or(default_frame),
+    )?;
+    let freedoms = |f: &Option<[String; 3]>, name: &str| -> Result<[Freedom; 3], SceneError> {
+        let Some(f) = f else {
+            return ctx.err(
+                Some(span.clone()),
+                format!("{field}.{name}"),
+                "a custom joint needs 3 entries, each `rigid` or `free`",
+            );
+        };
+        let mut out = [Freedom::Rigid; 3];
+        for (i, x) in f.iter().enumerate() {
+            out[i] = match x.as_str() {
+                "rigid" => Freedom::Rigid,
+                "free" => Freedom::Free,
+                other => {
+                    return ctx.err(
+                        Some(span.clone()),
+                        format!("{field}.{name}[{i}]"),
+                        format!("`{other}` (allowed: rigid, free)"),
+                    )
+                }
+            };
+        }
+        Ok(out)
+    };
+    Ok(match j.kind.as_str() {
+        "weld" | "rigid" => JointKind::Weld,
+        "ball" => JointKind::Ball,
+        "universal" | "wheel" => JointKind::Universal,
+        "hinge" => {
+            let Some(axis) = j.axis else {
+                return ctx.err(
+                    Some(span),
+                    format!("{field}.axis"),
+                    "a hinge needs `axis = [x, y, z]`",
+                );
+            };
+            JointKind::Hinge { axis, frame }
+        }
+        "custom" => {
+            let rf = match &j.rotation_frame {
+                Some(t) => parse_frame(ctx, span.clone(), &format!("{field}.rotation_frame"), t)?,
+                None => frame,
+            };
+            JointKind::Custom {
+                translation: freedoms(&j.translation, "translation")?,
+                translation_frame: frame,
+                rotation: freedoms(&j.rotation, "rotation")?,
+                rotation_frame: rf,
+            }
+        }
+        other => {
+            return ctx.err(
+                Some(span),
+                format!("{field}.kind"),
+                format!(
+                    "unknown joint kind `{other}` (allowed: weld, ball, hinge, universal, custom)"
+                ),
+            )
+        }
+    })
+}
+
+fn amplitude(
+    ctx: &Ctx<'_>,
+    span: std::ops::Range<usize>,
+    field: &str,
+    a: &Option<AmplitudeSpec>,
+) -> Result<Amplitude, SceneError> {
+    let amp = match a {
+        None => Amplitude::Constant,
+        Some(AmplitudeSpec { ramp: Some(r), table: None }) => Amplitude::Ramp { duration: *r },
+        Some(AmplitudeSpec { ramp: None, table: Some(t) }) => {
+            Amplitude::Table(t.iter().map(|p| (p[0], p[1])).collect())
+        }
+        Some(_) => {
+            return ctx.err(
+                Some(span),
+                field,
+                "give exactly one of `ramp = seconds` or `table = [[t, a], …]`",
+            )
+        }
+    };
+    if let Err(e) = amp.validate(field) {
+        return ctx.err(Some(span), field, e.to_string());
+    }
+    Ok(amp)
+}
+
+/// Builds a scene from a file.
+pub fn load(file: &Path) -> Result<Scene, SceneError> {
+    let (spec, text) = parse(file)?;
+    build(file, &text, spec)
+}
+
+/// Builds a scene from text (`file` names it in errors).
+pub fn load_str(file: &Path, text: &str) -> Result<Scene, SceneError> {
+    let spec = parse_str(file, text)?;
+    build(file, text, spec)
+}
+
+fn build(file: &Path, text: &str, spec: SceneSpec) -> Result<Scene, SceneError> {
+    let ctx = Ctx { file, text };
+    let components = match spec.components.as_str() {
+        "planar" => Components::Planar,
+        "spatial" => Components::Spatial,
+        other => {
+            return ctx.err(None, "components", format!("`{other}` (allowed: planar, spatial)"))
+        }
+    };
+    let mut sections = std::collections::BTreeMap::new();
+    for (name, s) in &spec.sections {
+        sections.insert(name.clone(), section_of(&ctx, name, s)?);
+    }
+    let beam_names: Vec<String> = spec.beams.iter().map(|b| b.get_ref().name.clone()).collect();
+    let mut beams = Vec::new();
+    for (i, b) in spec.beams.iter().enumerate() {
+        let span = Some(b.span());
+        let bs = b.get_ref();
+        let f = |x: &str| format!("beams[{i}].{x}");
+        let Some(section) = sections.get(&bs.section) else {
+            let known: Vec<&str> = sections.keys().map(String::as_str).collect();
+            return ctx.err(
+                span,
+                f("section"),
+                format!("unknown section `{}` (sections: {})", bs.section, known.join(", ")),
+            );
+        };
+        if !(bs.length.is_finite() && bs.length > 0.0) {
+            return ctx.err(span, f("length"), format!("must be positive, got {}", bs.length));
+        }
+        if bs.elements == 0 {
+            return ctx.err(span, f("elements"), "must be at least 1");
+        }
+        let mesh = Mesh::uniform(bs.length, bs.elements)
+            .or_else(|e| ctx.err(span.clone(), f("length"), e.to_string()))?;
+        let beam = Beam::new(section.clone(), mesh, components)
+            .or_else(|e| ctx.err(span.clone(), f("section"), e.to_string()))?;
+        let placement = match (&bs.attach, bs.origin, bs.rotation) {
+            (Some(a), None, None) => Placement::Attached {
+                joint: a.joint.clone(),
+                axis: a.axis,
+                angle: a.angle_deg.to_radians(),
+            },
+            (None, o, r) => {
+                let o = o.unwrap_or([0.0; 3]);
+                let q = r
+                    .map(|r| axis_angle(&Vector3::from(r.axis), r.angle_deg.to_radians()))
+                    .unwrap_or(nalgebra::Vector4::new(1.0, 0.0, 0.0, 0.0));
+                Placement::At { origin: Vector3::from(o), quaternion: q }
+            }
+            _ => {
+                return ctx.err(
+                    span,
+                    f("attach"),
+                    "give either `attach` or `origin`/`rotation`, not both",
+                )
+            }
+        };
+        beams.push(StructureBeam::new(bs.name.clone(), beam, placement));
+    }
+    let mut joints = Vec::new();
+    for (i, j) in spec.joints.iter().enumerate() {
+        let field = format!("joints[{i}]");
+        let js = j.get_ref();
+        let Some(ends) = &js.ends else {
+            return ctx.err(
+                Some(j.span()),
+                format!("{field}.ends"),
+                "a joint needs `ends = [\"beam:end\", \"beam:start\", …]`",
+            );
+        };
+        if js.end.is_some() {
+            return ctx.err(
+                Some(j.span()),
+                format!("{field}.end"),
+                "a joint takes `ends` (a list); `end` is for supports",
+            );
+        }
+        let ends = ends
+            .iter()
+            .map(|e| parse_end(&ctx, j.span(), &format!("{field}.ends"), e, &beam_names))
+            .collect::<Result<Vec<_>, _>>()?;
+        joints.push(Joint {
+            name: js.name.clone(),
+            ends,
+            kind: joint_kind(&ctx, j, &field, false)?,
+        });
+    }
+    let mut supports = Vec::new();
+    for (i, s) in spec.supports.iter().enumerate() {
+        let field = format!("supports[{i}]");
+        let ss = s.get_ref();
+        let Some(end) = &ss.end else {
+            return ctx.err(
+                Some(s.span()),
+                format!("{field}.end"),
+                "a support needs `end = \"beam:start\"`",
+            );
+        };
+        if ss.ends.is_some() {
+            return ctx.err(
+                Some(s.span()),
+                format!("{field}.ends"),
+                "a support takes one `end`; `ends` is for joints",
+            );
+        }
+        let end = parse_end(&ctx, s.span(), &format!("{field}.end"), end, &beam_names)?;
+        supports.push(Support {
+            name: ss.name.clone(),
+            end,
+            kind: joint_kind(&ctx, s, &field, true)?,
+        });
+    }
+    // Structure-level errors: attribute to the joint/support/beam they name.
+    let structure = Structure::new(
+        beams,
+        joints,
+        supports,
+        StructureSettings { allow_disconnected: spec.allow_disconnected, ..Default::default() },
+    )
+    .or_else(|e| {
+        let msg = e.to_string();
+        let (span, field) = locate(&spec, &msg);
+        ctx.err(span, field, msg)
+    })?;
+    let run = spec.run.get_ref();
+    let run_span = Some(spec.run.span());
+    if !(run.dt.is_finite() && run.dt > 0.0) {
+        return ctx.err(run_span, "run.dt", format!("must be positive, got {}", run.dt));
+    }
+    if !(run.duration.is_finite() && run.duration >= 0.0) {
+        return ctx.err(
+            run_span,
+            "run.duration",
+            format!("must be non-negative, got {}", run.duration),
+        );
+    }
+    let settings = PlantSettings {
+        dt: run.dt,
+        newton_tolerance: run.newton_tolerance.unwrap_or(1e-12),
+        ..Default::default()
+    };
+    let mut plant = Plant::new(structure, settings).or_else(|e| {
+        let msg = e.to_string();
+        let (span, field) = locate(&spec, &msg);
+        ctx.err(
+            span.or(run_span.clone()),
+            if field == "(structure)" { "run".to_string() } else { field },
+            msg,
+        )
+    })?;
+    if let Some(g) = spec.gravity {
+        plant.set_gravity(Vector3::from(g)).or_else(|e| ctx.err(None, "gravity", e.to_string()))?;
+    }
+    let mut inputs = Vec::new();
+    for (i, l) in spec.loads.iter().enumerate() {
+        let span = l.span();
+        let ls = l.get_ref();
+        let f = |x: &str| format!("loads[{i}].{x}");
+        let Some(b) = plant.structure().beam_index(&ls.beam) else {
+            return ctx.err(
+                Some(span),
+                f("beam"),
+                format!("unknown beam `{}` (beams: {})", ls.beam, beam_names.join(", ")),
+            );
+        };
+        let n_el = plant.structure().beams()[b].beam.n_elements();
+        let node = match &ls.node {
+            NodeSpec::Index(n) if *n <= n_el => *n,
+            NodeSpec::Index(n) => {
+                return ctx.err(
+                    Some(span),
+                    f("node"),
+                    format!("node {n} does not exist (beam `{}` has nodes 0..={n_el})", ls.beam),
+                )
+            }
+            NodeSpec::Named(s) if s == "start" => 0,
+            NodeSpec::Named(s) if s == "end" => n_el,
+            NodeSpec::Named(s) => {
+                return ctx.err(
+                    Some(span),
+                    f("node"),
+                    format!("`{s}` (allowed: an index 0..={n_el}, start, end)"),
+                )
+            }
+        };
+        let frame = match ls.frame.as_str() {
+            "follower" => LoadFrame::Follower,
+            "dead" => LoadFrame::Dead,
+            other => {
+                return ctx.err(
+                    Some(span),
+                    f("frame"),
+                    format!("`{other}` (allowed: follower, dead)"),
+                )
+            }
+        };
+        let fo = ls.force.unwrap_or([0.0; 3]);
+        let mo = ls.moment.unwrap_or([0.0; 3]);
+        let value = Vector6::new(fo[0], fo[1], fo[2], mo[0], mo[1], mo[2]);
+        if value.iter().any(|v| !v.is_finite()) {
+            return ctx.err(Some(span), f("force"), "entries must be finite");
+        }
+        let amp = amplitude(&ctx, span.clone(), &f("amplitude"), &ls.amplitude)?;
+        let index = plant.loads(b).point.len();
+        plant.loads_mut(b).point.push(PointLoad { node, frame, value, amplitude: amp });
+        let name = ls.name.clone().unwrap_or_else(|| format!("load{i}"));
+        inputs.push(Input { name, kind: InputKind::Load { beam: b, index } });
+    }
+    for (i, t) in spec.torques.iter().enumerate() {
+        let span = t.span();
+        let ts = t.get_ref();
+        let f = |x: &str| format!("torques[{i}].{x}");
+        let amp = amplitude(&ctx, span.clone(), &f("amplitude"), &ts.amplitude)?;
+        plant
+            .set_joint_torque(&ts.joint, ts.axis, ts.value * amp.at(0.0))
+            .or_else(|e| ctx.err(Some(span.clone()), f("joint"), e.to_string()))?;
+        inputs.push(Input {
+            name: format!("torque:{}", ts.joint),
+            kind: InputKind::Torque {
+                joint: ts.joint.clone(),
+                axis: ts.axis,
+                value: ts.value,
+                amplitude: amp,
+            },
+        });
+    }
+    // Initial state.
+    if !spec.initial.rigid.is_empty() {
+        let s = plant.structure();
+        let mut x = vec![0.0; s.dim()];
+        for (i, r) in spec.initial.rigid.iter().enumerate() {
+            let rs = r.get_ref();
+            let full = s.rigid_rotation_state(
+                Vector3::from(rs.omega),
+                Vector3::from(rs.center.unwrap_or([0.0; 3])),
+            );
+            let targets: Vec<usize> = match &rs.beams {
+                None => (0..s.beams().len()).collect(),
+                Some(names) => {
+                    let mut v = Vec::new();
+                    for n in names {
+                        match s.beam_index(n) {
+                            Some(b) => v.push(b),
+                            None => {
+                                return ctx.err(
+                                    Some(r.span()),
+                                    format!("initial.rigid[{i}].beams"),
+                                    format!("unknown beam `{n}`"),
+                                )
+                            }
+                        }
+                    }
+                    v
+                }
+            };
+            for b in targets {
+                let (o, d) = (s.offset(b), s.beams()[b].beam.dim());
+                x[o..o + d].copy_from_slice(&full[o..o + d]);
+            }
+        }
+        plant.set_state(&x).or_else(|e| ctx.err(None, "initial", e.to_string()))?;
+    }
+    let steps = (run.duration / run.dt).round() as usize;
+    let output_every = run.output_every.unwrap_or(10);
+    if output_every == 0 {
+        return ctx.err(run_span, "run.output_every", "must be at least 1");
+    }
+    Ok(Scene {
+        file: file.to_path_buf(),
+        plant,
+        steps,
+        output_every,
+        inputs,
+        plot: spec.output.plot.clone(),
+        title: spec.output.title.clone().unwrap_or_default(),
+        description: spec.description.clone().unwrap_or_default(),
+    })
+}
+
+/// The entry (span and field) that a structure error message names, by joint/support/beam
+/// name in backquotes.
+fn locate(spec: &SceneSpec, msg: &str) -> (Option<std::ops::Range<usize>>, String) {
+    let quoted: Vec<&str> = msg.split('`').skip(1).step_by(2).collect();
+    // Joints and supports first (the last one named is the one that clashed), then beams.
+    for q in quoted.iter().rev() {
+        for (i, j) in spec.joints.iter().enumerate() {
+            if j.get_ref().name == *q {
+                return (Some(j.span()), format!("joints[{i}] (`{q}`)"));
+            }
+        }
+        for (i, s) in spec.supports.iter().enumerate() {
+            if s.get_ref().name == *q {
+                return (Some(s.span()), format!("supports[{i}] (`{q}`)"));
+            }
+        }
+    }
+    for q in &quoted {
+        for (i, b) in spec.beams.iter().enumerate() {
+            if b.get_ref().name == *q {
+                let field = if msg.contains("placement") && b.get_ref().attach.is_some() {
+                    format!("beams[{i}].attach")
+                } else {
+                    format!("beams[{i}] (`{q}`)")
+                };
+                return (Some(b.span()), field);
+            }
+        }
+    }
+    (None, "(structure)".into())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const BASE: &str = r#"description = "test"
+components = "planar"
+
+[sections.link]
+preset = "paper-2d"
+
+[[beams]]
+name = "link1"
+section = "link"
+length = 1.0
+elements = 4
+
+[[beams]]
+name = "link2"
+section = "link"
+length = 1.0
+elements = 4
+attach = { joint = "elbow", axis = [0.0, 1.0, 0.0], angle_deg = 30.0 }
+
+[[joints]]
+name = "elbow"
+kind = "hinge"
+ends = ["link1:end", "link2:start"]
+axis = [0.0, 1.0, 0.0]
+
+[[supports]]
+name = "root"
+end = "link1:start"
+kind = "hinge"
+axis = [0.0, 1.0, 0.0]
+
+[[loads]]
+beam = "link2"
+node = "end"
+frame = "follower"
+force = [0.0, 0.0, 0.1]
+
+[run]
+dt = 1e-3
+duration = 0.01
+"#;
+
+    fn line_of(text: &str, needle: &str) -> usize {
+        text.lines().position(|l| l.contains(needle)).expect("needle in text") + 1
+    }
+
+    /// Replaces `from` by `to` in the base scene, loads it, and checks that the error names
+    /// the file, the expected line (of `at`, in the modified text) and `field`.
+    fn expect_error(from: &str, to: &str, at: &str, field: &str) {
+        assert!(BASE.contains(from), "base lacks {from}");
+        let text = BASE.replacen(from, to, 1);
+        let err = match load_str(Path::new("bad.toml"), &text) {
+            Ok(_) => panic!("`{to}` was accepted"),
+            Err(e) => e,
+        };
+        let msg = err.to_string();
+        let line = line_of(&text, at);
+        assert!(msg.starts_with(&format!("bad.toml:{line}:")), "expected line {line} in: {msg}");
+        assert!(msg.contains(field), "expected field `{field}` in: {msg}");
+    }
+
+    #[test]
+    fn base_scene_builds_and_runs() {
+        let mut s = load_str(Path::new("ok.toml"), BASE).unwrap();
+        assert_eq!(s.steps, 10);
+        for _ in 0..s.steps {
+            s.plant.step().unwrap();
+        }
+        assert!((s.plant.joint_angles()[0] - 30f64.to_radians()).abs() < 0.01);
+    }
+
+    #[test]
+    fn malformed_scenes_name_file_line_and_field() {
+        let l2 = "length = 1.0\nelements = 4\nattach";
+        let elbow_ends = "ends = [\"link1:end\", \"link2:start\"]\naxis = [0.0, 1.0, 0.0]";
+        // wrong type
+        expect_error(
+            "length = 1.0\nelements = 4\n\n[[beams]]",
+            "length = \"one\"\nelements = 4\n\n[[beams]]",
+            "length = \"one\"",
+            "beams[0].length",
+        );
+        // unknown field (typo)
+        expect_error("elements = 4\nattach", "elemnts = 4\nattach", "elemnts", "elemnts");
+        // missing field
+        expect_error("dt = 1e-3\n", "", "[run]", "dt");
+        // unknown beam in a joint
+        expect_error(
+            "ends = [\"link1:end\", \"link2:start\"]",
+            "ends = [\"link1:end\", \"link3:start\"]",
+            "link3",
+            "joints[0].ends",
+        );
+        // unknown end
+        expect_error(
+            "end = \"link1:start\"",
+            "end = \"link1:middle\"",
+            "link1:middle",
+            "supports[0].end",
+        );
+        // negative length
+        expect_error(l2, "length = -1.0\nelements = 4\nattach", "length = -1.0", "beams[1].length");
+        // zero elements
+        expect_error(l2, "length = 1.0\nelements = 0\nattach", "elements = 0", "beams[1].elements");
+        // bad joint kind
+        expect_error(
+            "kind = \"hinge\"\nends",
+            "kind = \"slider\"\nends",
+            "kind = \"slider\"",
+            "joints[0].kind",
+        );
+        // hinge without axis
+        expect_error(
+            elbow_ends,
+            "ends = [\"link1:end\", \"link2:start\"]",
+            "[[joints]]",
+            "joints[0].axis",
+        );
+        // zero-length axis (found by the structure, attributed to the joint)
+        expect_error(
+            elbow_ends,
+            "ends = [\"link1:end\", \"link2:start\"]\naxis = [0.0, 0.0, 0.0]",
+            "[[joints]]",
+            "joints[0]",
+        );
+        // planar hinge off e2
+        expect_error(
+            "kind = \"hinge\"\naxis = [0.0, 1.0, 0.0]\n\n[[loads]]",
+            "kind = \"hinge\"\naxis = [1.0, 0.0, 0.0]\n\n[[loads]]",
+            "[[supports]]",
+            "supports[0]",
+        );
+        // end used twice
+        expect_error("end = \"link1:start\"", "end = \"link1:end\"", "[[supports]]", "supports[0]");
+        // unknown section
+        expect_error(
+            "section = \"link\"\nlength = 1.0\nelements = 4\nattach",
+            "section = \"rod\"\nlength = 1.0\nelements = 4\nattach",
+            "section = \"rod\"",
+            "beams[1].section",
+        );
+        // bad preset
+        expect_error(
+            "preset = \"paper-2d\"",
+            "preset = \"paper-4d\"",
+            "paper-4d",
+            "sections.link.preset",
+        );
+        // load on a node that does not exist
+        expect_error("node = \"end\"", "node = 9", "node = 9", "loads[0].node");
+        // bad load frame
+        expect_error(
+            "frame = \"follower\"",
+            "frame = \"body\"",
+            "frame = \"body\"",
+            "loads[0].frame",
+        );
+        // non-positive time step
+        expect_error("dt = 1e-3", "dt = 0.0", "dt = 0.0", "run.dt");
+        // attach to an unknown joint
+        expect_error(
+            "attach = { joint = \"elbow\"",
+            "attach = { joint = \"knee\"",
+            "knee",
+            "beams[1]",
+        );
+        // bad components
+        expect_error(
+            "components = \"planar\"",
+            "components = \"flat\"",
+            "components",
+            "components",
+        );
+        // a support given a list of ends
+        expect_error(
+            "end = \"link1:start\"",
+            "ends = [\"link1:start\"]",
+            "[[supports]]",
+            "supports[0].end",
+        );
+    }
+
+    /// Every shipped scene builds and takes a few steps (the full runs are in CI via the CLI).
+    #[test]
+    fn shipped_scenes_load_and_step() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes");
+        let mut n = 0;
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().and_then(|e| e.to_str()) != Some("toml") {
+                continue;
+            }
+            let mut s = load(&path).unwrap_or_else(|e| panic!("{e}"));
+            for _ in 0..3 {
+                s.plant.step().unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            }
+            n += 1;
+        }
+        assert!(n >= 5, "found {n} scenes");
+    }
+
+    /// The built-in default scene is the shipped cantilever.
+    #[test]
+    fn default_scene_is_the_shipped_cantilever() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cantilever.toml");
+        assert_eq!(std::fs::read_to_string(dir).unwrap(), crate::DEFAULT_SCENE);
+    }
+}
