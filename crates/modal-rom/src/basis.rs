@@ -1,5 +1,6 @@
 //! The modal basis: frequencies, velocity/force modes per beam, labels, selection (§3.2).
 
+use crate::blocks::BlockDiag;
 use crate::eigen::{solve, EigenSettings, RawModes, SecondOrderProblem};
 use crate::error::{invalid, shape, ModalError, Result};
 use crate::layout::{Components, Layout};
@@ -143,6 +144,8 @@ pub struct ModalBasis {
     layout: Layout,
     b1: Mat<f64>,
     b2: Mat<f64>,
+    b1_blocks: BlockDiag,
+    b2_blocks: BlockDiag,
     d: Mat<f64>,
     omega: Vec<f64>,
     lambda: Vec<f64>,
@@ -173,8 +176,10 @@ impl ModalBasis {
                 (problem.n1(), problem.n2()),
             ));
         }
+        let b1_blocks = BlockDiag::from_dense("B1", problem.b1.as_ref(), layout.k())?;
+        let b2_blocks = BlockDiag::from_dense("B2", problem.b2.as_ref(), layout.k())?;
         let raw = solve(problem, &settings.eigen, rigid_candidates)?;
-        Ok(Self::from_raw(layout, problem, raw, settings.label_threshold))
+        Ok(Self::from_raw(layout, problem, raw, settings.label_threshold, b1_blocks, b2_blocks))
     }
 
     fn from_raw(
@@ -182,12 +187,16 @@ impl ModalBasis {
         problem: &SecondOrderProblem,
         raw: RawModes,
         threshold: f64,
+        b1_blocks: BlockDiag,
+        b2_blocks: BlockDiag,
     ) -> Self {
         let RawModes { lambda, omega, phi1, phi2, n_rigid, lambda_max, block_sizes } = raw;
         let mut basis = ModalBasis {
             layout,
             b1: problem.b1.clone(),
             b2: problem.b2.clone(),
+            b1_blocks,
+            b2_blocks,
             d: problem.d.clone(),
             omega,
             lambda,
@@ -206,8 +215,8 @@ impl ModalBasis {
     fn label(&mut self, threshold: f64) {
         let comps = self.layout.components;
         let k = comps.k();
-        let b1p = &self.b1 * &self.phi1;
-        let b2p = &self.b2 * &self.phi2;
+        let b1p = self.b1_blocks.apply(self.phi1.as_ref());
+        let b2p = self.b2_blocks.apply(self.phi2.as_ref());
         let m = self.omega.len();
         self.kinds.clear();
         self.fractions.clear();
@@ -322,6 +331,16 @@ impl ModalBasis {
         self.b2.as_ref()
     }
 
+    /// `B1` by blocks.
+    pub fn b1_blocks(&self) -> &BlockDiag {
+        &self.b1_blocks
+    }
+
+    /// `B2` by blocks.
+    pub fn b2_blocks(&self) -> &BlockDiag {
+        &self.b2_blocks
+    }
+
     /// Coupling `D` (n1 × n2) of the linear operator.
     pub fn d(&self) -> MatRef<'_, f64> {
         self.d.as_ref()
@@ -385,6 +404,8 @@ impl ModalBasis {
             layout: self.layout.clone(),
             b1: self.b1.clone(),
             b2: self.b2.clone(),
+            b1_blocks: self.b1_blocks.clone(),
+            b2_blocks: self.b2_blocks.clone(),
             d: self.d.clone(),
             omega: idx.iter().map(|&j| self.omega[j]).collect(),
             lambda: idx.iter().map(|&j| self.lambda[j]).collect(),
@@ -403,8 +424,8 @@ impl ModalBasis {
     pub fn orthonormality_residuals(&self) -> (f64, f64, f64) {
         let m = self.n_modes();
         let r = self.n_rigid;
-        let s1 = self.phi1.transpose() * &self.b1 * &self.phi1;
-        let s2 = self.phi2.transpose() * &self.b2 * &self.phi2;
+        let s1 = self.phi1.transpose() * self.b1_blocks.apply(self.phi1.as_ref());
+        let s2 = self.phi2.transpose() * self.b2_blocks.apply(self.phi2.as_ref());
         let dd = self.phi1.transpose() * &self.d * &self.phi2;
         let (mut e1, mut e2, mut e3) = (0.0f64, 0.0f64, 0.0f64);
         for i in 0..m {

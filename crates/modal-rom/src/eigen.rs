@@ -615,6 +615,8 @@ pub fn solve(
             phi1[(i, n_exact + j)] = canonical[(i, j)];
         }
     }
+    // Force modes per block: φ2 = B2e⁻¹ D_eᵀ φ1 / ω (one matrix product per block).
+    let flexed: Vec<Mat<f64>> = blocks.iter().map(|b| &b.flex * &b.phi1).collect();
     for (k, &(l, bi, ci)) in elastic_ids.iter().enumerate() {
         let col = n_rigid + k;
         let b = &blocks[bi];
@@ -627,12 +629,9 @@ pub fn solve(
         for (li, &gi) in b.s1.iter().enumerate() {
             phi1[(gi, col)] = sign * vals[li];
         }
+        let f = &flexed[bi];
         for (le, &ge) in b.elastic_cols.iter().enumerate() {
-            let mut acc = 0.0;
-            for li in 0..b.s1.len() {
-                acc += b.flex[(le, li)] * vals[li];
-            }
-            phi2[(ge, col)] = sign * acc / w;
+            phi2[(ge, col)] = sign * f[(le, ci)] / w;
         }
     }
     Ok(RawModes {
@@ -664,39 +663,33 @@ fn exact_rigid_fields(
     let Some(c) = candidates else { return Vec::new() };
     let n1 = problem.n1();
     let (gmax, dmax) = (max_abs(problem.g.as_ref()), max_abs(problem.d.as_ref()));
+    let gres = &problem.g * c;
+    let dres = problem.d.transpose() * c;
+    let bc = &problem.b1 * c;
     let mut done: Vec<(Vec<f64>, Vec<f64>)> = Vec::new();
     for col in 0..c.ncols() {
-        let v0: Vec<f64> = (0..n1).map(|i| c[(i, col)]).collect();
-        let vmax = v0.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+        let vmax = (0..n1).fold(0.0f64, |a, i| a.max(c[(i, col)].abs()));
         if vmax == 0.0 {
             continue;
         }
-        let gres = (0..problem.g.nrows())
-            .map(|row| (0..n1).map(|i| problem.g[(row, i)] * v0[i]).sum::<f64>().abs())
-            .fold(0.0f64, f64::max);
-        let dres = (0..problem.d.ncols())
-            .map(|e| (0..n1).map(|i| problem.d[(i, e)] * v0[i]).sum::<f64>().abs())
-            .fold(0.0f64, f64::max);
-        if gres > 1e-10 * gmax * vmax || dres > 1e-10 * dmax * vmax {
+        let g = (0..gres.nrows()).fold(0.0f64, |a, i| a.max(gres[(i, col)].abs()));
+        let d = (0..dres.nrows()).fold(0.0f64, |a, i| a.max(dres[(i, col)].abs()));
+        if g > 1e-10 * gmax * vmax || d > 1e-10 * dmax * vmax {
             continue;
         }
-        let bnorm = |v: &[f64]| -> (Vec<f64>, f64) {
-            let bv: Vec<f64> =
-                (0..n1).map(|i| (0..n1).map(|k| problem.b1[(i, k)] * v[k]).sum()).collect();
-            let n = bv.iter().zip(v).map(|(x, y)| x * y).sum::<f64>().max(0.0).sqrt();
-            (bv, n)
-        };
-        let (_, n0) = bnorm(&v0);
-        let mut v = v0;
+        let mut v: Vec<f64> = (0..n1).map(|i| c[(i, col)]).collect();
+        let mut bv: Vec<f64> = (0..n1).map(|i| bc[(i, col)]).collect();
+        let n0 = bv.iter().zip(&v).map(|(x, y)| x * y).sum::<f64>().max(0.0).sqrt();
         for _ in 0..2 {
             for (q, bq) in &done {
                 let a: f64 = bq.iter().zip(&v).map(|(x, y)| x * y).sum();
-                for (x, y) in v.iter_mut().zip(q) {
-                    *x -= a * y;
+                for i in 0..n1 {
+                    v[i] -= a * q[i];
+                    bv[i] -= a * bq[i];
                 }
             }
         }
-        let (bv, n) = bnorm(&v);
+        let n = bv.iter().zip(&v).map(|(x, y)| x * y).sum::<f64>().max(0.0).sqrt();
         if n > 1e-6 * n0 {
             done.push((v.iter().map(|x| x / n).collect(), bv.iter().map(|x| x / n).collect()));
         }

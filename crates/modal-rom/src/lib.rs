@@ -32,6 +32,7 @@
 //! the CLI ([`report`]) and the paper's canonical models ([`samples`]).
 
 pub mod basis;
+pub mod blocks;
 pub mod eigen;
 pub mod error;
 pub mod export;

@@ -19,11 +19,12 @@
 //! invertible.
 
 use crate::basis::{ModalBasis, ModeKind};
+use crate::blocks::BlockDiag;
 use crate::error::{invalid, shape, ModalError, Result};
 use crate::layout::Layout;
 use crate::tensor::SparseTensor3;
 use faer::linalg::solvers::{DenseSolveCore, Solve};
-use faer::{Mat, MatMut, Side};
+use faer::{Mat, Side};
 use intrinsic_beam::operators::{l1_times, l2_times, u_matrix, u_omega};
 use nalgebra::{Vector3, Vector4, Vector6};
 use serde::{Deserialize, Serialize};
@@ -227,8 +228,8 @@ impl ModalRom {
             _ => Mat::zeros(m, m),
         };
         // Embedded mode values and their weighted products.
-        let b1phi = basis.b1() * &phi1; // w_n M φ1l at nodes
-        let b2phi = basis.b2() * &phi2; // h_e C φ2l at elements
+        let b1phi = basis.b1_blocks().apply(phi1.as_ref()); // w_n M φ1l at nodes
+        let b2phi = basis.b2_blocks().apply(phi2.as_ref()); // h_e C φ2l at elements
         let emb = |mat: &Mat<f64>, i0: usize, j: usize| -> Vector6<f64> {
             let vals: Vec<f64> = (0..k).map(|c| mat[(i0 + c, j)]).collect();
             comps.embed(&vals)
@@ -297,13 +298,13 @@ impl ModalRom {
             }
         }
         // Projections: energy-norm least squares onto the modes (theory.md §7).
-        let proj1 = gram_projector(&phi1, basis.b1())?;
+        let proj1 = gram_projector(&phi1, basis.b1_blocks())?;
         let phi2q = mat_from_rows(n2, nq2, |i, p| phi2[(i, q2_modes[p])]);
         let proj2 = if q2_modes.iter().any(|&j| j < n_rigid) {
             // rigid modes have φ2 ≡ 0: their q2 is 0; project on the elastic ones only
             let el: Vec<usize> = (0..nq2).filter(|&p| q2_modes[p] >= n_rigid).collect();
             let sub = mat_from_rows(n2, el.len(), |i, p| phi2q[(i, el[p])]);
-            let ps = gram_projector(&sub, basis.b2())?;
+            let ps = gram_projector(&sub, basis.b2_blocks())?;
             let mut full = Mat::<f64>::zeros(nq2, n2);
             for (r, &p) in el.iter().enumerate() {
                 for c in 0..n2 {
@@ -312,13 +313,13 @@ impl ModalRom {
             }
             full
         } else {
-            gram_projector(&phi2q, basis.b2())?
+            gram_projector(&phi2q, basis.b2_blocks())?
         };
         let compliance = (0..layout.beams.len())
             .map(|b| {
                 let h = layout.beams[b].element_lengths[0];
                 let i0 = layout.x2_index(b, 0, 0);
-                (0..k * k).map(|rc| basis.b2()[(i0 + rc / k, i0 + rc % k)] / h).collect()
+                basis.b2_blocks().block(i0 / k).iter().map(|v| v / h).collect()
             })
             .collect();
         let quaternion = if options.quaternions {
@@ -543,22 +544,18 @@ impl ModalRom {
         }
     }
 
-    /// Exact Jacobians `∂f/∂q` (n × n) and `∂f/∂u` (n × inputs); the right-hand side is
-    /// quadratic in `q`, so `∂f/∂q` is affine in `q`.
-    pub fn jacobian(
-        &self,
-        q: &[f64],
-        u: &[f64],
-        mut jq: MatMut<'_, f64>,
-        mut ju: MatMut<'_, f64>,
-    ) -> Result<()> {
+    /// Exact Jacobians `∂f/∂q` (n × n) and `∂f/∂u` (n × inputs), written column-major into
+    /// `jq` (length n²) and `ju` (length n·inputs) — the layout of `nalgebra::DMatrix` and of
+    /// faer's column-major `Mat`. The right-hand side is quadratic in `q`, so `∂f/∂q` is
+    /// affine in `q`.
+    pub fn jacobian(&self, q: &[f64], u: &[f64], jq: &mut [f64], ju: &mut [f64]) -> Result<()> {
         self.check(q, u)?;
         let n = self.n_state();
-        if jq.nrows() != n || jq.ncols() != n {
-            return Err(shape("Jacobian ∂f/∂q", (n, n), (jq.nrows(), jq.ncols())));
+        if jq.len() != n * n {
+            return Err(shape("Jacobian ∂f/∂q", (n, n), (jq.len(), 1)));
         }
-        if ju.nrows() != n || ju.ncols() != self.n_inputs() {
-            return Err(shape("Jacobian ∂f/∂u", (n, self.n_inputs()), (ju.nrows(), ju.ncols())));
+        if ju.len() != n * self.n_inputs() {
+            return Err(shape("Jacobian ∂f/∂u", (n, self.n_inputs()), (ju.len(), 1)));
         }
         let m = self.n_modes();
         let o2 = self.q2_offset();
@@ -568,36 +565,152 @@ impl ModalRom {
         ju.fill(0.0);
         for j in 0..m {
             for i in 0..m {
-                jq[(i, j)] = self.sigma[(i, j)];
+                jq[j * n + i] = self.sigma[(i, j)];
             }
         }
         for c in 0..self.n_inputs() {
             for i in 0..m {
-                ju[(i, c)] = self.b_u[(i, c)];
+                ju[c * n + i] = self.b_u[(i, c)];
             }
         }
         for (p, &j) in self.q2_modes.iter().enumerate() {
-            jq[(j, o2 + p)] += self.omega[j];
-            jq[(o2 + p, j)] -= self.omega[j];
+            jq[(o2 + p) * n + j] += self.omega[j];
+            jq[j * n + o2 + p] -= self.omega[j];
         }
         for &(i, j, l, v) in &self.gamma1.entries {
             let (i, j, l) = (i as usize, j as usize, l as usize);
-            jq[(i, j)] -= v * q1[l];
-            jq[(i, l)] -= v * q1[j];
+            jq[j * n + i] -= v * q1[l];
+            jq[l * n + i] -= v * q1[j];
         }
         for &(i, j, l, v) in &self.gamma2.entries {
             let (i, j, l) = (i as usize, j as usize, l as usize);
-            jq[(i, o2 + j)] -= v * q2[l];
-            jq[(i, o2 + l)] -= v * q2[j];
-            jq[(o2 + j, i)] += v * q2[l];
-            jq[(o2 + j, o2 + l)] += v * q1[i];
+            jq[(o2 + j) * n + i] -= v * q2[l];
+            jq[(o2 + l) * n + i] -= v * q2[j];
+            jq[i * n + o2 + j] += v * q2[l];
+            jq[(o2 + l) * n + o2 + j] += v * q1[i];
         }
         if let Some(qm) = &self.quaternion {
             let qx = &q[ox..];
             for &(i, j, l, v) in &qm.gamma_xi_scaled.entries {
                 let (i, j, l) = (i as usize, j as usize, l as usize);
-                jq[(ox + i, j)] += v * qx[l];
-                jq[(ox + i, ox + l)] += v * q1[j];
+                jq[j * n + ox + i] += v * qx[l];
+                jq[(ox + l) * n + ox + i] += v * q1[j];
+            }
+        }
+        Ok(())
+    }
+
+    /// Right-hand side and both Jacobians in one pass over the tensors (what an integrator
+    /// with sensitivities needs); layouts as in [`ModalRom::rhs`] and [`ModalRom::jacobian`].
+    pub fn rhs_and_jacobian(
+        &self,
+        q: &[f64],
+        u: &[f64],
+        f: &mut [f64],
+        jq: &mut [f64],
+        ju: &mut [f64],
+    ) -> Result<()> {
+        self.check(q, u)?;
+        let n = self.n_state();
+        let nu = self.n_inputs();
+        if f.len() != n {
+            return Err(shape("output", (n, 1), (f.len(), 1)));
+        }
+        if jq.len() != n * n {
+            return Err(shape("Jacobian ∂f/∂q", (n, n), (jq.len(), 1)));
+        }
+        if ju.len() != n * nu {
+            return Err(shape("Jacobian ∂f/∂u", (n, nu), (ju.len(), 1)));
+        }
+        let m = self.n_modes();
+        let o2 = self.q2_offset();
+        let ox = self.xi_offset();
+        let (q1, q2, qx) = (&q[..m], &q[o2..ox], &q[ox..]);
+        jq.fill(0.0);
+        f.fill(0.0);
+        for j in 0..m {
+            let col = self.sigma.col_as_slice(j);
+            let jcol = &mut jq[j * n..j * n + m];
+            let qj = q1[j];
+            for i in 0..m {
+                jcol[i] = col[i];
+                f[i] += col[i] * qj;
+            }
+        }
+        for c in 0..nu {
+            let col = self.b_u.col_as_slice(c);
+            let jcol = &mut ju[c * n..(c + 1) * n];
+            jcol.fill(0.0);
+            let uc = u[c];
+            for i in 0..m {
+                jcol[i] = col[i];
+                f[i] += col[i] * uc;
+            }
+        }
+        for (p, &j) in self.q2_modes.iter().enumerate() {
+            let w = self.omega[j];
+            f[j] += w * q2[p];
+            f[o2 + p] = -w * q1[j];
+            jq[(o2 + p) * n + j] += w;
+            jq[j * n + o2 + p] -= w;
+        }
+        for &(i, j, l, v) in &self.gamma1.entries {
+            let (i, j, l) = (i as usize, j as usize, l as usize);
+            let (a, b) = (v * q1[l], v * q1[j]);
+            f[i] -= a * q1[j];
+            jq[j * n + i] -= a;
+            jq[l * n + i] -= b;
+        }
+        for &(i, j, l, v) in &self.gamma2.entries {
+            let (i, j, l) = (i as usize, j as usize, l as usize);
+            let (a, b) = (v * q2[l], v * q2[j]);
+            f[i] -= a * q2[j];
+            f[o2 + j] += a * q1[i];
+            jq[(o2 + j) * n + i] -= a;
+            jq[(o2 + l) * n + i] -= b;
+            jq[i * n + o2 + j] += a;
+            jq[(o2 + l) * n + o2 + j] += v * q1[i];
+        }
+        if let Some(qm) = &self.quaternion {
+            for &(i, j, l, v) in &qm.gamma_xi_scaled.entries {
+                let (i, j, l) = (i as usize, j as usize, l as usize);
+                let a = v * qx[l];
+                f[ox + i] += a * q1[j];
+                jq[j * n + ox + i] += a;
+                jq[(ox + l) * n + ox + i] += v * q1[j];
+            }
+        }
+        Ok(())
+    }
+
+    /// `out = Σ_i w_i ∇²f_i` (symmetric, `(n + inputs)²`, column-major, ordered `(q, u)`):
+    /// constant, since `f` is quadratic in `q` and linear in `u`.
+    pub fn weighted_hessian(&self, w: &[f64], out: &mut [f64]) -> Result<()> {
+        let n = self.n_state();
+        let nt = n + self.n_inputs();
+        if w.len() != n {
+            return Err(shape("weights w", (n, 1), (w.len(), 1)));
+        }
+        if out.len() != nt * nt {
+            return Err(shape("Hessian", (nt, nt), (out.len(), 1)));
+        }
+        out.fill(0.0);
+        let (o2, ox) = (self.q2_offset(), self.xi_offset());
+        let mut add = |a: usize, b: usize, v: f64| {
+            out[b * nt + a] += v;
+            out[a * nt + b] += v;
+        };
+        for &(i, j, l, v) in &self.gamma1.entries {
+            add(j as usize, l as usize, -v * w[i as usize]);
+        }
+        for &(i, j, l, v) in &self.gamma2.entries {
+            let (i, j, l) = (i as usize, j as usize, l as usize);
+            add(o2 + j, o2 + l, -v * w[i]);
+            add(i, o2 + l, v * w[o2 + j]);
+        }
+        if let Some(qm) = &self.quaternion {
+            for &(i, j, l, v) in &qm.gamma_xi_scaled.entries {
+                add(j as usize, ox + l as usize, v * w[ox + i as usize]);
             }
         }
         Ok(())
@@ -647,16 +760,16 @@ impl ModalRom {
         let mut z = q0.clone();
         let mut f = vec![0.0; n];
         let mut mid = vec![0.0; n];
-        let mut jq = Mat::<f64>::zeros(n, n);
-        let mut ju = Mat::<f64>::zeros(n, self.n_inputs());
+        let mut jq = vec![0.0; n * n];
+        let mut ju = vec![0.0; n * self.n_inputs()];
         let scale = q0.iter().fold(1.0f64, |a, v| a.max(v.abs()));
         for it in 1..=max_iter {
             for i in 0..n {
                 mid[i] = 0.5 * (q0[i] + z[i]);
             }
             self.rhs_unchecked(&mid, u, &mut f);
-            self.jacobian(&mid, u, jq.as_mut(), ju.as_mut())?;
-            let mut a = Mat::<f64>::from_fn(n, n, |i, j| -0.5 * dt * jq[(i, j)]);
+            self.jacobian(&mid, u, &mut jq, &mut ju)?;
+            let mut a = Mat::<f64>::from_fn(n, n, |i, j| -0.5 * dt * jq[j * n + i]);
             for i in 0..n {
                 a[(i, i)] += 1.0;
             }
@@ -710,8 +823,8 @@ impl ModalRom {
 }
 
 /// `(ΦᵀBΦ)⁻¹ ΦᵀB`: the energy-norm projector onto the columns of `Φ`.
-fn gram_projector(phi: &Mat<f64>, b: faer::MatRef<'_, f64>) -> Result<Mat<f64>> {
-    let bphi = b * phi;
+fn gram_projector(phi: &Mat<f64>, b: &BlockDiag) -> Result<Mat<f64>> {
+    let bphi = b.apply(phi.as_ref());
     let gram = phi.transpose() * &bphi;
     if gram.nrows() == 0 {
         return Ok(Mat::zeros(0, phi.nrows()));

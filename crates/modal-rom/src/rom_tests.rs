@@ -4,7 +4,6 @@ use crate::basis::{BasisSettings, ModeKind, ModeSelection};
 use crate::rom::RomOptions;
 use crate::samples::{self, paper_2d_selection, paper_3d_selection};
 use crate::testing;
-use faer::Mat;
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed};
 use std::sync::OnceLock;
@@ -126,9 +125,9 @@ proptest! {
             let n = rom.n_state();
             let q = state(&v, n);
             let u: Vec<f64> = (0..rom.n_inputs()).map(|i| w[i % w.len()]).collect();
-            let mut jq = Mat::<f64>::zeros(n, n);
-            let mut ju = Mat::<f64>::zeros(n, rom.n_inputs());
-            rom.jacobian(&q, &u, jq.as_mut(), ju.as_mut()).unwrap();
+            let mut jq = vec![0.0; n * n];
+            let mut ju = vec![0.0; n * rom.n_inputs()];
+            rom.jacobian(&q, &u, &mut jq, &mut ju).unwrap();
             let h = 1e-5;
             let (mut fp, mut fm) = (vec![0.0; n], vec![0.0; n]);
             let mut worst = 0.0f64;
@@ -140,13 +139,39 @@ proptest! {
                 rom.rhs(&qm, &um, &mut fm).unwrap();
                 for r in 0..n {
                     let fd = (fp[r] - fm[r]) / (2.0 * h);
-                    let exact = if c < n { jq[(r, c)] } else { ju[(r, c - n)] };
+                    let exact = if c < n { jq[c * n + r] } else { ju[(c - n) * n + r] };
                     worst = worst.max((fd - exact).abs());
                     scale = scale.max(exact.abs());
                 }
             }
             // f is quadratic: central differences are exact up to round-off ε|f|/h
             prop_assert!(worst <= 1e-8 * scale, "FD mismatch {worst} (scale {scale})");
+            // the fused evaluation gives the same numbers
+            let (mut f2, mut jq2, mut ju2) = (vec![0.0; n], vec![0.0; n * n], vec![0.0; n * rom.n_inputs()]);
+            rom.rhs_and_jacobian(&q, &u, &mut f2, &mut jq2, &mut ju2).unwrap();
+            let mut f1 = vec![0.0; n];
+            rom.rhs(&q, &u, &mut f1).unwrap();
+            let dev = f1.iter().zip(&f2).chain(jq.iter().zip(&jq2)).chain(ju.iter().zip(&ju2)).fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
+            prop_assert!(dev <= 1e-13 * scale, "fused evaluation differs by {dev}");
+            // Hessian: central differences of the Jacobian contracted with weights
+            let wts: Vec<f64> = (0..n).map(|i| (i as f64 * 1.3).cos()).collect();
+            let nt = n + rom.n_inputs();
+            let mut hess = vec![0.0; nt * nt];
+            rom.weighted_hessian(&wts, &mut hess).unwrap();
+            let (mut jp, mut jm, mut up_, mut um_) = (vec![0.0; n * n], vec![0.0; n * n], vec![0.0; n * rom.n_inputs()], vec![0.0; n * rom.n_inputs()]);
+            let mut hworst = 0.0f64;
+            for c in 0..n {
+                let (mut qp, mut qm) = (q.clone(), q.clone());
+                qp[c] += h;
+                qm[c] -= h;
+                rom.jacobian(&qp, &u, &mut jp, &mut up_).unwrap();
+                rom.jacobian(&qm, &u, &mut jm, &mut um_).unwrap();
+                for a in 0..n {
+                    let fd: f64 = (0..n).map(|r| wts[r] * (jp[a * n + r] - jm[a * n + r]) / (2.0 * h)).sum();
+                    hworst = hworst.max((fd - hess[c * nt + a]).abs());
+                }
+            }
+            prop_assert!(hworst <= 1e-7 * scale, "Hessian mismatch {hworst}");
         }
     }
 
