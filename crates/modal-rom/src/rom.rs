@@ -632,8 +632,8 @@ impl ModalRom {
             let col = self.sigma.col_as_slice(j);
             let jcol = &mut jq[j * n..j * n + m];
             let qj = q1[j];
+            jcol.copy_from_slice(&col[..m]);
             for i in 0..m {
-                jcol[i] = col[i];
                 f[i] += col[i] * qj;
             }
         }
@@ -642,8 +642,8 @@ impl ModalRom {
             let jcol = &mut ju[c * n..(c + 1) * n];
             jcol.fill(0.0);
             let uc = u[c];
+            jcol[..m].copy_from_slice(&col[..m]);
             for i in 0..m {
-                jcol[i] = col[i];
                 f[i] += col[i] * uc;
             }
         }
