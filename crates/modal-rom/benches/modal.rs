@@ -1,6 +1,8 @@
 //! Criterion benches: RHS + Jacobian of the 3D augmented model (4 rigid + 16 elastic modes),
 //! and the constrained modes of the 3D two-link at 2×50 elements.
 
+#![allow(missing_docs)] // criterion's macros generate undocumented items
+
 use criterion::{criterion_group, criterion_main, Criterion};
 use modal_rom::samples::{self, paper_3d_selection};
 use modal_rom::{BasisSettings, ModeSelection, RomOptions, StructureModel};
