@@ -20,6 +20,11 @@ pub fn cases() -> Vec<Case> {
         Case { name: "ocp-transcription/lq-equals-riccati", tier: Tier::Quick, run: lq_riccati },
         Case { name: "ocp-transcription/cartpole-swing-up", tier: Tier::Quick, run: swing_up },
         Case { name: "ocp-transcription/failure-statuses", tier: Tier::Quick, run: statuses },
+        Case {
+            name: "ocp-transcription/unstable-horizon-qp-accuracy",
+            tier: Tier::Quick,
+            run: unstable_horizon,
+        },
     ]
 }
 
@@ -300,6 +305,115 @@ fn statuses() -> CaseOutcome {
             flag(st == SqpStatus::QpInfeasible),
             1.0,
         ));
+    }
+    Ok(out)
+}
+
+/// Riccati (closed-loop) solution of the discrete LQ problem the SQP builds for `model`.
+fn riccati_solution(
+    model: &LinearModel,
+    ocp: &Ocp,
+    settings: &IntegratorSettings,
+    x0: &DVector<f64>,
+) -> Result<(Vec<DVector<f64>>, Vec<DVector<f64>>), String> {
+    let (nx, nu, n, dt) = (ocp.nx(), ocp.nu(), ocp.intervals, ocp.interval());
+    let mut int = Integrator::new(model, settings, dt).map_err(err)?;
+    let (mut a, mut b, mut xe) = (DMatrix::zeros(nx, nx), DMatrix::zeros(nx, nu), vec![0.0; nx]);
+    int.integrate_with_sensitivities(
+        model,
+        &vec![0.0; nx],
+        &vec![0.0; nu],
+        &mut xe,
+        &mut a,
+        &mut b,
+    )
+    .map_err(err)?;
+    let rd = &ocp.r * dt;
+    let mut p = &ocp.q * (0.5 * dt) + &ocp.terminal;
+    let mut gains = vec![DMatrix::zeros(nu, nx); n];
+    for k in (0..n).rev() {
+        let btp = b.transpose() * &p;
+        let gain = (&rd + &btp * &b).cholesky().ok_or("Riccati: not PD")?.solve(&(&btp * &a));
+        let qk = &ocp.q * if k == 0 { 0.5 * dt } else { dt };
+        p = qk + a.transpose() * &p * (&a - &b * &gain);
+        p = 0.5 * (&p + p.transpose());
+        gains[k] = gain;
+    }
+    let mut xs = vec![x0.clone()];
+    let mut us = Vec::new();
+    for k in 0..n {
+        let u = -&gains[k] * &xs[k];
+        xs.push(&a * &xs[k] + &b * &u);
+        us.push(u);
+    }
+    Ok((xs, us))
+}
+
+/// Three inverted pendula (`ẍ = a x + u`, growth `e^{√a τp}` ≈ 1e7 over the 6 s horizon, as
+/// the modal problem near ω0 = 2): condensed and sparse QPs against the Riccati solution.
+fn unstable_horizon() -> CaseOutcome {
+    let (m, a_coef) = (3, (1e7_f64.ln() / 6.0).powi(2));
+    let nx = 2 * m;
+    let mut am = DMatrix::zeros(nx, nx);
+    let mut bm = DMatrix::zeros(nx, m);
+    for i in 0..m {
+        am[(i, m + i)] = 1.0;
+        am[(m + i, i)] = a_coef * (1.0 + 0.1 * i as f64);
+        bm[(m + i, i)] = 1.0;
+    }
+    let model = LinearModel::new(am, bm).map_err(err)?;
+    let mut ocp = Ocp::new(nx, m, 6.0, 24).map_err(err)?;
+    ocp.r = DMatrix::identity(m, m) * 0.1;
+    let x0 = DVector::from_fn(nx, |i, _| 0.1 * (i as f64 + 1.0).sin());
+    let settings = IntegratorSettings::new(IntegratorKind::Rk4, 8);
+    let (xs, us) = riccati_solution(&model, &ocp, &settings, &x0)?;
+    let scale = us.iter().map(|u| u.amax()).fold(0.0, f64::max);
+    let mut out = Vec::new();
+    for form in
+        [QpForm::Auto, QpForm::CondensedDense, QpForm::CondensedClarabel, QpForm::SparseClarabel]
+    {
+        let s = SqpSettings {
+            qp_form: form,
+            integrator: settings.clone(),
+            max_iterations: 3,
+            ..SqpSettings::default()
+        };
+        let mut solver = SqpSolver::new(&model, ocp.clone(), s).map_err(err)?;
+        let stats = solver.solve(x0.as_slice()).map_err(err)?;
+        let mut dev = 0.0_f64;
+        for k in 0..ocp.intervals {
+            dev = dev.max((&solver.controls()[k] - &us[k]).amax());
+            dev = dev.max((&solver.states()[k + 1] - &xs[k + 1]).amax());
+        }
+        let rel = dev / scale;
+        match form {
+            // the multiple-shooting QP never forms the ill-conditioned condensed Hessian;
+            // Auto detects the conditioning and switches to it
+            QpForm::SparseClarabel | QpForm::Auto => out.push(Metric::at_most(
+                format!("{form:?}: max |w − w_Riccati| / max|u|"),
+                rel,
+                1e-10,
+            )),
+            // condensing costs digits (condition ~1e14): reported, bounded loosely
+            QpForm::CondensedDense => out.push(Metric::at_most(
+                format!("{form:?}: max |w − w_Riccati| / max|u|"),
+                rel,
+                1e-6,
+            )),
+            // Clarabel may give up on the condensed QP: it must say so, not return garbage
+            _ => {
+                let honest = stats.status == SqpStatus::QpFailed
+                    || (stats.status == SqpStatus::Solved && rel < 1e-6);
+                out.push(Metric::at_least(
+                    format!(
+                        "{form:?}: accurate or QpFailed (status {:?}, rel. dev. {rel:.1e})",
+                        stats.status
+                    ),
+                    if honest { 1.0 } else { 0.0 },
+                    1.0,
+                ));
+            }
+        }
     }
     Ok(out)
 }

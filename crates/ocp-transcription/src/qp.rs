@@ -15,7 +15,8 @@ use nalgebra::{DMatrix, DVector};
 #[non_exhaustive]
 pub enum QpForm {
     /// Condensed; the dense interior-point solver when only control bounds are present,
-    /// Clarabel otherwise. The default.
+    /// Clarabel otherwise; the sparse multiple-shooting QP when the condensed Hessian's
+    /// condition estimate exceeds [`crate::AUTO_SPARSE_CONDITION`]. The default.
     Auto,
     /// Condensed, dense primal–dual interior point on box constraints (faer Cholesky).
     /// With state bounds it falls back to [`QpForm::CondensedClarabel`].
@@ -182,7 +183,11 @@ impl Condenser {
         for j in (0..n).rev() {
             crate::la::gemm(&mut self.pb, &self.p, &lin.b[j], 1.0, false);
             crate::la::gemm_tn(&mut self.m, &lin.a[j], &self.pb, 1.0, false);
-            self.m += lin.hs[j].transpose();
+            for c in 0..nu {
+                for r in 0..nx {
+                    self.m[(r, c)] += lin.hs[j][(c, r)];
+                }
+            }
             // diagonal block
             {
                 let mut hjj = self.hc.view_mut((j * nu, j * nu), (nu, nu));
@@ -324,6 +329,29 @@ impl BoxQp {
             dzu: z(),
             rhs: z(),
             mem: MemBuffer::new(req),
+        }
+    }
+
+    /// `(max Lᵢᵢ / min Lᵢᵢ)²` of the Cholesky factor of `h` (a lower bound on its condition
+    /// number); `∞` when `h` is not positive definite.
+    pub(crate) fn condition_estimate(&mut self, h: &DMatrix<f64>) -> f64 {
+        for i in 0..self.n {
+            self.sl[i] = f64::INFINITY;
+            self.su[i] = f64::INFINITY;
+        }
+        if !self.factor(h) {
+            return f64::INFINITY;
+        }
+        let (mut lo, mut hi) = (f64::INFINITY, 0.0_f64);
+        for i in 0..self.n {
+            let d = self.k[(i, i)].abs();
+            lo = lo.min(d);
+            hi = hi.max(d);
+        }
+        if lo > 0.0 {
+            (hi / lo).powi(2)
+        } else {
+            f64::INFINITY
         }
     }
 

@@ -12,6 +12,11 @@ use crate::qp::{
 use nalgebra::{DMatrix, DVector};
 use std::time::Instant;
 
+/// [`QpForm::Auto`] switches to the sparse multiple-shooting QP when the Cholesky-based
+/// condition estimate of the condensed Hessian exceeds this (a condensed solve would keep
+/// fewer than ~6 digits of the step).
+pub const AUTO_SPARSE_CONDITION: f64 = 1e10;
+
 /// Hessian of the QP subproblems.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[non_exhaustive]
@@ -309,6 +314,9 @@ pub struct SqpSolver<D: Dynamics> {
     tmp_x: DVector<f64>,
     tmp_x2: DVector<f64>,
     tmp_u: DVector<f64>,
+    tmp_u2: DVector<f64>,
+    inf_lo: DVector<f64>,
+    inf_hi: DVector<f64>,
     shift_s: Vec<DVector<f64>>,
     shift_u: Vec<DVector<f64>>,
     shift_l: Vec<DVector<f64>>,
@@ -387,6 +395,9 @@ impl<D: Dynamics> SqpSolver<D> {
             tmp_x: DVector::zeros(nx),
             tmp_x2: DVector::zeros(nx),
             tmp_u: DVector::zeros(nu),
+            tmp_u2: DVector::zeros(nu),
+            inf_lo: DVector::from_element(n * nu, f64::NEG_INFINITY),
+            inf_hi: DVector::from_element(n * nu, f64::INFINITY),
             shift_s: vec![DVector::zeros(nx); n + 1],
             shift_u: vec![DVector::zeros(nu); n],
             shift_l: vec![DVector::zeros(nx); n + 1],
@@ -748,8 +759,8 @@ impl<D: Dynamics> SqpSolver<D> {
             if k < n {
                 self.tmp_u.copy_from(&u[k]);
                 self.tmp_u -= &self.ocp.u_ref;
-                let ru = (&self.ocp.r * &self.tmp_u).dot(&self.tmp_u);
-                j += 0.5 * dt * ru;
+                gemv(self.tmp_u2.as_mut_slice(), &self.ocp.r, self.tmp_u.as_slice(), 1.0, false);
+                j += 0.5 * dt * self.tmp_u.dot(&self.tmp_u2);
             }
         }
         j
@@ -823,15 +834,28 @@ impl<D: Dynamics> SqpSolver<D> {
             QpForm::Auto => QpForm::CondensedDense,
             f => f,
         };
+        let mut form = form;
+        if form != QpForm::SparseClarabel {
+            let t = Instant::now();
+            self.cond.condense(&self.lin);
+            self.stats.time_condensing += t.elapsed().as_secs_f64();
+            // Auto: an ill-conditioned condensed Hessian (unstable dynamics over the horizon)
+            // loses digits in any condensed solve; the multiple-shooting QP does not
+            if self.settings.qp_form == QpForm::Auto {
+                let t = Instant::now();
+                let cond = self.boxqp.condition_estimate(&self.cond.hc);
+                self.stats.time_qp += t.elapsed().as_secs_f64();
+                if cond.is_finite() && cond > AUTO_SPARSE_CONDITION {
+                    form = QpForm::SparseClarabel;
+                }
+            }
+        }
         if form == QpForm::SparseClarabel {
             let t = Instant::now();
             let r = solve_sparse_clarabel(&self.lin, &mut self.step, tol, max_it as u32);
             self.stats.time_qp += t.elapsed().as_secs_f64();
             return r;
         }
-        let t = Instant::now();
-        self.cond.condense(&self.lin);
-        self.stats.time_condensing += t.elapsed().as_secs_f64();
         let t = Instant::now();
         let exact = self.settings.hessian == HessianApproximation::Exact && self.lq.is_none();
         let mut iters = 0;
@@ -905,10 +929,7 @@ impl<D: Dynamics> SqpSolver<D> {
 
     /// Whether the condensed Hessian admits a Cholesky factorisation.
     fn boxqp_is_pd(&mut self) -> bool {
-        let m = self.cond.hc.nrows();
-        let lo = DVector::from_element(m, f64::NEG_INFINITY);
-        let hi = DVector::from_element(m, f64::INFINITY);
-        self.boxqp.solve(&self.cond.hc, &self.cond.hv, &lo, &hi, 1e-12, 1).is_ok()
+        self.boxqp.solve(&self.cond.hc, &self.cond.hv, &self.inf_lo, &self.inf_hi, 1e-12, 1).is_ok()
     }
 
     /// Merit `J + ν (Σ‖d‖₁ + ‖x0 − s_0‖₁ + state-bound violations)` at `(s + tΔs, u + tΔu)`;
