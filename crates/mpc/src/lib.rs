@@ -1,5 +1,54 @@
-//! Closed-loop NMPC and linear MPC of flexible multibody structures (paper §4–5).
+//! Closed-loop NMPC and linear MPC of flexible multibody structures (paper §4–5, issue 6).
 //!
-//! This crate will join the modal model (controller) and the FE plant (issue 6): adapters from
-//! the ROM to the `Dynamics` trait, controllers, closed loops, the paper's 2D and 3D
-//! scenarios and sweeps. It is empty until then.
+//! **Controller model.** The augmented modal model (29) on `q_a = [q1, q2, qξ]`
+//! ([`RomDynamics`], exact Jacobian and second derivatives, constant linear part `W` for the
+//! Lawson integrator):
+//!
+//! ```text
+//!   q̇1 = Σ q1 + Ω q2 − q1_l Γ1^l q1 − q2_l Γ2^l q2 + B_u u          (14)–(17)
+//!   q̇2 = −Ω q1 + q2_l (Γ2^l)ᵀ q1
+//!   q̇ξ = Aξ⁻¹ qξ_l Γξ^l q1                                          (26), (29)
+//! ```
+//!
+//! **Optimal control (33)–(34).** At each sample `t_i`, from the projected plant state
+//! `q_a(t_i) = q_as` (theory.md §7), over the horizon `τp` with `u` piecewise constant on
+//! `Nc` intervals and `|u| ≤ u_max`:
+//!
+//! ```text
+//!   min ∫_{t_i}^{t_i+τp} ½(q_a − q_r)ᵀQ(q_a − q_r) + ½ uᵀR u dt,
+//!   Q = blkdiag(k_x1 I, k_x2 I, Kξᵀ Aξ Kξ + k_Δξ AΔξ),  R = k_u I                 (35)
+//!   AΔξ = (Φξ^a(L) − Φξ^b(0))ᵀ (Φξ^a(L) − Φξ^b(0))                              (36)
+//! ```
+//!
+//! (36) read as theory.md §6 (`qξᵀAΔξqξ` is the squared quaternion jump at the joint);
+//! `q_r = [0, 0, e0]` (`qξ0,r = 1` in the unnormalised `φξ0 = ξ̄` scaling). Defaults are the
+//! paper's ([`MpcSettings`]): `k_x1 = k_x2 = 0.01`, `k_Δξ = 2`, `k_u = 0.1`,
+//! `Kξ = diag(1 for φξ0 and the rigid modes, 0.01 …)`, `τp = 6 s`, `τs = 0.2 s`, `Nc = 24`,
+//! `|u| ≤ 5`.
+//!
+//! **Controllers** ([`Controller`]). NMPC: multiple-shooting SQP (Gauss–Newton, merit line
+//! search) warm-started from the previous plan shifted by `τs`; on failure a retry from the
+//! linear MPC plan with the paper's sub-relaxation and a Levenberg–Marquardt term; if that
+//! fails too, the linear MPC plan is applied. Linear MPC: the same problem with (29)
+//! linearised at `q_r`, one QP per sample. The control `u_0` is held for `τs` on the plant.
+//!
+//! **Closed loops** ([`run`], [`sweep`]): the FE plant of multibody-constraints (joints as
+//! hard constraints, follower loads and joint torques as inputs) or the modal model itself;
+//! the paper's scenarios ([`Scenario::paper_2d`], [`Scenario::paper_3d`]); results with time
+//! series, snapshots, per-sample solver reports and the issue's summary metrics.
+
+mod closed_loop;
+mod controller;
+mod dynamics;
+mod error;
+mod plant;
+mod scenario;
+mod weights;
+
+pub use closed_loop::{run, sweep, Record, RunResult, RunSummary, Snapshot};
+pub use controller::{Controller, ControllerKind, ControllerSettings, SampleReport, Strategy};
+pub use dynamics::RomDynamics;
+pub use error::{MpcError, Result};
+pub use plant::{ControlInput, PlantKind};
+pub use scenario::{Scenario, Setup};
+pub use weights::{MpcSettings, Weights};

@@ -1,0 +1,345 @@
+//! The closed loop: sample → project the plant state onto the modes → solve → hold the
+//! control for `τs` on the plant; time series, snapshots, per-sample reports and the summary
+//! metrics of issue 6; sweeps over `ω0` in parallel.
+
+use crate::controller::{Controller, ControllerKind, ControllerSettings, SampleReport, Strategy};
+use crate::dynamics::RomDynamics;
+use crate::error::{invalid, Result};
+use crate::plant::{relative_angle, PlantKind, SimPlant};
+use crate::scenario::{ratio, Setup};
+use nalgebra::{Vector3, Vector4};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+/// One row of the time series (every `output_interval`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Record {
+    /// Time (s).
+    pub t: f64,
+    /// State part of the cost (34), `½(q − q_r)ᵀQ(q − q_r)`, of the projected plant state.
+    pub v_state: f64,
+    /// Control held over the interval that starts here.
+    pub u: Vec<f64>,
+    /// Joint angles (rad), structure order (supports: angle of the end relative to its
+    /// reference). Planar: signed; spatial: relative rotation angle in `[0, π]`.
+    pub joint_angles: Vec<f64>,
+    /// Global position of the last node of the last beam.
+    pub tip: [f64; 3],
+    /// Modal state `q_a` (projected FE state, or the ROM plant's state).
+    pub q: Vec<f64>,
+}
+
+/// Node positions of every beam at one time.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Snapshot {
+    /// Time (s).
+    pub t: f64,
+    /// `positions[beam][node]` (global).
+    pub positions: Vec<Vec<[f64; 3]>>,
+}
+
+/// The issue's summary of one closed loop.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunSummary {
+    /// Disturbance magnitude `ω0` (rad/s) per disturbed axis.
+    pub omega0: f64,
+    /// `nmpc` or `lmpc`.
+    pub controller: String,
+    /// `fe` or `rom`.
+    pub plant: String,
+    /// `V(T)/V(0)`, state part of the cost (T = end of the run).
+    pub v_ratio_final: f64,
+    /// Largest `|joint angle|` of the joints between links (deg).
+    pub max_joint_angle_deg: f64,
+    /// `|root link angle|` at T (deg).
+    pub orientation_error_deg: f64,
+    /// Largest `|root link angle|` over the run (deg).
+    pub max_orientation_deg: f64,
+    /// Rigid rotation rate at T over its initial value (`ω0`): the norm of the rigid modes'
+    /// velocity coordinates `q1`, relative to t = 0.
+    pub rigid_rate_ratio: f64,
+    /// The issue's criterion at T: `rigid_rate_ratio < 0.05`, orientation error within 20% of
+    /// the largest excursion, `V(T)/V(0) < 0.1`, and the run completed.
+    pub stabilised: bool,
+    /// Worst per-sample solve time (s).
+    pub solve_time_worst_s: f64,
+    /// Median per-sample solve time (s).
+    pub solve_time_median_s: f64,
+    /// Samples whose first NMPC attempt failed.
+    pub failed_first_attempts: usize,
+    /// Samples solved by the relaxed retry (sub-relaxation + LM).
+    pub relaxed_samples: usize,
+    /// Samples where the linear MPC plan was applied after NMPC failure.
+    pub fallback_samples: usize,
+    /// Time reached (s): the duration, or where the run stopped.
+    pub t_end: f64,
+    /// Why the run stopped early (plant failure), if it did.
+    pub error: Option<String>,
+}
+
+/// Everything one closed loop produced.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunResult {
+    /// Summary metrics.
+    pub summary: RunSummary,
+    /// Joint names (columns of `joint_angles`).
+    pub joint_names: Vec<String>,
+    /// Input names (columns of `u`).
+    pub input_names: Vec<String>,
+    /// Time series.
+    pub records: Vec<Record>,
+    /// Per-sample solver reports.
+    pub samples: Vec<SampleReport>,
+    /// Snapshots every `snapshot_interval`.
+    pub snapshots: Vec<Snapshot>,
+    /// Wall time of the whole loop, plant included (s).
+    pub wall_time_s: f64,
+}
+
+impl RunResult {
+    /// A copy with every wall-clock timing zeroed (for reproducibility checks: two runs of
+    /// the same scenario are identical apart from timings).
+    pub fn without_timings(&self) -> Self {
+        let mut r = self.clone();
+        r.wall_time_s = 0.0;
+        r.summary.solve_time_worst_s = 0.0;
+        r.summary.solve_time_median_s = 0.0;
+        for s in &mut r.samples {
+            s.solve_time = 0.0;
+        }
+        r
+    }
+}
+
+/// Observation of the plant in modal and physical terms.
+struct Observation {
+    q: Vec<f64>,
+    joint_angles: Vec<f64>,
+    tip: [f64; 3],
+}
+
+fn observe(
+    setup: &Setup,
+    plant: &SimPlant,
+    with_positions: bool,
+) -> Result<(Observation, Option<Vec<Vec<[f64; 3]>>>)> {
+    match plant {
+        SimPlant::Fe { plant, .. } => {
+            let xi: Vec<[f64; 4]> = plant
+                .kinematics()
+                .iter()
+                .flat_map(|k| k.xi.iter().map(|v| [v[0], v[1], v[2], v[3]]))
+                .collect();
+            let q = setup.rom.project_full(plant.state(), Some(&xi))?;
+            let nb = plant.structure().beams().len();
+            let kin = plant.kinematics();
+            let last = kin[nb - 1].r[kin[nb - 1].r.len() - 1];
+            let pos = with_positions.then(|| {
+                kin.iter().map(|k| k.r.iter().map(|r| [r.x, r.y, r.z]).collect()).collect()
+            });
+            Ok((
+                Observation {
+                    q,
+                    joint_angles: plant.joint_angles().to_vec(),
+                    tip: [last.x, last.y, last.z],
+                },
+                pos,
+            ))
+        }
+        SimPlant::Rom { q, .. } => {
+            let fields = setup.rom.reconstruct(q)?;
+            let xi: Vec<Vector4<f64>> = fields
+                .xi
+                .as_ref()
+                .map(|v| v.iter().map(|a| Vector4::from_column_slice(a)).collect())
+                .unwrap_or_else(|| setup.reference_xi.clone());
+            let angles = setup
+                .joint_nodes
+                .iter()
+                .map(|nodes| {
+                    if nodes.len() == 1 {
+                        let n = nodes[0];
+                        relative_angle(&setup.reference_xi[n], &xi[n], setup.planar_axis)
+                    } else {
+                        let (a, b) = (nodes[0], nodes[1]);
+                        let rel = relative_angle(&xi[a], &xi[b], setup.planar_axis);
+                        let rel0 = relative_angle(
+                            &setup.reference_xi[a],
+                            &setup.reference_xi[b],
+                            setup.planar_axis,
+                        );
+                        rel - rel0
+                    }
+                })
+                .collect();
+            let positions = setup.rom.positions(q)?;
+            let lb = positions.last().and_then(|b| b.last()).copied().unwrap_or([0.0; 3]);
+            Ok((
+                Observation { q: q.clone(), joint_angles: angles, tip: lb },
+                with_positions.then_some(positions),
+            ))
+        }
+    }
+}
+
+/// Runs one closed loop of `setup`'s scenario with disturbance magnitude `omega0`.
+///
+/// A plant failure (e.g. Newton divergence of the FE step, or a diverging ROM plant) does not
+/// return `Err`: the run stops there and the summary says so (`error`, `stabilised = false`).
+pub fn run(
+    setup: &Setup,
+    omega0: f64,
+    controller: &ControllerSettings,
+    plant_kind: PlantKind,
+) -> Result<RunResult> {
+    if !omega0.is_finite() {
+        return Err(invalid("omega0", omega0, "must be finite"));
+    }
+    let start = Instant::now();
+    let sc = &setup.scenario;
+    let per_sample = ratio("output_interval per sampling", sc.mpc.sampling, sc.output_interval)?;
+    let n_out = ratio("output_interval per duration", sc.duration, sc.output_interval)?;
+    let steps = ratio("plant.dt per output_interval", sc.output_interval, sc.plant.dt)?;
+    let per_snap = ratio("output_interval per snapshot", sc.snapshot_interval, sc.output_interval)?;
+    let omega = Vector3::from_column_slice(&sc.omega_direction) * omega0;
+    let x0 = sc.structure.rigid_rotation_state(omega, Vector3::from_column_slice(&sc.center));
+    let mut plant = SimPlant::fe(&sc.structure, sc.plant, steps, &sc.inputs, &x0)?;
+    if plant_kind == PlantKind::Rom {
+        let (obs, _) = observe(setup, &plant, false)?;
+        plant = SimPlant::rom(&setup.rom, obs.q, sc.output_interval, sc.rom_plant_substeps)?;
+    }
+    let mut ctrl =
+        Controller::new(RomDynamics::new(&setup.rom)?, &setup.weights, &sc.mpc, controller)?;
+    let nu = sc.inputs.len();
+    let mut u = vec![0.0; nu];
+    let mut records = Vec::with_capacity(n_out + 1);
+    let mut samples = Vec::new();
+    let mut snapshots = Vec::new();
+    let mut error = None;
+    for k in 0..=n_out {
+        let t = k as f64 * sc.output_interval;
+        let (obs, pos) = observe(setup, &plant, k % per_snap == 0)?;
+        if let Some(p) = pos {
+            snapshots.push(Snapshot { t, positions: p });
+        }
+        if k < n_out && k % per_sample == 0 {
+            let rep = ctrl.step(t, &obs.q)?;
+            u.copy_from_slice(&rep.u);
+            samples.push(rep);
+        }
+        let v_state = setup.weights.state_cost(&obs.q);
+        records.push(Record {
+            t,
+            v_state,
+            u: u.clone(),
+            joint_angles: obs.joint_angles,
+            tip: obs.tip,
+            q: obs.q,
+        });
+        if k == n_out {
+            break;
+        }
+        if let Err(e) = plant.advance(&u) {
+            error = Some(e.to_string());
+            break;
+        }
+    }
+    let summary = summarise(setup, omega0, controller.kind, plant_kind, &records, &samples, error);
+    Ok(RunResult {
+        summary,
+        joint_names: setup.joint_names.clone(),
+        input_names: sc.inputs.iter().map(|i| i.name().to_string()).collect(),
+        records,
+        samples,
+        snapshots,
+        wall_time_s: start.elapsed().as_secs_f64(),
+    })
+}
+
+fn summarise(
+    setup: &Setup,
+    omega0: f64,
+    kind: ControllerKind,
+    plant: PlantKind,
+    records: &[Record],
+    samples: &[SampleReport],
+    error: Option<String>,
+) -> RunSummary {
+    let first = &records[0];
+    let last = &records[records.len() - 1];
+    let nr = setup.rom.n_rigid();
+    let rigid = |q: &[f64]| q[..nr].iter().map(|v| v * v).sum::<f64>().sqrt();
+    let rigid_rate_ratio = rigid(&last.q) / rigid(&first.q);
+    let v_ratio_final = last.v_state / first.v_state;
+    let links: Vec<usize> = setup
+        .joint_nodes
+        .iter()
+        .enumerate()
+        .filter(|(_, n)| n.len() == 2)
+        .map(|(j, _)| j)
+        .collect();
+    let max_joint = records
+        .iter()
+        .flat_map(|r| links.iter().map(move |&j| r.joint_angles[j].abs()))
+        .fold(0.0, f64::max);
+    let root = setup.root_joint;
+    let max_orient = records.iter().map(|r| r.joint_angles[root].abs()).fold(0.0, f64::max);
+    let orient = last.joint_angles[root].abs();
+    let mut times: Vec<f64> = samples.iter().map(|s| s.solve_time).collect();
+    times.sort_by(|a, b| a.total_cmp(b));
+    let median = if times.is_empty() {
+        0.0
+    } else if times.len() % 2 == 1 {
+        times[times.len() / 2]
+    } else {
+        0.5 * (times[times.len() / 2 - 1] + times[times.len() / 2])
+    };
+    let worst = times.last().copied().unwrap_or(0.0);
+    let completed = error.is_none();
+    let stabilised =
+        completed && rigid_rate_ratio < 0.05 && orient <= 0.2 * max_orient && v_ratio_final < 0.1;
+    RunSummary {
+        omega0,
+        controller: kind.name().into(),
+        plant: plant.name().into(),
+        v_ratio_final,
+        max_joint_angle_deg: max_joint.to_degrees(),
+        orientation_error_deg: orient.to_degrees(),
+        max_orientation_deg: max_orient.to_degrees(),
+        rigid_rate_ratio,
+        stabilised,
+        solve_time_worst_s: worst,
+        solve_time_median_s: median,
+        failed_first_attempts: samples
+            .iter()
+            .filter(|s| {
+                s.first_status != s.status
+                    || s.strategy != Strategy::Sqp && s.strategy != Strategy::Qp
+            })
+            .count(),
+        relaxed_samples: samples.iter().filter(|s| s.strategy == Strategy::Relaxed).count(),
+        fallback_samples: samples.iter().filter(|s| s.strategy == Strategy::Fallback).count(),
+        t_end: last.t,
+        error,
+    }
+}
+
+/// Runs `omegas` in parallel (rayon), results in the order of `omegas`; `progress` is called
+/// once per finished run (e.g. to advance a progress bar).
+pub fn sweep(
+    setup: &Setup,
+    omegas: &[f64],
+    controller: &ControllerSettings,
+    plant: PlantKind,
+    progress: &(dyn Fn() + Sync),
+) -> Vec<Result<RunResult>> {
+    omegas
+        .par_iter()
+        .map(|&w| {
+            let r = run(setup, w, controller, plant);
+            progress();
+            r
+        })
+        .collect()
+}

@@ -1,0 +1,373 @@
+//! Controllers: nonlinear MPC (SQP on the augmented modal model) and linear MPC (one QP per
+//! sample on the model linearised at the reference), paper §4.
+
+use crate::dynamics::RomDynamics;
+use crate::error::{invalid, Result};
+use crate::weights::{MpcSettings, Weights};
+use nalgebra::DVector;
+use ocp_transcription::{
+    Globalisation, HessianApproximation, IntegratorKind, IntegratorSettings, Ocp, QpForm, SqpMode,
+    SqpSettings, SqpSolver, SqpStatus,
+};
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+/// Which controller.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ControllerKind {
+    /// Nonlinear MPC: SQP on the augmented modal model (29).
+    Nmpc,
+    /// Linear MPC: the same problem on (29) linearised at the reference, one QP per sample.
+    Lmpc,
+}
+
+impl ControllerKind {
+    /// `"nmpc"` or `"lmpc"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            ControllerKind::Nmpc => "nmpc",
+            ControllerKind::Lmpc => "lmpc",
+        }
+    }
+}
+
+/// Settings of the controllers' solvers. Defaults in brackets.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ControllerSettings {
+    /// Which controller [NMPC].
+    pub kind: ControllerKind,
+    /// Integrator inside each shooting interval [Lawson RK4 on `W`, 16 substeps per
+    /// `Δt = 0.25 s`; theory.md §8 measured a one-interval error 1.2e-2 at ω0 = 2].
+    pub integrator: IntegratorSettings,
+    /// SQP iteration limit of the NMPC per sample [20].
+    pub max_iterations: usize,
+    /// KKT tolerance of the NMPC [1e-6].
+    pub kkt_tolerance: f64,
+    /// Levenberg–Marquardt term of the first attempt [0].
+    pub levenberg_marquardt: f64,
+    /// Globalisation of the first attempt [merit line search].
+    pub globalisation: Globalisation,
+    /// QP form [condensed, dense interior point].
+    pub qp_form: QpForm,
+    /// When the first attempt fails: retry from the linear MPC plan with the paper's fixed
+    /// sub-relaxation `α` and a Levenberg–Marquardt term ([`Self::retry_levenberg_marquardt`])
+    /// [Some(0.5)]; `None`: no retry.
+    pub retry_relaxation: Option<f64>,
+    /// Levenberg–Marquardt term of the retry [1e-3].
+    pub retry_levenberg_marquardt: f64,
+    /// When every NMPC attempt fails, apply the linear MPC plan [true].
+    pub fallback_to_lmpc: bool,
+}
+
+impl Default for ControllerSettings {
+    fn default() -> Self {
+        Self {
+            kind: ControllerKind::Nmpc,
+            integrator: IntegratorSettings::new(IntegratorKind::LawsonRk4, 16),
+            max_iterations: 20,
+            kkt_tolerance: 1e-6,
+            levenberg_marquardt: 0.0,
+            globalisation: Globalisation::merit(),
+            qp_form: QpForm::Auto,
+            retry_relaxation: Some(0.5),
+            retry_levenberg_marquardt: 1e-3,
+            fallback_to_lmpc: true,
+        }
+    }
+}
+
+impl ControllerSettings {
+    /// Defaults with the given kind.
+    pub fn of(kind: ControllerKind) -> Self {
+        Self { kind, ..Self::default() }
+    }
+
+    /// Checks the ranges (the solver settings are checked again by `ocp-transcription`).
+    pub fn validate(&self) -> Result<()> {
+        self.integrator.validate()?;
+        if self.max_iterations == 0 {
+            return Err(invalid("max_iterations", 0, "must be at least 1"));
+        }
+        if !(self.kkt_tolerance > 0.0 && self.kkt_tolerance.is_finite()) {
+            return Err(invalid("kkt_tolerance", self.kkt_tolerance, "must be finite and > 0"));
+        }
+        for (name, v) in [
+            ("levenberg_marquardt", self.levenberg_marquardt),
+            ("retry_levenberg_marquardt", self.retry_levenberg_marquardt),
+        ] {
+            if !(v >= 0.0 && v.is_finite()) {
+                return Err(invalid(name, v, "must be finite and ≥ 0"));
+            }
+        }
+        if let Some(a) = self.retry_relaxation {
+            if !(a > 0.0 && a <= 1.0) {
+                return Err(invalid("retry_relaxation", a, "must be in (0, 1]"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Which path produced the applied control of a sample.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Strategy {
+    /// The linear MPC's QP.
+    Qp,
+    /// The NMPC's first attempt (warm start from the shifted plan, line search).
+    Sqp,
+    /// The NMPC's retry from the linear MPC plan with sub-relaxation and LM.
+    Relaxed,
+    /// Every NMPC attempt failed: the linear MPC plan was applied.
+    Fallback,
+}
+
+/// What one sample's solve did.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SampleReport {
+    /// Sample time (s).
+    pub t: f64,
+    /// Status of the solve that produced the control (`Debug` name of [`SqpStatus`]).
+    pub status: String,
+    /// Status of the NMPC's first attempt (same as `status` for the LMPC).
+    pub first_status: String,
+    /// Path that produced the applied control.
+    pub strategy: Strategy,
+    /// SQP iterations over all attempts (QPs for the LMPC).
+    pub iterations: usize,
+    /// Wall time of the whole sample's solve (all attempts) (s).
+    pub solve_time: f64,
+    /// Optimal cost of the accepted plan.
+    pub cost: f64,
+    /// KKT residual of the accepted plan.
+    pub kkt: f64,
+    /// Applied control `u_0`.
+    pub u: Vec<f64>,
+}
+
+/// A receding-horizon controller on the augmented modal model.
+pub struct Controller {
+    settings: ControllerSettings,
+    mpc: MpcSettings,
+    nmpc: Option<SqpSolver<RomDynamics>>,
+    relaxed: Option<SqpSolver<RomDynamics>>,
+    lmpc: SqpSolver<RomDynamics>,
+    samples: usize,
+}
+
+impl std::fmt::Debug for Controller {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Controller")
+            .field("settings", &self.settings)
+            .field("samples", &self.samples)
+            .finish()
+    }
+}
+
+fn status_name(s: SqpStatus) -> String {
+    format!("{s:?}")
+}
+
+impl Controller {
+    /// Builds the controller for `model` with the assembled `weights`.
+    pub fn new(
+        model: RomDynamics,
+        weights: &Weights,
+        mpc: &MpcSettings,
+        settings: &ControllerSettings,
+    ) -> Result<Self> {
+        mpc.validate()?;
+        settings.validate()?;
+        let nu = ocp_transcription::Dynamics::nu(&model);
+        let nx = ocp_transcription::Dynamics::nx(&model);
+        let mut ocp = Ocp::new(nx, nu, mpc.horizon, mpc.intervals)?;
+        ocp.q = weights.q.clone();
+        ocp.r = weights.r.clone();
+        ocp.x_ref = weights.x_ref.clone();
+        ocp.u_ref = DVector::zeros(nu);
+        ocp.u_min = DVector::from_element(nu, -mpc.u_max);
+        ocp.u_max = DVector::from_element(nu, mpc.u_max);
+        let base = SqpSettings {
+            hessian: HessianApproximation::GaussNewton,
+            qp_form: settings.qp_form,
+            integrator: settings.integrator.clone(),
+            kkt_tolerance: settings.kkt_tolerance,
+            ..SqpSettings::default()
+        };
+        let lq = SqpSettings {
+            mode: SqpMode::LinearQuadratic,
+            globalisation: Globalisation::FullStep,
+            max_iterations: 2,
+            ..base.clone()
+        };
+        let lmpc = SqpSolver::new(model.clone(), ocp.clone(), lq)?;
+        let (nmpc, relaxed) = match settings.kind {
+            ControllerKind::Lmpc => (None, None),
+            ControllerKind::Nmpc => {
+                let s = SqpSettings {
+                    mode: SqpMode::Sqp,
+                    globalisation: settings.globalisation,
+                    levenberg_marquardt: settings.levenberg_marquardt,
+                    max_iterations: settings.max_iterations,
+                    ..base
+                };
+                let relaxed = match settings.retry_relaxation {
+                    Some(alpha) => {
+                        let r = SqpSettings {
+                            globalisation: Globalisation::FixedRelaxation { alpha },
+                            levenberg_marquardt: settings.retry_levenberg_marquardt,
+                            // a fixed relaxation contracts by (1 − α) per iteration at best
+                            max_iterations: 2 * settings.max_iterations,
+                            ..s.clone()
+                        };
+                        Some(SqpSolver::new(model.clone(), ocp.clone(), r)?)
+                    }
+                    None => None,
+                };
+                (Some(SqpSolver::new(model, ocp, s)?), relaxed)
+            }
+        };
+        Ok(Self { settings: settings.clone(), mpc: mpc.clone(), nmpc, relaxed, lmpc, samples: 0 })
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &ControllerSettings {
+        &self.settings
+    }
+
+    /// The current plan of the solver whose control was applied last: nodes and controls.
+    pub fn plan(&self) -> (&[DVector<f64>], &[DVector<f64>]) {
+        match &self.nmpc {
+            Some(s) => (s.states(), s.controls()),
+            None => (self.lmpc.states(), self.lmpc.controls()),
+        }
+    }
+
+    /// Solves the linear MPC's QP from `x0` (warm start from its shifted plan).
+    fn solve_lmpc(&mut self, x0: &[f64]) -> Result<ocp_transcription::SqpStats> {
+        if self.samples > 0 {
+            self.lmpc.shift_time(self.mpc.sampling)?;
+        }
+        Ok(self.lmpc.solve(x0)?)
+    }
+
+    /// Copies the linear MPC's plan into the NMPC iterate.
+    fn nmpc_from_lmpc(&mut self) {
+        if let Some(n) = self.nmpc.as_mut() {
+            copy_plan(&self.lmpc, n);
+        }
+    }
+
+    /// One sample: solves the OCP from the modal state `x0` at time `t` and returns the
+    /// control to hold for `τs`, with the report of what was done.
+    pub fn step(&mut self, t: f64, x0: &[f64]) -> Result<SampleReport> {
+        let start = Instant::now();
+        let report = match self.settings.kind {
+            ControllerKind::Lmpc => {
+                let st = self.solve_lmpc(x0)?;
+                SampleReport {
+                    t,
+                    status: status_name(st.status),
+                    first_status: status_name(st.status),
+                    strategy: Strategy::Qp,
+                    iterations: st.iterations,
+                    solve_time: 0.0,
+                    cost: st.cost,
+                    kkt: st.kkt,
+                    u: self.lmpc.first_control().iter().copied().collect(),
+                }
+            }
+            ControllerKind::Nmpc => self.step_nmpc(t, x0)?,
+        };
+        self.samples += 1;
+        Ok(SampleReport { solve_time: start.elapsed().as_secs_f64(), ..report })
+    }
+
+    fn step_nmpc(&mut self, t: f64, x0: &[f64]) -> Result<SampleReport> {
+        let mut lmpc_done = false;
+        if self.samples == 0 {
+            // first sample: initial guess from the linear MPC plan
+            self.solve_lmpc(x0)?;
+            lmpc_done = true;
+            self.nmpc_from_lmpc();
+        } else if let Some(n) = self.nmpc.as_mut() {
+            n.shift_time(self.mpc.sampling)?;
+        }
+        let first = match self.nmpc.as_mut() {
+            Some(n) => n.solve(x0)?,
+            None => return Err(invalid("controller", "lmpc", "no NMPC solver")),
+        };
+        let mut iterations = first.iterations;
+        if first.status.has_iterate() {
+            return Ok(self.nmpc_report(t, first, first.status, Strategy::Sqp, iterations));
+        }
+        if !lmpc_done {
+            self.solve_lmpc(x0)?;
+        }
+        if let Some(r) = self.relaxed.as_mut() {
+            copy_plan(&self.lmpc, r);
+            let retry = r.solve(x0)?;
+            iterations += retry.iterations;
+            if retry.status.has_iterate() {
+                if let Some(n) = self.nmpc.as_mut() {
+                    copy_plan(r, n);
+                }
+                return Ok(self.nmpc_report(t, retry, first.status, Strategy::Relaxed, iterations));
+            }
+        }
+        // failure: apply the linear plan and restart the NMPC from it
+        self.nmpc_from_lmpc();
+        let st = *self.lmpc.stats();
+        let fallback = self.settings.fallback_to_lmpc;
+        let u: Vec<f64> = if fallback {
+            self.lmpc.first_control().iter().copied().collect()
+        } else {
+            self.nmpc.as_ref().map_or(Vec::new(), |n| n.first_control().iter().copied().collect())
+        };
+        Ok(SampleReport {
+            t,
+            status: status_name(if fallback { st.status } else { first.status }),
+            first_status: status_name(first.status),
+            strategy: Strategy::Fallback,
+            iterations,
+            solve_time: 0.0,
+            cost: st.cost,
+            kkt: st.kkt,
+            u,
+        })
+    }
+
+    fn nmpc_report(
+        &self,
+        t: f64,
+        st: ocp_transcription::SqpStats,
+        first: SqpStatus,
+        strategy: Strategy,
+        iterations: usize,
+    ) -> SampleReport {
+        let u =
+            self.nmpc.as_ref().map_or(Vec::new(), |n| n.first_control().iter().copied().collect());
+        SampleReport {
+            t,
+            status: status_name(st.status),
+            first_status: status_name(first),
+            strategy,
+            iterations,
+            solve_time: 0.0,
+            cost: st.cost,
+            kkt: st.kkt,
+            u,
+        }
+    }
+}
+
+/// Copies nodes and controls of `from` into `to` (same problem dimensions).
+fn copy_plan(from: &SqpSolver<RomDynamics>, to: &mut SqpSolver<RomDynamics>) {
+    for (d, s) in to.states_mut().iter_mut().zip(from.states()) {
+        d.copy_from(s);
+    }
+    for (d, s) in to.controls_mut().iter_mut().zip(from.controls()) {
+        d.copy_from(s);
+    }
+}

@@ -1,0 +1,48 @@
+//! The crate's error type: every fallible public function returns [`MpcError`].
+
+use thiserror::Error;
+
+/// Errors of the MPC layer. Numerical failures of a solve are *not* errors (they are a
+/// per-sample status in the results); these are construction and data errors, and failures of
+/// the layers below that stop a run.
+#[non_exhaustive]
+#[derive(Debug, Error)]
+pub enum MpcError {
+    /// A setting or argument is out of its valid range.
+    #[error("invalid {field} = {value}: {reason}")]
+    Invalid {
+        /// Name of the field or argument.
+        field: String,
+        /// The value received, formatted.
+        value: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// The optimal control layer rejected a problem or setting.
+    #[error(transparent)]
+    Ocp(#[from] ocp_transcription::OcpError),
+    /// The modal layer failed (modes, reduced model, projection).
+    #[error(transparent)]
+    Modal(#[from] modal_rom::ModalError),
+    /// The FE plant failed (construction, a step's Newton iteration).
+    #[error(transparent)]
+    Plant(#[from] multibody_constraints::MultibodyError),
+    /// The reduced-model plant produced a non-finite state at time `t`.
+    #[error("the reduced-model plant diverged (non-finite state) at t = {t}")]
+    PlantDiverged {
+        /// Time of the failing sample (s).
+        t: f64,
+    },
+}
+
+/// Result alias of the crate.
+pub type Result<T> = std::result::Result<T, MpcError>;
+
+/// An [`MpcError::Invalid`] naming `field` and `value`.
+pub(crate) fn invalid(
+    field: impl Into<String>,
+    value: impl std::fmt::Display,
+    reason: impl Into<String>,
+) -> MpcError {
+    MpcError::Invalid { field: field.into(), value: value.to_string(), reason: reason.into() }
+}

@@ -1,0 +1,173 @@
+//! The paper's cost (34)–(36): weights `Q`, `R`, references and timing, with the paper's
+//! values as defaults ([`MpcSettings`]), and their assembly for a reduced model ([`Weights`]).
+
+use crate::error::{invalid, Result};
+use modal_rom::ModalRom;
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+
+/// Weights, references, bounds and timing of the MPC (paper §5.2, eqs. 34–36). Defaults are
+/// the paper's values; any other value is a deliberate, documented deviation.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct MpcSettings {
+    /// `k_x1`, weight of the velocity coordinates `q1` [0.01].
+    pub kx1: f64,
+    /// `k_x2`, weight of the strain coordinates `q2` [0.01].
+    pub kx2: f64,
+    /// `k_Δξ`, weight of the quaternion jump across the joints (36) [2.0].
+    pub k_dxi: f64,
+    /// `k_u`, `R = k_u I` [0.1].
+    pub ku: f64,
+    /// Entries of `Kξ` for the shifting-equilibrium mode `φξ0` and the rigid modes' quaternion
+    /// modes (the paper's leading ones: 3 in 2D, 5 in 3D) [1.0].
+    pub k_xi_rigid: f64,
+    /// Entries of `Kξ` for the elastic modes' quaternion modes [0.01].
+    pub k_xi_elastic: f64,
+    /// Prediction horizon `τp` (s) [6].
+    pub horizon: f64,
+    /// Sampling time `τs` (s): each control is held on the plant for `τs` [0.2].
+    pub sampling: f64,
+    /// Number of piecewise-constant control intervals `Nc` over `τp` [24].
+    pub intervals: usize,
+    /// Input bound: `|u_i| ≤ u_max` [5].
+    pub u_max: f64,
+}
+
+impl Default for MpcSettings {
+    fn default() -> Self {
+        Self {
+            kx1: 0.01,
+            kx2: 0.01,
+            k_dxi: 2.0,
+            ku: 0.1,
+            k_xi_rigid: 1.0,
+            k_xi_elastic: 0.01,
+            horizon: 6.0,
+            sampling: 0.2,
+            intervals: 24,
+            u_max: 5.0,
+        }
+    }
+}
+
+impl MpcSettings {
+    /// Checks every field: weights finite and `≥ 0` (`k_u > 0`), times positive,
+    /// `τs ≤ τp`, `Nc ≥ 1`, `u_max > 0`.
+    pub fn validate(&self) -> Result<()> {
+        for (name, v) in [
+            ("kx1", self.kx1),
+            ("kx2", self.kx2),
+            ("k_dxi", self.k_dxi),
+            ("k_xi_rigid", self.k_xi_rigid),
+            ("k_xi_elastic", self.k_xi_elastic),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(invalid(name, v, "must be finite and ≥ 0"));
+            }
+        }
+        if !(self.ku.is_finite() && self.ku > 0.0) {
+            return Err(invalid("ku", self.ku, "must be finite and > 0 (R positive definite)"));
+        }
+        if !(self.horizon.is_finite() && self.horizon > 0.0) {
+            return Err(invalid("horizon", self.horizon, "must be finite and > 0"));
+        }
+        if !(self.sampling.is_finite() && self.sampling > 0.0 && self.sampling <= self.horizon) {
+            return Err(invalid("sampling", self.sampling, "must be in (0, horizon]"));
+        }
+        if self.intervals == 0 {
+            return Err(invalid("intervals", 0, "must be at least 1"));
+        }
+        if !(self.u_max.is_finite() && self.u_max > 0.0) {
+            return Err(invalid("u_max", self.u_max, "must be finite and > 0"));
+        }
+        Ok(())
+    }
+}
+
+/// The assembled cost of (34)–(35) for one reduced model:
+/// `Q = blkdiag(k_x1 I, k_x2 I, Kξᵀ Aξ Kξ + k_Δξ AΔξ)`, `R = k_u I`, `q_r = [0, 0, e0]`,
+/// `u_r = 0`, with `AΔξ = Σ_joints (Φξ^a(L) − Φξ^b(0))ᵀ (Φξ^a(L) − Φξ^b(0))` (36, read as
+/// theory.md §6: `qξᵀ AΔξ qξ` is the squared quaternion jump across each joint).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Weights {
+    /// State weight `Q` (n × n).
+    pub q: DMatrix<f64>,
+    /// Input weight `R` (nu × nu).
+    pub r: DMatrix<f64>,
+    /// State reference `q_r`: zero except the shifting-equilibrium coefficient `qξ0,r = 1`
+    /// (our `φξ0 = ξ̄` is unnormalised, so the undeformed field projects to exactly 1;
+    /// theory.md §6; the paper's `‖ξ‖⁻²` is the same reference in its normalisation).
+    pub x_ref: DVector<f64>,
+    /// Diagonal of `Kξ` over the kept quaternion modes.
+    pub k_xi: Vec<f64>,
+    /// `Aξ` (copied from the model).
+    pub a_xi: DMatrix<f64>,
+    /// `AΔξ` over the kept quaternion modes.
+    pub a_dxi: DMatrix<f64>,
+}
+
+impl Weights {
+    /// Builds the weights of `rom` for `settings`; `joints` lists, per joint penalised by
+    /// `AΔξ`, the global node indices (all beams' nodes in order) of the two joined ends
+    /// `(a at L, b at 0)`. The model must carry quaternion states.
+    pub fn new(rom: &ModalRom, settings: &MpcSettings, joints: &[(usize, usize)]) -> Result<Self> {
+        settings.validate()?;
+        let qm = rom.quaternion().ok_or_else(|| {
+            invalid("rom", "without quaternion states", "the cost (35) needs the augmented model")
+        })?;
+        let (m, nq2, nxi, nu) = (rom.n_modes(), rom.n_q2(), rom.n_xi(), rom.n_inputs());
+        let n = rom.n_state();
+        let ox = rom.xi_offset();
+        let nodes = qm.weights.len();
+        let n_rigid = rom.n_rigid();
+        let k_xi: Vec<f64> = qm
+            .kept
+            .iter()
+            .map(|&c| {
+                if c == 0 || c - 1 < n_rigid {
+                    settings.k_xi_rigid
+                } else {
+                    settings.k_xi_elastic
+                }
+            })
+            .collect();
+        let a_xi = DMatrix::from_fn(nxi, nxi, |i, j| qm.a_xi[(i, j)]);
+        let mut a_dxi = DMatrix::zeros(nxi, nxi);
+        for &(na, nb) in joints {
+            for (what, v) in [("joint node a", na), ("joint node b", nb)] {
+                if v >= nodes {
+                    return Err(invalid(what, v, format!("the model has {nodes} nodes")));
+                }
+            }
+            let d = DMatrix::from_fn(4, nxi, |a, c| {
+                qm.phi_xi[(4 * na + a, c)] - qm.phi_xi[(4 * nb + a, c)]
+            });
+            a_dxi += d.transpose() * d;
+        }
+        let mut q = DMatrix::zeros(n, n);
+        for i in 0..m {
+            q[(i, i)] = settings.kx1;
+        }
+        for p in 0..nq2 {
+            q[(m + p, m + p)] = settings.kx2;
+        }
+        for i in 0..nxi {
+            for j in 0..nxi {
+                q[(ox + i, ox + j)] =
+                    k_xi[i] * a_xi[(i, j)] * k_xi[j] + settings.k_dxi * a_dxi[(i, j)];
+            }
+        }
+        // exact symmetry (Aξ is symmetric to round-off)
+        let q = (&q + q.transpose()) * 0.5;
+        let r = DMatrix::identity(nu, nu) * settings.ku;
+        let x_ref = DVector::from_vec(rom.reference_state());
+        Ok(Self { q, r, x_ref, k_xi, a_xi, a_dxi })
+    }
+
+    /// State part of the cost (34), `V_x = ½ (q − q_r)ᵀ Q (q − q_r)`.
+    pub fn state_cost(&self, q: &[f64]) -> f64 {
+        let e = DVector::from_column_slice(q) - &self.x_ref;
+        0.5 * (&self.q * &e).dot(&e)
+    }
+}
