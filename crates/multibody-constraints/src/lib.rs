@@ -5,5 +5,6 @@ pub mod nullspace;
 pub mod plant;
 pub mod samples;
 pub mod structure;
+pub mod studies;
 pub use error::{MultibodyError, Result};
 pub use plant::{Plant, PlantSettings, StepReport};
