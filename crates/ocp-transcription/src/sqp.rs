@@ -361,7 +361,10 @@ impl<D: Dynamics> SqpSolver<D> {
         }
         let dt = ocp.interval();
         let mut integrators = Vec::with_capacity(n);
-        for _ in 0..n {
+        // one workspace serves every interval in turn (it stays in cache); the parallel mode
+        // needs one per interval
+        let count = if settings.parallel_intervals { n } else { 1 };
+        for _ in 0..count {
             let mut int = Integrator::new(&model, &settings.integrator, dt)?;
             if exact && settings.mode != SqpMode::LinearQuadratic {
                 int.enable_second_order()?;
@@ -542,7 +545,7 @@ impl<D: Dynamics> SqpSolver<D> {
         self.initialize_constant(x0, u)?;
         for k in 0..self.n {
             let (head, tail) = self.s.split_at_mut(k + 1);
-            self.integrators[k].integrate(
+            self.integrators[0].integrate(
                 &self.model,
                 head[k].as_slice(),
                 self.u[k].as_slice(),
@@ -649,7 +652,7 @@ impl<D: Dynamics> SqpSolver<D> {
                 continue;
             }
             if exact {
-                self.integrators[k].integrate_with_hessian(
+                self.integrators[0].integrate_with_hessian(
                     &self.model,
                     self.s[k].as_slice(),
                     self.u[k].as_slice(),
@@ -664,7 +667,7 @@ impl<D: Dynamics> SqpSolver<D> {
                 self.lin.hr[k].copy_from(&self.hdyn.view((nx, nx), (self.nu, self.nu)));
                 self.lin.hs[k].copy_from(&self.hdyn.view((nx, 0), (self.nu, nx)));
             } else {
-                self.integrators[k].integrate_with_sensitivities(
+                self.integrators[0].integrate_with_sensitivities(
                     &self.model,
                     self.s[k].as_slice(),
                     self.u[k].as_slice(),
@@ -953,7 +956,7 @@ impl<D: Dynamics> SqpSolver<D> {
             c += (self.x0[i] - self.shift_s[0][i]).abs();
         }
         for k in 0..n {
-            if self.integrators[k]
+            if self.integrators[0]
                 .integrate(
                     &self.model,
                     self.shift_s[k].as_slice(),
