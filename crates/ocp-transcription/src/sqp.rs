@@ -24,8 +24,8 @@ pub enum HessianApproximation {
     /// Gauss–Newton: the cost Hessian (exact for the quadratic cost (34), no integrator work).
     GaussNewton,
     /// Exact Hessian of the Lagrangian (adds `∇²(λᵀΦ)` from the integrators; needs
-    /// [`Dynamics::weighted_hessian`] and an explicit integrator). Indefinite condensed
-    /// Hessians are regularised by `δI` until a Cholesky succeeds.
+    /// [`Dynamics::weighted_hessian`], an explicit integrator and a condensed QP form).
+    /// Indefinite condensed Hessians are regularised by `δI` until a Cholesky succeeds.
     Exact,
 }
 
@@ -359,6 +359,16 @@ impl<D: Dynamics> SqpSolver<D> {
                 what: "exact Hessian with a model without weighted_hessian",
             });
         }
+        if exact
+            && settings.qp_form == QpForm::SparseClarabel
+            && settings.mode != SqpMode::LinearQuadratic
+        {
+            // the stage blocks of an exact Hessian are indefinite in general; only the condensed
+            // forms can convexify the reduced Hessian
+            return Err(OcpError::Unsupported {
+                what: "exact Hessian with the sparse QP form (use a condensed form)",
+            });
+        }
         let dt = ocp.interval();
         let mut integrators = Vec::with_capacity(n);
         // one workspace serves every interval in turn (it stays in cache); the parallel mode
@@ -445,6 +455,11 @@ impl<D: Dynamics> SqpSolver<D> {
     /// The model.
     pub fn model(&self) -> &D {
         &self.model
+    }
+    /// Mutable model (e.g. to update its parameters between samples; in
+    /// [`SqpMode::LinearQuadratic`] call [`SqpSolver::linearise_lq_at`] afterwards).
+    pub fn model_mut(&mut self) -> &mut D {
+        &mut self.model
     }
     /// The problem.
     pub fn ocp(&self) -> &Ocp {
@@ -844,7 +859,9 @@ impl<D: Dynamics> SqpSolver<D> {
             self.stats.time_condensing += t.elapsed().as_secs_f64();
             // Auto: an ill-conditioned condensed Hessian (unstable dynamics over the horizon)
             // loses digits in any condensed solve; the multiple-shooting QP does not
-            if self.settings.qp_form == QpForm::Auto {
+            if self.settings.qp_form == QpForm::Auto
+                && self.settings.hessian == HessianApproximation::GaussNewton
+            {
                 let t = Instant::now();
                 let cond = self.boxqp.condition_estimate(&self.cond.hc);
                 self.stats.time_qp += t.elapsed().as_secs_f64();

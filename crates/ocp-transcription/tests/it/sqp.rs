@@ -217,6 +217,11 @@ fn bad_settings_are_rejected() {
             integrator: IntegratorSettings::new(IntegratorKind::ImplicitMidpoint, 2),
             ..SqpSettings::default()
         },
+        SqpSettings {
+            hessian: HessianApproximation::Exact,
+            qp_form: QpForm::SparseClarabel,
+            ..SqpSettings::default()
+        },
     ];
     for s in bad {
         assert!(SqpSolver::new(CartPole::default(), ocp.clone(), s.clone()).is_err(), "{s:?}");
