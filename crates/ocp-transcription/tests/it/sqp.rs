@@ -303,3 +303,48 @@ fn parallel_intervals_match_sequential() {
     }
     assert_eq!(results[0], results[1]);
 }
+
+/// The linear–quadratic mode on the cart-pole at the upright equilibrium equals the SQP on the
+/// linearised ODE: at an equilibrium every RK4 stage sits at the reference, so the
+/// linearisation of the discrete map is the discrete map of the linearisation.
+#[test]
+fn linear_quadratic_mode_equals_sqp_on_the_linearised_model() {
+    let cp = CartPole::default();
+    let (mut fx, mut fu) = (DMatrix::zeros(4, 4), DMatrix::zeros(4, 1));
+    cp.jacobians(&[0.0; 4], &[0.0], &mut fx, &mut fu);
+    let lin = LinearModel::new(fx, fu).unwrap();
+    let mut ocp = Ocp::new(4, 1, 2.0, 20).unwrap();
+    ocp.u_min[0] = -2.0;
+    ocp.u_max[0] = 2.0;
+    let x0 = [0.1, 0.2, 0.0, -0.1];
+    let lq = SqpSettings { mode: SqpMode::LinearQuadratic, ..SqpSettings::default() };
+    let mut a = SqpSolver::new(CartPole::default(), ocp.clone(), lq).unwrap();
+    let sa = a.solve(&x0).unwrap();
+    let mut b = SqpSolver::new(lin, ocp, SqpSettings::default()).unwrap();
+    let sb = b.solve(&x0).unwrap();
+    assert_eq!((sa.status, sb.status), (SqpStatus::Solved, SqpStatus::Solved));
+    assert_eq!(sa.iterations, 1, "one QP per sample");
+    // the force saturates at the start: bounds are active
+    assert!((a.controls()[0][0].abs() - 2.0).abs() < 1e-9);
+    for k in 0..20 {
+        // same QP, same solver: equal to the interior-point tolerance
+        assert!((&a.controls()[k] - &b.controls()[k]).amax() < 1e-9, "{k}");
+    }
+}
+
+/// Shifting by one interval's time equals shifting by one interval.
+#[test]
+fn shift_time_of_one_interval_equals_shift() {
+    let (mut a, _) = swing_up(HessianApproximation::GaussNewton, QpForm::Auto);
+    let mut b = SqpSolver::new(CartPole::default(), swing_up_ocp(), a.settings().clone()).unwrap();
+    b.states_mut().clone_from_slice(a.states());
+    b.controls_mut().clone_from_slice(a.controls());
+    a.shift(1);
+    b.shift_time(1.5 / 30.0).unwrap();
+    for k in 0..=30 {
+        assert!((&a.states()[k] - &b.states()[k]).amax() < 1e-12);
+    }
+    for k in 0..30 {
+        assert_eq!(a.controls()[k], b.controls()[k]);
+    }
+}
