@@ -384,7 +384,7 @@ impl Beam {
         let (m, c) = (&self.section.mass, &self.section.compliance);
         let d0 = &self.section.d0;
         let has_d0 = d0.iter().any(|&v| v != 0.0);
-        let e_mat = &self.e_mat;
+        let kappa0 = self.section.kappa0;
         let hs = self.mesh.lengths();
         let ws = self.mesh.weights();
         let node_term = |i: usize, x1: &Vector6<f64>| {
@@ -415,7 +415,7 @@ impl Beam {
             let x2 = self.x2(x, e);
             let cx2 = c * x2;
             // E always couples (its ẽ1 block), also without initial curvature
-            let q = (e_mat * x2 - l2_times(&x2, &cx2)) * (0.5 * hs[e]);
+            let q = (e_times(&kappa0, &x2) - l2_times(&x2, &cx2)) * (0.5 * hs[e]);
             f_prev += x2 + q;
             f_next += q - x2;
             let dx = x1_next - x1_prev;
@@ -430,7 +430,7 @@ impl Beam {
                 }
             }
             let xb = (x1_prev + x1_next) * 0.5;
-            let f2 = dx + (l1t_times(&xb, &cx2) - e_mat.transpose() * xb) * hs[e];
+            let f2 = dx + (l1t_times(&xb, &cx2) - et_times(&kappa0, &xb)) * hs[e];
             let s = k * (n + 1 + e);
             self.components.extract(&f2, &mut out[s..s + k]);
             self.components.extract(&f_prev, &mut out[e * k..(e + 1) * k]);
@@ -748,6 +748,20 @@ impl Beam {
         push(&mut ops.a, n * k, self.right_index(0), &eye);
         ops
     }
+}
+
+/// `E x2 = [κ0×f, e1×f + κ0×m]` (eq. 3) without forming the matrix.
+#[inline]
+pub fn e_times(kappa0: &nalgebra::Vector3<f64>, x2: &Vector6<f64>) -> Vector6<f64> {
+    let (f, m) = halves(x2);
+    join(&kappa0.cross(&f), &(nalgebra::Vector3::x().cross(&f) + kappa0.cross(&m)))
+}
+
+/// `Eᵀ x1 = [−κ0×v − e1×ω, −κ0×ω]` (eq. 3) without forming the matrix.
+#[inline]
+pub fn et_times(kappa0: &nalgebra::Vector3<f64>, x1: &Vector6<f64>) -> Vector6<f64> {
+    let (v, w) = halves(x1);
+    join(&(-kappa0.cross(&v) - nalgebra::Vector3::x().cross(&w)), &(-kappa0.cross(&w)))
 }
 
 /// `L1ᵀ(x1) y = [−ω×y_f − v×y_m, −ω×y_m]` without forming the matrix.

@@ -438,7 +438,16 @@ impl ImplicitMidpoint {
                 previous_update = f64::INFINITY;
                 continue;
             }
-            if last <= self.settings.tolerance {
+            // Converged when the update is below tolerance, or (simplified Newton, contraction
+            // θ < 1 measured on this and the last update) when the remaining error estimate
+            // θ/(1 − θ)·‖Δ‖ is (Hairer & Wanner, Solving ODEs II, §IV.8).
+            let theta = last / previous_update;
+            let estimate = if !fresh && previous_update.is_finite() && theta < 1.0 {
+                theta / (1.0 - theta) * last
+            } else {
+                last
+            };
+            if last <= self.settings.tolerance || estimate <= self.settings.tolerance {
                 self.kinematics.advance(&self.problem.beam, &self.state, &self.new, dt)?;
                 let old = std::mem::replace(&mut self.state, self.new.clone());
                 self.previous = Some((old, dt));
