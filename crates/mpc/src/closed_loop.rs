@@ -112,6 +112,9 @@ impl RunResult {
     }
 }
 
+/// Node positions per beam.
+type Positions = Vec<Vec<[f64; 3]>>;
+
 /// Observation of the plant in modal and physical terms.
 struct Observation {
     q: Vec<f64>,
@@ -123,7 +126,7 @@ fn observe(
     setup: &Setup,
     plant: &SimPlant,
     with_positions: bool,
-) -> Result<(Observation, Option<Vec<Vec<[f64; 3]>>>)> {
+) -> Result<(Observation, Option<Positions>)> {
     match plant {
         SimPlant::Fe { plant, .. } => {
             let xi: Vec<[f64; 4]> = plant

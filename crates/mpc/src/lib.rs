@@ -45,6 +45,9 @@ mod plant;
 mod scenario;
 mod weights;
 
+#[cfg(test)]
+mod tests;
+
 pub use closed_loop::{run, sweep, Record, RunResult, RunSummary, Snapshot};
 pub use controller::{Controller, ControllerKind, ControllerSettings, SampleReport, Strategy};
 pub use dynamics::RomDynamics;

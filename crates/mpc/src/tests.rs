@@ -1,0 +1,275 @@
+//! Unit tests: the Dynamics adapter against the modal model and finite differences, the
+//! weights' identities, settings validation, and short closed loops (small meshes).
+
+use crate::*;
+use nalgebra::{DMatrix, DVector};
+use ocp_transcription::Dynamics;
+use proptest::prelude::{prop_assert, prop_assert_eq, proptest};
+use proptest::test_runner::{Config, RngSeed};
+use std::sync::OnceLock;
+
+/// The paper's 2D scenario on a coarse mesh (10 elements per link: same mode set, fast).
+fn setup_2d() -> &'static Setup {
+    static S: OnceLock<Setup> = OnceLock::new();
+    S.get_or_init(|| Setup::new(&Scenario::paper_2d(10).unwrap()).unwrap())
+}
+
+/// The paper's 3D scenario on a coarse mesh.
+fn setup_3d() -> &'static Setup {
+    static S: OnceLock<Setup> = OnceLock::new();
+    S.get_or_init(|| Setup::new(&Scenario::paper_3d(10).unwrap()).unwrap())
+}
+
+fn config() -> Config {
+    Config { cases: 64, rng_seed: RngSeed::Fixed(0x6d70_6300), ..Config::default() }
+}
+
+fn state_strategy(n: usize) -> impl proptest::strategy::Strategy<Value = Vec<f64>> {
+    proptest::collection::vec(-2.0f64..2.0, n)
+}
+
+proptest! {
+    #![proptest_config(config())]
+
+    /// The adapter evaluates exactly the modal model's right-hand side (29).
+    #[test]
+    fn rhs_matches_the_modal_model(q in state_strategy(53), u in state_strategy(5)) {
+        for setup in [setup_2d(), setup_3d()] {
+            let d = RomDynamics::new(&setup.rom).unwrap();
+            let (n, nu) = (d.nx(), d.nu());
+            let (q, u) = (&q[..n], &u[..nu]);
+            let mut a = vec![0.0; n];
+            let mut b = vec![0.0; n];
+            d.rhs(q, u, &mut a);
+            setup.rom.rhs(q, u, &mut b).unwrap();
+            let scale = b.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+            for i in 0..n {
+                // same sums in a different order: round-off only
+                prop_assert!((a[i] - b[i]).abs() <= 1e-12 * scale, "row {i}: {} vs {}", a[i], b[i]);
+            }
+        }
+    }
+
+    /// Exact Jacobians: the right-hand side is quadratic, so central differences are exact up
+    /// to round-off (`~ε‖f‖/h`), whatever the step.
+    #[test]
+    fn jacobians_match_central_differences(q in state_strategy(53), u in state_strategy(5)) {
+        for setup in [setup_2d(), setup_3d()] {
+            let d = RomDynamics::new(&setup.rom).unwrap();
+            let (n, nu) = (d.nx(), d.nu());
+            let (q, u) = (q[..n].to_vec(), u[..nu].to_vec());
+            let mut fx = DMatrix::zeros(n, n);
+            let mut fu = DMatrix::zeros(n, nu);
+            d.jacobians(&q, &u, &mut fx, &mut fu);
+            let h = 1e-3;
+            let (mut fp, mut fm) = (vec![0.0; n], vec![0.0; n]);
+            let scale = 1.0 + fx.amax();
+            for j in 0..n + nu {
+                let (mut qp, mut qm, mut up, mut um) = (q.clone(), q.clone(), u.clone(), u.clone());
+                if j < n { qp[j] += h; qm[j] -= h; } else { up[j - n] += h; um[j - n] -= h; }
+                d.rhs(&qp, &up, &mut fp);
+                d.rhs(&qm, &um, &mut fm);
+                for i in 0..n {
+                    let fd = (fp[i] - fm[i]) / (2.0 * h);
+                    let ex = if j < n { fx[(i, j)] } else { fu[(i, j - n)] };
+                    prop_assert!((fd - ex).abs() <= 1e-9 * scale, "({i},{j}): {fd} vs {ex}");
+                }
+            }
+        }
+    }
+
+    /// Exact second derivatives: the Jacobian is affine in `q`, so a forward difference of
+    /// `wᵀ ∂f/∂x` is exact up to round-off.
+    #[test]
+    fn weighted_hessian_matches_differences(q in state_strategy(53), w in state_strategy(53)) {
+        let setup = setup_2d();
+        let d = RomDynamics::new(&setup.rom).unwrap();
+        let (n, nu) = (d.nx(), d.nu());
+        let (q, w) = (q[..n].to_vec(), DVector::from_column_slice(&w[..n]));
+        let u = vec![0.3; nu];
+        let mut h = DMatrix::zeros(n + nu, n + nu);
+        d.weighted_hessian(&q, &u, w.as_slice(), &mut h);
+        let mut fx0 = DMatrix::zeros(n, n);
+        let mut fx1 = DMatrix::zeros(n, n);
+        let mut fu = DMatrix::zeros(n, nu);
+        d.jacobians(&q, &u, &mut fx0, &mut fu);
+        let g0 = fx0.transpose() * &w;
+        let step = 0.5;
+        for j in 0..n {
+            let mut qp = q.clone();
+            qp[j] += step;
+            d.jacobians(&qp, &u, &mut fx1, &mut fu);
+            let col = (fx1.transpose() * &w - &g0) / step;
+            for i in 0..n {
+                prop_assert!((col[i] - h[(i, j)]).abs() <= 1e-9 * (1.0 + h.amax()));
+            }
+        }
+        // no u-dependence in the second derivative (f is linear in u)
+        prop_assert_eq!(h.view((n, 0), (nu, n + nu)).amax(), 0.0);
+        prop_assert!((&h - h.transpose()).amax() == 0.0);
+    }
+}
+
+#[test]
+fn linear_part_is_the_jacobian_at_the_origin() {
+    for setup in [setup_2d(), setup_3d()] {
+        let d = RomDynamics::new(&setup.rom).unwrap();
+        let n = d.nx();
+        let mut fx = DMatrix::zeros(n, n);
+        let mut fu = DMatrix::zeros(n, d.nu());
+        d.jacobians(&vec![0.0; n], &vec![0.0; d.nu()], &mut fx, &mut fu);
+        let l = d.linear_part().unwrap();
+        assert_eq!((l - fx).amax(), 0.0);
+    }
+}
+
+#[test]
+fn paper_dimensions() {
+    let (s2, s3) = (setup_2d(), setup_3d());
+    // 2D: 2 rigid + 8 elastic velocity modes, 8 q2, 7 kept quaternion modes (theory.md §6)
+    assert_eq!((s2.rom.n_modes(), s2.rom.n_q2(), s2.rom.n_xi(), s2.rom.n_inputs()), (10, 8, 7, 3));
+    // 3D: 4 rigid + 16 elastic, 16 q2, 17 kept quaternion modes, 5 inputs
+    assert_eq!(
+        (s3.rom.n_modes(), s3.rom.n_q2(), s3.rom.n_xi(), s3.rom.n_inputs()),
+        (20, 16, 17, 5)
+    );
+    // Kξ: 1 for φξ0 and the rigid modes' quaternion modes (3 in 2D, 5 in 3D), 0.01 otherwise
+    let ones = |w: &Weights| w.k_xi.iter().filter(|&&k| k == 1.0).count();
+    assert_eq!(ones(&s2.weights), 3);
+    assert_eq!(ones(&s3.weights), 5);
+    assert!(s2.weights.k_xi.iter().all(|&k| k == 1.0 || k == 0.01));
+}
+
+#[test]
+fn weights_are_symmetric_semidefinite_and_vanish_at_the_reference() {
+    for setup in [setup_2d(), setup_3d()] {
+        let w = &setup.weights;
+        assert_eq!((&w.q - w.q.transpose()).amax(), 0.0);
+        let eig = w.q.clone().symmetric_eigenvalues();
+        // PSD up to round-off of Aξ (entries O(1))
+        assert!(eig.min() > -1e-12 * eig.max(), "min eigenvalue {}", eig.min());
+        assert_eq!(w.state_cost(w.x_ref.as_slice()), 0.0);
+        assert_eq!(w.r, DMatrix::identity(w.r.nrows(), w.r.nrows()) * 0.1);
+    }
+}
+
+/// `qξᵀ AΔξ qξ` is the squared quaternion jump across the joint (36), for any `qξ`.
+#[test]
+fn joint_penalty_is_the_squared_quaternion_jump() {
+    for setup in [setup_2d(), setup_3d()] {
+        let qm = setup.rom.quaternion().unwrap();
+        let nxi = qm.kept.len();
+        let elbow = setup.joint_nodes.iter().find(|n| n.len() == 2).unwrap();
+        for seed in 0..5 {
+            let qx = DVector::from_fn(nxi, |i, _| ((i * 7 + seed * 3) % 11) as f64 / 11.0 - 0.4);
+            let xi = |node: usize| -> DVector<f64> {
+                DVector::from_fn(4, |a, _| {
+                    (0..nxi).map(|c| qm.phi_xi[(4 * node + a, c)] * qx[c]).sum::<f64>()
+                })
+            };
+            let jump = (xi(elbow[0]) - xi(elbow[1])).norm_squared();
+            let pen = (&setup.weights.a_dxi * &qx).dot(&qx);
+            assert!((jump - pen).abs() <= 1e-13 * (1.0 + jump), "{jump} vs {pen}");
+        }
+    }
+}
+
+/// At t = 0 the state is a rigid rotation in the reference configuration: only the velocity
+/// term `½ k_x1 ‖q1‖²` of (35) is non-zero, and ‖q1‖² is twice the kinetic energy.
+#[test]
+fn initial_cost_is_the_weighted_kinetic_energy() {
+    let setup = setup_2d();
+    let w0 = 0.7;
+    let s = &setup.scenario;
+    let x0 = s
+        .structure
+        .rigid_rotation_state(nalgebra::Vector3::new(0.0, w0, 0.0), nalgebra::Vector3::zeros());
+    let xi: Vec<[f64; 4]> = s
+        .structure
+        .reference()
+        .iter()
+        .flat_map(|k| k.xi.iter().map(|v| [v[0], v[1], v[2], v[3]]))
+        .collect();
+    let q = setup.rom.project_full(&x0, Some(&xi)).unwrap();
+    let v = setup.weights.state_cost(&q);
+    // two rigid links of unit mass per length about the root: I = (2L)³/3 = 8/3; the lumped
+    // node masses of a 10-element mesh integrate r² with O(h²) error (≈ 1%)
+    let expected = 0.5 * 0.01 * (8.0 / 3.0) * w0 * w0;
+    assert!((v - expected).abs() <= 0.02 * expected, "{v} vs {expected}");
+}
+
+#[test]
+fn settings_validation_names_the_field() {
+    let bad = MpcSettings { ku: 0.0, ..MpcSettings::default() };
+    assert!(bad.validate().unwrap_err().to_string().contains("ku"));
+    let bad = MpcSettings { sampling: 7.0, ..MpcSettings::default() };
+    assert!(bad.validate().unwrap_err().to_string().contains("sampling"));
+    let bad = ControllerSettings { retry_relaxation: Some(1.5), ..ControllerSettings::default() };
+    assert!(bad.validate().unwrap_err().to_string().contains("retry_relaxation"));
+    let mut s = Scenario::paper_2d(10).unwrap();
+    s.output_interval = 0.03;
+    assert!(s.validate().unwrap_err().to_string().contains("output_interval"));
+    assert!(MpcSettings::default().validate().is_ok());
+}
+
+/// At a tiny disturbance the nonlinear and linear MPC plans coincide to first order: the
+/// nonlinear terms of (29) are quadratic, so the relative difference of `u0` is `O(ω0)`.
+#[test]
+fn nmpc_reduces_to_lmpc_for_small_disturbances() {
+    let setup = setup_2d();
+    let s = &setup.scenario;
+    let w0 = 1e-3;
+    let x0 = s
+        .structure
+        .rigid_rotation_state(nalgebra::Vector3::new(0.0, w0, 0.0), nalgebra::Vector3::zeros());
+    let q = setup.rom.project_full(&x0, None).unwrap();
+    let mut u = Vec::new();
+    for kind in [ControllerKind::Nmpc, ControllerKind::Lmpc] {
+        let mut c = Controller::new(
+            RomDynamics::new(&setup.rom).unwrap(),
+            &setup.weights,
+            &s.mpc,
+            &ControllerSettings { kkt_tolerance: 1e-12, ..ControllerSettings::of(kind) },
+        )
+        .unwrap();
+        let r = c.step(0.0, &q).unwrap();
+        assert_eq!(r.status, "Solved", "{kind:?}");
+        u.push(DVector::from_vec(r.u));
+    }
+    let rel = (&u[0] - &u[1]).norm() / u[1].norm();
+    assert!(u[1].norm() > 0.0);
+    assert!(rel < 1e-2, "relative difference {rel}");
+}
+
+/// A full 7.5 s linear MPC loop on the reduced-model plant stops the rotation, and a second
+/// run is identical (timings aside).
+#[test]
+fn lmpc_loop_on_the_rom_stops_the_rotation_deterministically() {
+    let setup = setup_2d();
+    let c = ControllerSettings::of(ControllerKind::Lmpc);
+    let a = run(setup, 0.5, &c, PlantKind::Rom).unwrap();
+    let b = run(setup, 0.5, &c, PlantKind::Rom).unwrap();
+    assert_eq!(a.without_timings(), b.without_timings());
+    let s = &a.summary;
+    assert!(s.error.is_none());
+    assert_eq!(a.samples.len(), 38);
+    assert_eq!(a.records.len(), 151);
+    assert_eq!(a.snapshots.len(), 31);
+    assert!(s.rigid_rate_ratio < 0.05, "{s:?}");
+    assert!(s.orientation_error_deg <= 0.2 * s.max_orientation_deg, "{s:?}");
+    assert!(a.records.iter().all(|r| r.u.iter().all(|u| u.abs() <= 5.0)));
+}
+
+/// Two seconds of NMPC on the FE plant (coarse mesh): every sample solved by the first SQP
+/// attempt at a moderate disturbance, inputs within bounds, and the rotation slowed down.
+#[test]
+fn nmpc_on_the_fe_plant_short_run() {
+    let mut sc = Scenario::paper_2d(10).unwrap();
+    sc.duration = 2.0;
+    let setup = Setup::new(&sc).unwrap();
+    let r = run(&setup, 0.5, &ControllerSettings::default(), PlantKind::Fe).unwrap();
+    assert!(r.summary.error.is_none());
+    assert_eq!(r.samples.len(), 10);
+    assert!(r.samples.iter().all(|s| s.strategy == crate::Strategy::Sqp), "{:?}", r.samples);
+    assert!(r.summary.rigid_rate_ratio < 0.5, "{:?}", r.summary);
+}
