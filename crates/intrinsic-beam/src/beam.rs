@@ -379,6 +379,10 @@ impl Beam {
         out: &mut [f64],
         mut damp: Option<&mut [Vector6<f64>]>,
     ) {
+        if self.components == Components::Planar {
+            self.rhs_planar(x, node_loads, out, damp);
+            return;
+        }
         let n = self.n_elements();
         let k = self.k;
         let (m, c) = (&self.section.mass, &self.section.compliance);
@@ -439,6 +443,92 @@ impl Beam {
         }
         f_prev += self.x2_right(x);
         self.components.extract(&f_prev, &mut out[n * k..(n + 1) * k]);
+    }
+
+    /// The planar (`k = 3`) specialisation of [`Beam::rhs_into`] on 3-vectors
+    /// `(v1, v3, ω2)`, `(f1, f3, m2)`; same arithmetic as the 6-component kernel restricted to
+    /// the in-plane components (see [`planar_ops`]).
+    fn rhs_planar(
+        &self,
+        x: &[f64],
+        node_loads: &[Vector6<f64>],
+        out: &mut [f64],
+        mut damp: Option<&mut [Vector6<f64>]>,
+    ) {
+        use nalgebra::Vector3 as V3;
+        let r = |m: &Matrix6<f64>| Matrix3::from_fn(|a, b| self.components.entry(m, a, b));
+        let (m, c, d0, d1, d2) = (
+            r(&self.section.mass),
+            r(&self.section.compliance),
+            r(&self.section.d0),
+            r(&self.section.d1),
+            r(&self.section.d2),
+        );
+        let has_d0 = d0.iter().any(|&v| v != 0.0);
+        let kappa = self.section.kappa0.y;
+        let n = self.n_elements();
+        let hs = self.mesh.lengths();
+        let ws = self.mesh.weights();
+        let get = |i: usize| V3::new(x[i], x[i + 1], x[i + 2]);
+        let load = |i: usize| {
+            if node_loads.is_empty() {
+                V3::zeros()
+            } else {
+                let l = &node_loads[i];
+                V3::new(l[0], l[2], l[4])
+            }
+        };
+        let to6 = |v: &V3<f64>| Vector6::new(v[0], 0.0, v[1], 0.0, v[2], 0.0);
+        let node_term = |i: usize, x1: &V3<f64>| {
+            let mut f = -planar_ops::l1_times(x1, &(m * x1)) * ws[i] + load(i);
+            if has_d0 {
+                f += d0 * x1 * ws[i];
+            }
+            f
+        };
+        let mut x1_prev = get(0);
+        let mut f_prev = node_term(0, &x1_prev) - get(self.left_index(0));
+        if let Some(d) = damp.as_deref_mut() {
+            if has_d0 {
+                d[0] = to6(&(d0 * x1_prev * ws[0]));
+            }
+        }
+        for e in 0..n {
+            let x1_next = get(3 * (e + 1));
+            let mut f_next = node_term(e + 1, &x1_next);
+            if let Some(d) = damp.as_deref_mut() {
+                if has_d0 {
+                    d[e + 1] = to6(&(d0 * x1_next * ws[e + 1]));
+                }
+            }
+            let x2 = get(self.x2_index(e, 0));
+            let cx2 = c * x2;
+            let q =
+                (planar_ops::e_times(kappa, &x2) - planar_ops::l2_times(&x2, &cx2)) * (0.5 * hs[e]);
+            f_prev += x2 + q;
+            f_next += q - x2;
+            let dx = x1_next - x1_prev;
+            if self.has_flux_damping {
+                let g = d2 * dx / hs[e] + d1 * dx * 0.5;
+                let g2 = -d2 * dx / hs[e] + d1 * dx * 0.5;
+                f_prev += g;
+                f_next += g2;
+                if let Some(d) = damp.as_deref_mut() {
+                    d[e] += to6(&g);
+                    d[e + 1] += to6(&g2);
+                }
+            }
+            let xb = (x1_prev + x1_next) * 0.5;
+            let f2 =
+                dx + (planar_ops::l1t_times(&xb, &cx2) - planar_ops::et_times(kappa, &xb)) * hs[e];
+            let s = 3 * (n + 1 + e);
+            out[s..s + 3].copy_from_slice(f2.as_slice());
+            out[3 * e..3 * e + 3].copy_from_slice(f_prev.as_slice());
+            x1_prev = x1_next;
+            f_prev = f_next;
+        }
+        f_prev += get(self.right_index(0));
+        out[3 * n..3 * n + 3].copy_from_slice(f_prev.as_slice());
     }
 
     /// Writes the `k(2N+1)` step residual rows `B (new − old)/dt − f(mid)` into `out`.
@@ -750,6 +840,43 @@ impl Beam {
     }
 }
 
+/// The operators of eqs. (3)–(4) on planar 3-vectors `x1 = (v1, v3, ω2)`,
+/// `x2 = (f1, f3, m2)` (beam in the e1–e3 plane, `κ0 = κ e2`): the in-plane components of the
+/// 6-component products, which have no out-of-plane part for in-plane arguments.
+pub mod planar_ops {
+    use nalgebra::Vector3;
+
+    /// `L1(x1) p = [ω2 P3, −ω2 P1, v3 P1 − v1 P3]`.
+    #[inline]
+    pub fn l1_times(x1: &Vector3<f64>, p: &Vector3<f64>) -> Vector3<f64> {
+        Vector3::new(x1[2] * p[1], -x1[2] * p[0], x1[1] * p[0] - x1[0] * p[1])
+    }
+
+    /// `L2(x2) e = [−f3 e_ω, f1 e_ω, f3 e1 − f1 e3]`.
+    #[inline]
+    pub fn l2_times(x2: &Vector3<f64>, e: &Vector3<f64>) -> Vector3<f64> {
+        Vector3::new(-x2[1] * e[2], x2[0] * e[2], x2[1] * e[0] - x2[0] * e[1])
+    }
+
+    /// `L1ᵀ(x1) y = [−y_f3 ω2 + y_m v3, y_f1 ω2 − y_m v1, 0]`.
+    #[inline]
+    pub fn l1t_times(x1: &Vector3<f64>, y: &Vector3<f64>) -> Vector3<f64> {
+        Vector3::new(-y[1] * x1[2] + y[2] * x1[1], y[0] * x1[2] - y[2] * x1[0], 0.0)
+    }
+
+    /// `E x2 = [κ f3, −κ f1, −f3]`.
+    #[inline]
+    pub fn e_times(kappa: f64, x2: &Vector3<f64>) -> Vector3<f64> {
+        Vector3::new(kappa * x2[1], -kappa * x2[0], -x2[1])
+    }
+
+    /// `Eᵀ x1 = [−κ v3, κ v1 − ω2, 0]`.
+    #[inline]
+    pub fn et_times(kappa: f64, x1: &Vector3<f64>) -> Vector3<f64> {
+        Vector3::new(-kappa * x1[1], kappa * x1[0] - x1[2], 0.0)
+    }
+}
+
 /// `E x2 = [κ0×f, e1×f + κ0×m]` (eq. 3) without forming the matrix.
 #[inline]
 pub fn e_times(kappa0: &nalgebra::Vector3<f64>, x2: &Vector6<f64>) -> Vector6<f64> {
@@ -924,6 +1051,34 @@ mod tests {
             // residual entries O(1e3) (1/dt scaling): central FD error ~ 1e-6 relative
             let diff = (&jac - &fd).abs().max();
             assert!(diff < 1e-5 * (1.0 + jac.abs().max()), "max |J − FD| = {diff}");
+        }
+    }
+
+    /// The planar kernels are the in-plane restriction of the 6-component operators.
+    #[test]
+    fn planar_ops_match_spatial_operators() {
+        let mut rng = Lcg::new(11);
+        let c = Components::Planar;
+        for _ in 0..20 {
+            let a: Vec<f64> = random_vec(&mut rng, 3);
+            let b: Vec<f64> = random_vec(&mut rng, 3);
+            let kappa = rng.uniform(-1.0, 1.0);
+            let (a3, b3) = (
+                nalgebra::Vector3::from_column_slice(&a),
+                nalgebra::Vector3::from_column_slice(&b),
+            );
+            let (a6, b6) = (c.embed(&a), c.embed(&b));
+            let k0 = Vector3::new(0.0, kappa, 0.0);
+            let pairs = [
+                (planar_ops::l1_times(&a3, &b3), l1_times(&a6, &b6)),
+                (planar_ops::l2_times(&a3, &b3), l2_times(&a6, &b6)),
+                (planar_ops::l1t_times(&a3, &b3), l1t_times(&a6, &b6)),
+                (planar_ops::e_times(kappa, &a3), e_times(&k0, &a6)),
+                (planar_ops::et_times(kappa, &a3), et_times(&k0, &a6)),
+            ];
+            for (p, s6) in pairs {
+                assert!((c.embed(p.as_slice()) - s6).amax() < 1e-15, "{p:?} vs {s6:?}");
+            }
         }
     }
 
