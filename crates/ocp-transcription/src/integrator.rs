@@ -148,6 +148,7 @@ pub struct Integrator {
     tm: DMatrix<f64>,
     ks: [DMatrix<f64>; 4],
     tcm: DMatrix<f64>,
+    rows: crate::la::SparseRows,
     lu: DMatrix<f64>,
     perm: Vec<usize>,
     perm_inv: Vec<usize>,
@@ -242,6 +243,7 @@ impl Integrator {
             sx: zm(),
             tm: zm(),
             ks: [zm(), zm(), zm(), zm()],
+            rows: crate::la::SparseRows::with_capacity(nx),
             tcm: if settings.kind == IntegratorKind::ImplicitMidpoint {
                 DMatrix::zeros(nx, nz)
             } else {
@@ -550,7 +552,7 @@ impl Integrator {
                 self.fx -= &lw.l;
             }
             // a NaN/∞ in the Jacobians propagates into the sensitivities, checked once per interval
-            crate::la::mul_right_t(&mut self.ks[j], &self.sx, &self.fx);
+            crate::la::mul_right_t(&mut self.ks[j], &self.sx, &self.fx, &mut self.rows);
             for c in 0..self.nu {
                 for i in 0..self.nx {
                     self.ks[j][(self.nx + c, i)] += self.fu[(i, c)];

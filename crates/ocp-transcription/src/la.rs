@@ -40,50 +40,105 @@ pub(crate) fn gemm_tn(
     matmul(fmut(dst), acc, fref(a).transpose(), fref(b), alpha, Par::Seq);
 }
 
+/// Row-compressed scratch for a sparse Jacobian (capacity `n²`, allocated once).
+#[derive(Clone, Debug, Default)]
+pub(crate) struct SparseRows {
+    row_ptr: Vec<usize>,
+    col: Vec<usize>,
+    val: Vec<f64>,
+}
+
+impl SparseRows {
+    pub(crate) fn with_capacity(n: usize) -> Self {
+        Self { row_ptr: vec![0; n + 1], col: vec![0; n * n], val: vec![0.0; n * n] }
+    }
+
+    /// Compresses the nonzeros of the column-major `n × n` matrix `j` by rows (branch-free;
+    /// no allocation); returns the number of nonzeros.
+    fn compress(&mut self, j: &[f64], n: usize) -> usize {
+        let mut len = 0;
+        self.row_ptr[0] = 0;
+        for i in 0..n {
+            for k in 0..n {
+                let v = j[i + k * n];
+                self.col[len] = k;
+                self.val[len] = v;
+                len += (v != 0.0) as usize;
+            }
+            self.row_ptr[i + 1] = len;
+        }
+        len
+    }
+}
+
 /// `dst = src · jᵀ` for the transposed sensitivity layout (`src`, `dst`: `m × n`, `j`: `n × n`):
-/// column `i` of `dst` is `Σ_k j[i, k] · src[:, k]`. When at most 30 % of `j` is nonzero this
-/// runs as contiguous axpys over the nonzeros only (the modal Jacobians are sparse), else as a
-/// dense faer product.
-pub(crate) fn mul_right_t(dst: &mut DMatrix<f64>, src: &DMatrix<f64>, j: &DMatrix<f64>) {
+/// column `i` of `dst` is `Σ_k j[i, k] · src[:, k]`. When at most 30 % of `j` is nonzero the
+/// nonzeros are compressed by rows and each column of `dst` is accumulated in registers over
+/// them (one store per column), else a dense faer product runs.
+pub(crate) fn mul_right_t(
+    dst: &mut DMatrix<f64>,
+    src: &DMatrix<f64>,
+    j: &DMatrix<f64>,
+    rows: &mut SparseRows,
+) {
     let n = j.nrows();
-    let nnz = j.as_slice().iter().filter(|v| **v != 0.0).count();
+    if rows.row_ptr.len() != n + 1 || rows.col.len() < n * n {
+        *rows = SparseRows::with_capacity(n);
+    }
+    let nnz = rows.compress(j.as_slice(), n);
     if nnz * 10 > 3 * n * n {
         matmul(fmut(dst), Accum::Replace, fref(src), fref(j).transpose(), 1.0, Par::Seq);
         return;
     }
     let m = src.nrows();
-    Arch::new().dispatch(SparseRightT {
-        dst: dst.as_mut_slice(),
-        src: src.as_slice(),
-        j: j.as_slice(),
-        m,
-        n,
-    });
+    Arch::new().dispatch(SparseRightT { dst: dst.as_mut_slice(), src: src.as_slice(), rows, m });
 }
 
 /// The sparse kernel of [`mul_right_t`], compiled for the best SIMD level available at run
-/// time (pulp dispatch, so the plain loops below vectorise with FMA).
+/// time (pulp dispatch, so the fixed-size accumulators below vectorise with FMA).
 struct SparseRightT<'a> {
     dst: &'a mut [f64],
     src: &'a [f64],
-    j: &'a [f64],
+    rows: &'a SparseRows,
     m: usize,
-    n: usize,
 }
+
+const CHUNK: usize = 16;
 
 impl WithSimd for SparseRightT<'_> {
     type Output = ();
     #[inline(always)]
     fn with_simd<S: Simd>(self, _simd: S) {
-        let SparseRightT { dst, src, j, m, n } = self;
-        dst.fill(0.0);
-        for k in 0..n {
-            let sk = &src[k * m..(k + 1) * m];
-            for i in 0..n {
-                let v = j[i + k * n];
-                if v != 0.0 {
-                    axpy_kernel(&mut dst[i * m..(i + 1) * m], v, sk);
+        let SparseRightT { dst, src, rows, m } = self;
+        let n = rows.row_ptr.len() - 1;
+        for i in 0..n {
+            let (p0, p1) = (rows.row_ptr[i], rows.row_ptr[i + 1]);
+            let d = &mut dst[i * m..(i + 1) * m];
+            let mut c0 = 0;
+            while c0 + CHUNK <= m {
+                let mut acc = [0.0_f64; CHUNK];
+                for p in p0..p1 {
+                    let v = rows.val[p];
+                    let s = &src[rows.col[p] * m + c0..rows.col[p] * m + c0 + CHUNK];
+                    for t in 0..CHUNK {
+                        acc[t] = v.mul_add(s[t], acc[t]);
+                    }
                 }
+                d[c0..c0 + CHUNK].copy_from_slice(&acc);
+                c0 += CHUNK;
+            }
+            let rest = m - c0;
+            if rest > 0 {
+                let mut acc = [0.0_f64; CHUNK];
+                for p in p0..p1 {
+                    let v = rows.val[p];
+                    let base = rows.col[p] * m + c0;
+                    let s = &src[base..base + rest];
+                    for t in 0..rest {
+                        acc[t] = v.mul_add(s[t], acc[t]);
+                    }
+                }
+                d[c0..].copy_from_slice(&acc[..rest]);
             }
         }
     }
@@ -446,7 +501,7 @@ mod tests {
             let expected_t = DMatrix::from_element(3, n, 1.0) + &srct * m.transpose() * 2.0;
             assert!((dt - expected_t).amax() < 1e-14);
             let mut prod = DMatrix::zeros(3, n);
-            mul_right_t(&mut prod, &srct, &m);
+            mul_right_t(&mut prod, &srct, &m, &mut SparseRows::with_capacity(n));
             assert!((prod - &srct * m.transpose()).amax() < 1e-14);
             let mut y = vec![0.0; n];
             op.apply_vec(&mut y, src.column(0).as_slice(), 1.0, false);
