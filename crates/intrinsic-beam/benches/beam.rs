@@ -15,13 +15,17 @@ use intrinsic_beam::{
 };
 
 fn warmed(sample: Sample, dt: f64, steps: usize) -> ImplicitMidpoint {
-    let mut sim = ImplicitMidpoint::new(
-        sample.problem,
-        sample.state,
-        sample.kinematics,
-        NewtonSettings::default(),
-    )
-    .expect("valid sample");
+    warmed_with(sample, dt, steps, NewtonSettings::default())
+}
+
+fn warmed_with(
+    sample: Sample,
+    dt: f64,
+    steps: usize,
+    settings: NewtonSettings,
+) -> ImplicitMidpoint {
+    let mut sim = ImplicitMidpoint::new(sample.problem, sample.state, sample.kinematics, settings)
+        .expect("valid sample");
     for _ in 0..steps {
         sim.step(dt).expect("step converges");
     }
@@ -87,6 +91,18 @@ fn step_benches(c: &mut Criterion) {
         });
         let mut sim = warmed(samples::cantilever_swing(comp, 100).unwrap(), 1e-3, 50);
         group.bench_function(format!("{name}/swing"), |b| {
+            b.iter(|| black_box(sim.step(1e-3).unwrap()))
+        });
+        // engineering tolerance (1e-8 relative update) instead of the conservative default
+        let loose = NewtonSettings { tolerance: 1e-8, ..NewtonSettings::default() };
+        let mut sim = warmed_with(samples::cantilever_swing(comp, 100).unwrap(), 1e-3, 50, loose);
+        group.bench_function(format!("{name}/swing-tol1e-8"), |b| {
+            b.iter(|| black_box(sim.step(1e-3).unwrap()))
+        });
+        // full Newton: a fresh Jacobian and factorisation every iteration
+        let full = NewtonSettings { reuse_jacobian: false, ..NewtonSettings::default() };
+        let mut sim = warmed_with(samples::cantilever_swing(comp, 100).unwrap(), 1e-3, 50, full);
+        group.bench_function(format!("{name}/swing-full-newton"), |b| {
             b.iter(|| black_box(sim.step(1e-3).unwrap()))
         });
     }

@@ -33,6 +33,15 @@
 //! * [`loads::Loads`] — point/distributed, follower/dead loads with time amplitudes.
 //! * [`kinematics::Kinematics`] — node quaternions/positions, advanced in time or rebuilt from
 //!   strains.
+//! * [`problem`] — single-beam problems: [`problem::EndCondition`] (free, applied end load,
+//!   clamped, pinned, prescribed motion, mixed) and [`problem::ImplicitMidpoint`] (Newton on the
+//!   sparse step system, faer sparse LU with the symbolic factorisation reused, simplified
+//!   Newton with Jacobian reuse, counters).
+//! * [`rk4::ExplicitRk4`] — explicit RK4 for cross-checks when the problem is an ODE.
+//! * [`modes`] — linear modes of a single beam (second-order reduction, faer dense eigen) and
+//!   closed-form beam frequencies.
+//! * [`samples`] — canonical problems with provenance and known answers; [`studies`] — the
+//!   experiments behind the tests, verification cases and benches.
 //!
 //! A multi-beam assembler places each beam's vector at a column offset and its rows at a row
 //! offset, appends its own end/joint rows (on the `x2_L`, `x2_R` and end-node `x1` unknowns,
