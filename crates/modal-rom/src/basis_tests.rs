@@ -76,10 +76,9 @@ fn two_link_2d_modes_orthonormal_and_labelled() {
     assert_eq!(basis.n_rigid(), 2);
     let (e1, e2, e3) = basis.select(&ModeSelection::Lowest(40)).unwrap().orthonormality_residuals();
     assert!(e1 < 1e-12, "M-orthonormality {e1}");
-    // φ2 inherits cond(K) ≈ λmax/ω²: the bound ε·λmax/ω1² (theory.md §4).
-    let bound = 64.0 * f64::EPSILON * basis.lambda_max() / basis.omega()[2].powi(2);
-    assert!(e2 < bound.max(1e-12), "C-orthonormality {e2} vs {bound}");
-    assert!(e3 < 1e-6 * basis.omega()[39], "duality {e3}");
+    // φ2 from orthonormal left singular vectors (SVD route): round-off, not cond(K)
+    assert!(e2 < 1e-12, "C-orthonormality {e2}");
+    assert!(e3 < 1e-12 * basis.omega()[39], "duality {e3}");
     let labels = basis.labels();
     let first5: Vec<&str> = labels[2..7].iter().map(|s| s.as_str()).collect();
     assert_eq!(first5.iter().filter(|l| **l == "bending").count(), 4, "{first5:?}");

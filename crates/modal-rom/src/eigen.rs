@@ -18,9 +18,12 @@
 //! ```
 //!
 //! and massless rows (`B1 = 0`) add the constraint `(K φ1)_massless = 0`. All constraints are
-//! absorbed into a null-space basis `Z` (32); the reduced pencil `(ZᵀKZ, ZᵀB1Z)` is solved by a
-//! Cholesky transform `ZᵀB1Z = L Lᵀ` and faer's self-adjoint eigen solver on `L⁻¹ ZᵀKZ L⁻ᵀ`.
-//! Modes are real and exactly `B1`-orthonormal.
+//! absorbed into a null-space basis `Z` (32). With `ZᵀB1Z = L1 L1ᵀ` and `B2 = L2 L2ᵀ`
+//! (Cholesky), `L1⁻¹ ZᵀKZ L1⁻ᵀ = MᵀM` with `M = L2⁻¹ Dᵀ Z L1⁻ᵀ`, so the frequencies are the
+//! singular values of `M` (faer SVD): `M v = ω u`, `φ1 = Z L1⁻ᵀ v`, `φ2 = L2⁻ᵀ u`. Working
+//! with `M` instead of `K` avoids squaring its condition number (shear stiffness over h²,
+//! rotary inertia 1e-5: cond(K) ≈ 1e8–1e10 for the paper's scenes): `φ1` is `B1`-orthonormal
+//! and `φ2` `B2`-orthonormal to round-off, and `⟨φ1i, Dφ2j⟩ = ω_j δij` to round-off.
 //!
 //! **Force modes and sign.** `φ2 = +B2⁻¹ Dᵀ φ1 / ω` (elastic modes; rigid modes have
 //! `φ2 ≡ 0`). With this choice `⟨φ1i, D φ2j⟩ = +ω_j δij` and the modal equations are the
@@ -32,7 +35,6 @@
 
 use crate::error::{invalid, shape, ModalError, Result};
 use crate::layout::{FullIndex, Layout};
-use faer::linalg::solvers::Solve;
 use faer::{Mat, MatRef, Side};
 
 /// Settings of the constrained eigen solver.
@@ -355,8 +357,8 @@ struct BlockSolution {
     elastic_cols: Vec<usize>,
     lambda: Vec<f64>,
     phi1: Mat<f64>,
-    /// `B2e⁻¹ D_eᵀ` restricted to the block (|elastic| × |s1|).
-    flex: Mat<f64>,
+    /// `φ2 = B2e⁻¹ D_eᵀ φ1 / ω` of each column (zero where `ω = 0`), |elastic| × modes.
+    phi2: Mat<f64>,
 }
 
 fn solve_block(
@@ -394,28 +396,28 @@ fn solve_block(
     let b2e = gather(b2.as_ref(), &elastic, &elastic);
     let all1: Vec<usize> = (0..s1.len()).collect();
     let de = gather(d.as_ref(), &all1, &elastic);
-    let flex = if elastic.is_empty() {
-        Mat::<f64>::zeros(0, s1.len())
+    // B2e = L2 L2ᵀ (block diagonal, SPD on the non-rigid entries)
+    let l2 = if elastic.is_empty() {
+        Mat::<f64>::zeros(0, 0)
     } else {
-        let llt = b2e.llt(Side::Lower).map_err(|e| ModalError::Numerical {
-            stage: "Cholesky of an element compliance block B2".into(),
-            reason: format!(
-                "{e:?} (a compliance matrix C must be positive definite on its non-rigid entries)"
-            ),
-        })?;
-        llt.solve(de.transpose().to_owned())
+        b2e.llt(Side::Lower)
+            .map_err(|e| ModalError::Numerical {
+                stage: "Cholesky of an element compliance block B2".into(),
+                reason: format!(
+                    "{e:?} (a compliance matrix C must be positive definite on its non-rigid entries)"
+                ),
+            })?
+            .L()
+            .to_owned()
     };
-    let k = &de * &flex;
-    let reduce = |z: &Mat<f64>| {
-        let mut b1r = z.transpose() * &b1 * z;
-        let mut kr = z.transpose() * &k * z;
-        symmetrize(&mut b1r);
-        symmetrize(&mut kr);
-        (b1r, kr)
-    };
-    let (mut b1r, mut kr) = reduce(&z);
+    let mut b1r = z.transpose() * &b1 * &z;
+    symmetrize(&mut b1r);
     if z.ncols() > 0 && b1r.llt(Side::Lower).is_err() {
-        // Massless directions: (K φ1) vanishes there (theory.md §4).
+        // Massless directions: (K φ1) vanishes there (theory.md §4), K = D B2⁻¹ Dᵀ.
+        let mut y = de.transpose().to_owned();
+        l2.solve_lower_triangular_in_place(y.as_mut());
+        let mut kr = (&y * &z).transpose() * (&y * &z);
+        symmetrize(&mut kr);
         let eig = b1r.self_adjoint_eigen(Side::Lower).map_err(|e| ModalError::Numerical {
             stage: "eigen of the reduced mass matrix".into(),
             reason: format!("{e:?}"),
@@ -428,44 +430,56 @@ fn solve_block(
         let cons2 = n_mat.transpose() * &kr;
         let z2 = null_space(cons2.as_ref(), tol)?;
         z = &z * &z2;
-        (b1r, kr) = reduce(&z);
+        b1r = z.transpose() * &b1 * &z;
+        symmetrize(&mut b1r);
     }
     let nz = z.ncols();
+    let elastic_cols: Vec<usize> = elastic.iter().map(|&i| s2[i]).collect();
     if nz == 0 {
         return Ok(BlockSolution {
             s1,
-            elastic_cols: elastic.iter().map(|&i| s2[i]).collect(),
+            elastic_cols,
             lambda: vec![],
             phi1: Mat::zeros(all1.len(), 0),
-            flex,
+            phi2: Mat::zeros(elastic.len(), 0),
         });
     }
-    let llt = b1r.llt(Side::Lower).map_err(|e| ModalError::Numerical {
-        stage: "Cholesky of the reduced mass matrix ZᵀB1Z".into(),
-        reason: format!("{e:?} (massless directions left after elimination)"),
-    })?;
-    let l = llt.L().to_owned();
-    let mut x = kr.clone();
-    l.solve_lower_triangular_in_place(x.as_mut());
-    let mut a = x.transpose().to_owned();
-    l.solve_lower_triangular_in_place(a.as_mut());
-    symmetrize(&mut a);
-    let eig = a.self_adjoint_eigen(Side::Lower).map_err(|e| ModalError::Numerical {
-        stage: "self-adjoint eigen solve".into(),
+    let l1 = b1r
+        .llt(Side::Lower)
+        .map_err(|e| ModalError::Numerical {
+            stage: "Cholesky of the reduced mass matrix ZᵀB1Z".into(),
+            reason: format!("{e:?} (massless directions left after elimination)"),
+        })?
+        .L()
+        .to_owned();
+    // M = L2⁻¹ D_eᵀ Z L1⁻ᵀ, so that L1⁻¹ ZᵀKZ L1⁻ᵀ = MᵀM: the singular values of M are the
+    // frequencies ω (no squaring of the condition number), its right singular vectors give
+    // φ1 = Z L1⁻ᵀ v and its left ones φ2 = L2⁻ᵀ u = B2⁻¹Dᵀφ1/ω, exactly C-orthonormal.
+    let mut y = de.transpose() * &z; // |e| × nz
+    l2.solve_lower_triangular_in_place(y.as_mut());
+    let mut mt = y.transpose().to_owned(); // nz × |e|
+    l1.solve_lower_triangular_in_place(mt.as_mut());
+    let svd = mt.transpose().to_owned().svd().map_err(|e| ModalError::Numerical {
+        stage: "SVD of L2⁻¹DᵀZL1⁻ᵀ".into(),
         reason: format!("{e:?}"),
     })?;
-    let s = eig.S().column_vector();
-    let lambda: Vec<f64> = (0..nz).map(|i| s[i]).collect();
-    let mut y = eig.U().to_owned();
-    l.transpose().solve_upper_triangular_in_place(y.as_mut());
-    let phi1 = &z * &y;
-    Ok(BlockSolution {
-        s1,
-        elastic_cols: elastic.iter().map(|&i| s2[i]).collect(),
-        lambda,
-        phi1,
-        flex,
-    })
+    let sv = svd.S().column_vector();
+    let ns = sv.nrows();
+    let mut v = svd.V().to_owned(); // nz × nz
+    let u = svd.U(); // |e| × |e|
+    let lambda: Vec<f64> = (0..nz).map(|i| if i < ns { sv[i] * sv[i] } else { 0.0 }).collect();
+    l1.transpose().solve_upper_triangular_in_place(v.as_mut());
+    let phi1 = &z * &v;
+    let mut w2 = Mat::<f64>::zeros(elastic.len(), nz);
+    for j in 0..ns.min(nz) {
+        if sv[j] > 0.0 {
+            for i in 0..elastic.len() {
+                w2[(i, j)] = u[(i, j)];
+            }
+        }
+    }
+    l2.transpose().solve_upper_triangular_in_place(w2.as_mut());
+    Ok(BlockSolution { s1, elastic_cols, lambda, phi1, phi2: w2 })
 }
 
 /// Solves the constrained eigenproblem (see the module docs).
@@ -615,8 +629,6 @@ pub fn solve(
             phi1[(i, n_exact + j)] = canonical[(i, j)];
         }
     }
-    // Force modes per block: φ2 = B2e⁻¹ D_eᵀ φ1 / ω (one matrix product per block).
-    let flexed: Vec<Mat<f64>> = blocks.iter().map(|b| &b.flex * &b.phi1).collect();
     for (k, &(l, bi, ci)) in elastic_ids.iter().enumerate() {
         let col = n_rigid + k;
         let b = &blocks[bi];
@@ -629,9 +641,8 @@ pub fn solve(
         for (li, &gi) in b.s1.iter().enumerate() {
             phi1[(gi, col)] = sign * vals[li];
         }
-        let f = &flexed[bi];
         for (le, &ge) in b.elastic_cols.iter().enumerate() {
-            phi2[(ge, col)] = sign * f[(le, ci)] / w;
+            phi2[(ge, col)] = sign * b.phi2[(le, ci)];
         }
     }
     Ok(RawModes {
