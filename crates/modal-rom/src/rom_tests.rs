@@ -290,3 +290,4 @@ fn mode_report_lists_rigid_then_elastic() {
     let json = serde_json::to_value(&r).unwrap();
     assert!(json["frequencies_rad_s"].is_array() && json["labels"].is_array());
 }
+
