@@ -1,8 +1,133 @@
-//! Verification cases of the `mpc` crate (names `mpc/<case>`).
+//! Verification cases of the `mpc` crate (names `mpc/<case>`): closed loops of the paper's
+//! 2D and 3D two-links (§5.2–5.3) against the issue's stabilisation criterion, solve times,
+//! and reproducibility.
 
-use crate::Case;
+use crate::{Case, CaseOutcome, Metric, Tier};
+use mpc::{
+    run, sweep, ControllerKind, ControllerSettings, PlantKind, RunSummary, Scenario, Setup,
+    Strategy,
+};
 
 /// The cases of `mpc`.
 pub fn cases() -> Vec<Case> {
-    Vec::new()
+    vec![
+        Case { name: "mpc/2d-nmpc-fe-short", tier: Tier::Quick, run: nmpc_short },
+        Case { name: "mpc/2d-lmpc-rom-determinism", tier: Tier::Quick, run: determinism },
+        Case { name: "mpc/2d-sweep-lmpc-fe", tier: Tier::Full, run: sweep_2d_lmpc },
+        Case { name: "mpc/2d-sweep-nmpc-fe", tier: Tier::Full, run: sweep_2d_nmpc },
+        Case { name: "mpc/3d-sweep-nmpc-fe", tier: Tier::Full, run: sweep_3d_nmpc },
+        Case { name: "mpc/3d-sweep-lmpc-fe", tier: Tier::Full, run: sweep_3d_lmpc },
+    ]
+}
+
+fn err<E: std::fmt::Display>(e: E) -> String {
+    e.to_string()
+}
+
+/// The paper's mesh: 2 × 50 elements.
+const ELEMENTS: usize = 50;
+
+/// Two seconds of NMPC on the paper's 2D FE plant at ω0 = 0.5: every sample solved by the
+/// first SQP attempt, the rotation slowed down, the joint within the model's range (the modes
+/// are computed at 0°), the inputs within their bounds.
+fn nmpc_short() -> CaseOutcome {
+    let mut sc = Scenario::paper_2d(ELEMENTS).map_err(err)?;
+    sc.duration = 2.0;
+    let setup = Setup::new(&sc).map_err(err)?;
+    let r = run(&setup, 0.5, &ControllerSettings::default(), PlantKind::Fe).map_err(err)?;
+    if let Some(e) = &r.summary.error {
+        return Err(e.clone());
+    }
+    let failed = r.samples.iter().filter(|s| s.strategy != Strategy::Sqp).count();
+    let umax = r.records.iter().flat_map(|x| x.u.iter()).fold(0.0f64, |m, v| m.max(v.abs()));
+    Ok(vec![
+        Metric::at_most("samples not solved by the first SQP attempt", failed as f64, 0.0),
+        // without control the rigid rate stays at ω0 (ratio 1)
+        Metric::at_most("rigid rate ratio at t = 2 s", r.summary.rigid_rate_ratio, 0.5),
+        Metric::at_most("max joint angle (deg)", r.summary.max_joint_angle_deg, 30.0),
+        Metric::at_most("max |u| (bound 5)", umax, 5.0),
+    ])
+}
+
+/// Two identical 7.5 s runs (LMPC on the ROM plant, paper mesh) give identical results
+/// (wall-clock timings aside).
+fn determinism() -> CaseOutcome {
+    let setup = Setup::new(&Scenario::paper_2d(ELEMENTS).map_err(err)?).map_err(err)?;
+    let c = ControllerSettings::of(ControllerKind::Lmpc);
+    let a = run(&setup, 1.0, &c, PlantKind::Rom).map_err(err)?.without_timings();
+    let b = run(&setup, 1.0, &c, PlantKind::Rom).map_err(err)?.without_timings();
+    let mut diff = 0.0f64;
+    for (x, y) in a.records.iter().zip(&b.records) {
+        for (p, q) in x.q.iter().zip(&y.q).chain(x.u.iter().zip(&y.u)) {
+            diff = diff.max((p - q).abs());
+        }
+    }
+    let same = if a == b { 0.0 } else { 1.0 };
+    Ok(vec![
+        Metric::at_most("max |difference| of states and inputs", diff, 0.0),
+        Metric::at_most("results differ (0/1)", same, 0.0),
+    ])
+}
+
+/// The issue's criterion per run, as three metrics, plus NMPC's use of the fallbacks.
+fn criterion(s: &RunSummary, out: &mut Vec<Metric>) {
+    let w = s.omega0;
+    if let Some(e) = &s.error {
+        out.push(Metric::at_most(format!("ω0={w}: run stopped at t={} ({e})", s.t_end), 1.0, 0.0));
+        return;
+    }
+    out.push(Metric::at_most(format!("ω0={w}: V(7.5)/V(0)"), s.v_ratio_final, 0.1));
+    out.push(Metric::at_most(format!("ω0={w}: rigid rate / ω0"), s.rigid_rate_ratio, 0.05));
+    out.push(Metric::at_most(
+        format!("ω0={w}: orientation error / largest excursion"),
+        s.orientation_error_deg / s.max_orientation_deg.max(1e-300),
+        0.2,
+    ));
+    if s.controller == "nmpc" {
+        out.push(Metric::at_most(
+            format!("ω0={w}: samples on relaxed retry / LMPC fallback (report)"),
+            (s.relaxed_samples + s.fallback_samples) as f64,
+            f64::INFINITY,
+        ));
+    }
+}
+
+fn sweep_case(three_d: bool, kind: ControllerKind, omegas: &[f64], time_goal: bool) -> CaseOutcome {
+    let sc = if three_d { Scenario::paper_3d(ELEMENTS) } else { Scenario::paper_2d(ELEMENTS) }
+        .map_err(err)?;
+    let setup = Setup::new(&sc).map_err(err)?;
+    let results = sweep(&setup, omegas, &ControllerSettings::of(kind), PlantKind::Fe, &|| {});
+    let mut out = Vec::new();
+    let mut worst = 0.0f64;
+    let mut wall = 0.0f64;
+    for r in results {
+        let r = r.map_err(err)?;
+        criterion(&r.summary, &mut out);
+        worst = worst.max(r.summary.solve_time_worst_s);
+        wall = wall.max(r.wall_time_s);
+    }
+    if time_goal {
+        // issue 6: worst sample under 50 ms (4× under τs = 0.2 s); whole loop under 10 s
+        out.push(Metric::at_most("worst per-sample solve time (s)", worst, 0.05));
+        out.push(Metric::at_most("slowest closed loop wall time (s)", wall, 10.0));
+    }
+    Ok(out)
+}
+
+const OMEGAS_2D: [f64; 8] = [0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0];
+
+fn sweep_2d_lmpc() -> CaseOutcome {
+    sweep_case(false, ControllerKind::Lmpc, &OMEGAS_2D, false)
+}
+
+fn sweep_2d_nmpc() -> CaseOutcome {
+    sweep_case(false, ControllerKind::Nmpc, &OMEGAS_2D, true)
+}
+
+fn sweep_3d_nmpc() -> CaseOutcome {
+    sweep_case(true, ControllerKind::Nmpc, &[0.25, 0.5, 0.75, 1.0], true)
+}
+
+fn sweep_3d_lmpc() -> CaseOutcome {
+    sweep_case(true, ControllerKind::Lmpc, &[0.5, 0.625, 0.75], false)
 }

@@ -25,10 +25,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             s.t, s.status, s.strategy, s.iterations, s.solve_time, s.cost, s.kkt, s.u
         );
     }
-    for rec in r.records.iter().step_by(10) {
+    let every = a.get(5).map_or(Ok(10), |s| s.parse())?;
+    for rec in r.records.iter().step_by(every) {
         println!(
-            "t={:.2} V={:.4e} angles={:?} tip={:?}",
-            rec.t, rec.v_state, rec.joint_angles, rec.tip
+            "t={:.2} V={:.4e} angles={:.4?} tip={:.4?} u={:.3?} q={:.3?}",
+            rec.t, rec.v_state, rec.joint_angles, rec.tip, rec.u, rec.q
         );
     }
     println!("{:#?}\nwall {:.2} s", r.summary, r.wall_time_s);
