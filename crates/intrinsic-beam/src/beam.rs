@@ -69,6 +69,18 @@ pub struct StepPower {
     pub damping: f64,
 }
 
+impl StepPower {
+    /// Dissipated power `−damping` (≥ 0 for dissipative damping).
+    pub fn dissipated(&self) -> f64 {
+        -self.damping
+    }
+
+    /// Total power `boundary + loads + damping`: `ε(new) − ε(old) = dt · total()`.
+    pub fn total(&self) -> f64 {
+        self.boundary + self.loads + self.damping
+    }
+}
+
 /// Linearised operators at rest (theory.md §4), local indices of the beam vector.
 ///
 /// `B = blkdiag(w_n M, h_e C, 0)` (square, `k(2N+3)`); `A` has the `k(2N+1)` node and element

@@ -318,7 +318,7 @@ impl ImplicitMidpoint {
         self.time
     }
 
-    /// The problem (its loads may be changed with [`ImplicitMidpoint::problem_mut`]).
+    /// The problem (its loads may be changed with [`ImplicitMidpoint::loads_mut`]).
     pub fn problem(&self) -> &BeamProblem {
         &self.problem
     }
