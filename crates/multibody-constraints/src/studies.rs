@@ -13,6 +13,9 @@ use crate::plant::{Plant, PlantSettings};
 use crate::samples;
 use crate::structure::{Placement, Structure, StructureBeam, StructureSettings};
 
+/// `(t, elbow z, tip z)` samples.
+pub type TimeSeries = Vec<(f64, f64, f64)>;
+
 /// A state in which only `beam` moves, rigidly, with angular velocity `omega` (global)
 /// about `center` (e.g. the second link spinning about the elbow).
 pub fn beam_rigid_rotation(
@@ -231,7 +234,7 @@ pub fn l_frame(
     t_end: f64,
     force: f64,
     undamped: bool,
-) -> Result<(Vec<(f64, f64, f64)>, f64)> {
+) -> Result<(TimeSeries, f64)> {
     let section = if undamped { Section::paper_3d().undamped() } else { Section::paper_3d() };
     let structure = samples::l_frame(section, n, 1.0)?;
     let mut plant = Plant::new(structure, PlantSettings { dt, ..Default::default() })?;
@@ -277,7 +280,8 @@ pub fn topology_errors() -> (usize, usize) {
     };
     let ok = vec![EndRef::new("a", End::End), EndRef::new("b", End::Start)];
     let s = StructureSettings::default();
-    let tries: Vec<(Result<Structure>, fn(&MultibodyError) -> bool)> = vec![
+    type Expect = fn(&MultibodyError) -> bool;
+    let tries: Vec<(Result<Structure>, Expect)> = vec![
         (
             Structure::new(
                 two(),
