@@ -89,7 +89,8 @@ impl Kinematics {
         Ok(())
     }
 
-    /// Rotation angle (rad) between the orientations of node `a` here and node `b` in `other`.
+    /// Rotation angle (rad) between the orientations of node `a` here and node `b` in `other`
+    /// (panics if a node index is out of range).
     pub fn angle_between(&self, a: usize, other: &Self, b: usize) -> f64 {
         let qa = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
             self.xi[a][0],
@@ -106,7 +107,7 @@ impl Kinematics {
         qa.angle_to(&qb)
     }
 
-    /// Largest position distance between corresponding nodes.
+    /// Largest position distance between corresponding nodes (over the common nodes).
     pub fn max_position_gap(&self, other: &Self) -> f64 {
         self.r.iter().zip(&other.r).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max)
     }
