@@ -61,10 +61,11 @@ fn report(summary: &run::RunSummary, quiet: bool) {
         return;
     }
     println!(
-        "{} steps in {:.2} s; energy + potential changed by {:.1e} (relative); max velocity-constraint violation {:.1e}; wrote {}",
+        "{} steps in {:.2} s; energy + potential {:.6e} → {:.6e}; max velocity-constraint violation {:.1e}; wrote {}",
         summary.steps,
         summary.seconds,
-        summary.energy_change,
+        summary.total_energy.0,
+        summary.total_energy.1,
         summary.velocity_violation,
         summary.csv.display()
     );
