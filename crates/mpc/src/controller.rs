@@ -45,6 +45,10 @@ pub struct ControllerSettings {
     /// KKT tolerance of the NMPC (max-norm natural residual; the inputs are O(0.1–5), so
     /// 1e-4 resolves them to far below what the plant feels within `τs`) [1e-4].
     pub kkt_tolerance: f64,
+    /// An attempt that ends at the iteration limit is accepted only when its KKT residual
+    /// and constraint violation are at most this; otherwise it counts as failed (its plan is
+    /// inconsistent) and the retry / fallback follow [1e-2].
+    pub accept_kkt: f64,
     /// Levenberg–Marquardt term of the first attempt [0].
     pub levenberg_marquardt: f64,
     /// Globalisation of the first attempt [merit line search].
@@ -68,6 +72,7 @@ impl Default for ControllerSettings {
             integrator: IntegratorSettings::new(IntegratorKind::LawsonRk4, 16),
             max_iterations: 10,
             kkt_tolerance: 1e-4,
+            accept_kkt: 1e-2,
             levenberg_marquardt: 0.0,
             globalisation: Globalisation::merit(),
             qp_form: QpForm::Auto,
@@ -92,6 +97,13 @@ impl ControllerSettings {
         }
         if !(self.kkt_tolerance > 0.0 && self.kkt_tolerance.is_finite()) {
             return Err(invalid("kkt_tolerance", self.kkt_tolerance, "must be finite and > 0"));
+        }
+        if !(self.accept_kkt >= self.kkt_tolerance && self.accept_kkt.is_finite()) {
+            return Err(invalid(
+                "accept_kkt",
+                self.accept_kkt,
+                "must be finite and ≥ kkt_tolerance",
+            ));
         }
         for (name, v) in [
             ("levenberg_marquardt", self.levenberg_marquardt),
@@ -300,17 +312,18 @@ impl Controller {
             None => return Err(invalid("controller", "lmpc", "no NMPC solver")),
         };
         let mut iterations = first.iterations;
-        if first.status.has_iterate() {
+        if accepted(&first, self.settings.accept_kkt) {
             return Ok(self.nmpc_report(t, first, first.status, Strategy::Sqp, iterations));
         }
         if !lmpc_done {
             self.solve_lmpc(x0)?;
         }
+        let accept = self.settings.accept_kkt;
         if let Some(r) = self.relaxed.as_mut() {
             copy_plan(&self.lmpc, r);
             let retry = r.solve(x0)?;
             iterations += retry.iterations;
-            if retry.status.has_iterate() {
+            if accepted(&retry, accept) {
                 if let Some(n) = self.nmpc.as_mut() {
                     copy_plan(r, n);
                 }
@@ -360,6 +373,16 @@ impl Controller {
             kkt: st.kkt,
             u,
         }
+    }
+}
+
+/// Whether a solve left a usable plan: converged, or at the iteration limit with KKT
+/// residual and constraint violation at most `accept`.
+fn accepted(st: &ocp_transcription::SqpStats, accept: f64) -> bool {
+    match st.status {
+        SqpStatus::Solved => true,
+        SqpStatus::MaxIterations => st.kkt <= accept && st.constraint_violation <= accept,
+        _ => false,
     }
 }
 
