@@ -72,32 +72,32 @@ pub enum SqpMode {
     LinearQuadratic,
 }
 
-/// SQP settings. Defaults in brackets.
+/// SQP settings. Defaults in parentheses.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SqpSettings {
-    /// Mode [`SqpMode::Sqp`].
+    /// Mode (default `SqpMode::Sqp`).
     pub mode: SqpMode,
-    /// Hessian [`HessianApproximation::GaussNewton`].
+    /// Hessian (default `HessianApproximation::GaussNewton`).
     pub hessian: HessianApproximation,
-    /// QP form [`QpForm::Auto`].
+    /// QP form (default `QpForm::Auto`).
     pub qp_form: QpForm,
-    /// Globalisation [merit line search](Globalisation::merit).
+    /// Globalisation (default: [merit line search](Globalisation::merit)).
     pub globalisation: Globalisation,
-    /// Levenberg–Marquardt term `μ ≥ 0` added to every Hessian block [0].
+    /// Levenberg–Marquardt term `μ ≥ 0` added to every Hessian block (default 0).
     pub levenberg_marquardt: f64,
-    /// SQP iteration limit ≥ 1 [50].
+    /// SQP iteration limit ≥ 1 (default 50).
     pub max_iterations: usize,
     /// Termination: max-norm KKT residual (natural residual of stationarity with the bound
-    /// projections, defects, initial condition, state-bound violation) [1e-8].
+    /// projections, defects, initial condition, state-bound violation) (default 1e-8).
     pub kkt_tolerance: f64,
-    /// QP solver tolerance (Clarabel gap/feasibility, dense IP residual and μ) [1e-11].
+    /// QP solver tolerance (Clarabel gap/feasibility, dense IP residual and μ) (default 1e-11).
     pub qp_tolerance: f64,
-    /// QP iteration limit [200].
+    /// QP iteration limit (default 200).
     pub qp_max_iterations: usize,
-    /// Integrator inside the shooting intervals [RK4, 4 substeps].
+    /// Integrator inside the shooting intervals (default RK4, 4 substeps).
     pub integrator: IntegratorSettings,
     /// Integrate the shooting intervals of a linearisation on the rayon thread pool
-    /// (Gauss–Newton path; exact-Hessian sweeps and line-search trials stay sequential) [false].
+    /// (Gauss–Newton path; exact-Hessian sweeps and line-search trials stay sequential) (default false).
     pub parallel_intervals: bool,
 }
 
