@@ -18,7 +18,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let t = std::time::Instant::now();
     let setup = Setup::new(&scenario)?;
     eprintln!("setup {:?}", t.elapsed());
-    let r = run(&setup, omega0, &ControllerSettings::of(kind), plant)?;
+    let mut c = ControllerSettings::of(kind);
+    c.real_time_iteration = std::env::var("MPC_RTI").is_ok();
+    if let Ok(n) = std::env::var("MPC_SUBSTEPS") {
+        c.integrator.substeps = n.parse()?;
+    }
+    let r = run(&setup, omega0, &c, plant)?;
     for s in &r.samples {
         println!(
             "t={:.2} {} {:?} it={} time={:.4} cost={:.4e} kkt={:.1e} u={:?}",

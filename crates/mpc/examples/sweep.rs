@@ -21,7 +21,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .collect::<Result<_, _>>()?;
     let scenario = if dim == "3d" { Scenario::paper_3d(50)? } else { Scenario::paper_2d(50)? };
     let setup = Setup::new(&scenario)?;
-    let results = sweep(&setup, &omegas, &ControllerSettings::of(kind), plant, &|| {});
+    let mut c = ControllerSettings::of(kind);
+    c.real_time_iteration = std::env::var("MPC_RTI").is_ok();
+    if let Ok(n) = std::env::var("MPC_SUBSTEPS") {
+        c.integrator.substeps = n.parse()?;
+    }
+    let results = sweep(&setup, &omegas, &c, plant, &|| {});
     for r in results {
         let r = r?;
         let s = &r.summary;

@@ -40,6 +40,10 @@ pub struct ControllerSettings {
     /// Integrator inside each shooting interval [Lawson RK4 on `W`, 16 substeps per
     /// `Δt = 0.25 s`; theory.md §8 measured a one-interval error 1.2e-2 at ω0 = 2].
     pub integrator: IntegratorSettings,
+    /// Real-time iteration: one SQP iteration (one QP) per sample from the shifted plan,
+    /// instead of iterating to the KKT tolerance [false]. The retry and fallback still apply
+    /// when that iteration fails.
+    pub real_time_iteration: bool,
     /// SQP iteration limit of the NMPC per sample [10].
     pub max_iterations: usize,
     /// KKT tolerance of the NMPC (max-norm natural residual; the inputs are O(0.1–5), so
@@ -70,6 +74,7 @@ impl Default for ControllerSettings {
         Self {
             kind: ControllerKind::Nmpc,
             integrator: IntegratorSettings::new(IntegratorKind::LawsonRk4, 16),
+            real_time_iteration: false,
             max_iterations: 10,
             kkt_tolerance: 1e-4,
             accept_kkt: 1e-2,
@@ -219,7 +224,11 @@ impl Controller {
             ControllerKind::Lmpc => (None, None),
             ControllerKind::Nmpc => {
                 let s = SqpSettings {
-                    mode: SqpMode::Sqp,
+                    mode: if settings.real_time_iteration {
+                        SqpMode::RealTimeIteration
+                    } else {
+                        SqpMode::Sqp
+                    },
                     globalisation: settings.globalisation,
                     levenberg_marquardt: settings.levenberg_marquardt,
                     max_iterations: settings.max_iterations,
@@ -228,6 +237,7 @@ impl Controller {
                 let relaxed = match settings.retry_relaxation {
                     Some(alpha) => {
                         let r = SqpSettings {
+                            mode: SqpMode::Sqp,
                             globalisation: Globalisation::FixedRelaxation { alpha },
                             levenberg_marquardt: settings.retry_levenberg_marquardt,
                             // a fixed relaxation contracts by (1 − α) per iteration at best
@@ -380,7 +390,7 @@ impl Controller {
 /// residual and constraint violation at most `accept`.
 fn accepted(st: &ocp_transcription::SqpStats, accept: f64) -> bool {
     match st.status {
-        SqpStatus::Solved => true,
+        SqpStatus::Solved | SqpStatus::RealTimeIteration => true,
         SqpStatus::MaxIterations => st.kkt <= accept && st.constraint_violation <= accept,
         _ => false,
     }
