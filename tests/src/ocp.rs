@@ -314,13 +314,16 @@ fn statuses() -> CaseOutcome {
     Ok(out)
 }
 
+/// States `x_0 … x_N` and controls `u_0 … u_{N−1}`.
+type Trajectory = (Vec<DVector<f64>>, Vec<DVector<f64>>);
+
 /// Riccati (closed-loop) solution of the discrete LQ problem the SQP builds for `model`.
 fn riccati_solution(
     model: &LinearModel,
     ocp: &Ocp,
     settings: &IntegratorSettings,
     x0: &DVector<f64>,
-) -> Result<(Vec<DVector<f64>>, Vec<DVector<f64>>), String> {
+) -> Result<Trajectory, String> {
     let (nx, nu, n, dt) = (ocp.nx(), ocp.nu(), ocp.intervals, ocp.interval());
     let mut int = Integrator::new(model, settings, dt).map_err(err)?;
     let (mut a, mut b, mut xe) = (DMatrix::zeros(nx, nx), DMatrix::zeros(nx, nu), vec![0.0; nx]);
