@@ -169,6 +169,13 @@ fn qp_table() {
             println!("| {kind:?} × {n} | {form:?} | {t:.1} | {ti:.1} | {tc:.1} | {tq:.1} | {qi} |");
         }
     }
+    // without the line-search trial integration (full steps, as RTI usually runs)
+    let full = SqpSettings {
+        globalisation: ocp_transcription::Globalisation::FullStep,
+        ..rti(IntegratorKind::LawsonRk4, 20, QpForm::CondensedDense)
+    };
+    let (t, ti, tc, tq, qi) = time_iteration(61, 24, full, 7);
+    println!("| LawsonRk4 × 20, full step | CondensedDense | {t:.1} | {ti:.1} | {tc:.1} | {tq:.1} | {qi} |");
     // wall clock with the intervals on the thread pool (2 cores here)
     for n in [20, 24] {
         let settings = SqpSettings {
