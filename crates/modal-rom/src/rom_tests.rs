@@ -332,3 +332,31 @@ fn joint_torque_input_matches_the_plant() {
         );
     }
 }
+
+#[test]
+fn options_without_quaternions_and_with_rigid_q2() {
+    let opts =
+        RomOptions { rigid_q2: true, quaternions: false, damping: false, ..RomOptions::default() };
+    let s = samples::paper_2d(12, 0.2, true, &ModeSelection::Lowest(8), &opts).unwrap();
+    let rom = &s.rom;
+    assert_eq!(rom.n_xi(), 0);
+    assert_eq!(rom.n_q2(), 8);
+    assert_eq!(rom.n_state(), 16);
+    assert!(rom.sigma().as_ref().norm_max() == 0.0, "damping switched off");
+    let q: Vec<f64> = (0..16).map(|i| (i as f64 * 0.9).cos()).collect();
+    let u = vec![0.1, -0.2, 0.3];
+    let n = rom.energy_neutrality(&q).unwrap();
+    assert!(n.abs() < 1e-12 * rom.gamma1().max_abs().max(rom.gamma2().max_abs()) * 1e3);
+    // rigid q2 stay at 0 (φ2 ≡ 0, ω = 0): their rates vanish
+    let mut f = vec![0.0; 16];
+    rom.rhs(&q, &u, &mut f).unwrap();
+    let o2 = rom.q2_offset();
+    assert_eq!(f[o2], 0.0);
+    assert_eq!(f[o2 + 1], 0.0);
+    // bad inputs are errors, not panics or NaN
+    assert!(rom.rhs(&q[..5], &u, &mut f).is_err());
+    let mut bad = q.clone();
+    bad[3] = f64::NAN;
+    assert!(rom.rhs(&bad, &u, &mut f).is_err());
+    assert!(RomOptions { quaternion_tolerance: 0.0, ..RomOptions::default() }.validate().is_err());
+}
