@@ -114,6 +114,15 @@ pub struct Beam {
     /// `½` (differential) or `1` (algebraic) per local unknown: `∂mid/∂new`.
     mid_weight: Vec<f64>,
     has_flux_damping: bool,
+    /// `M` restricted to the active components, row-major `k×k`.
+    reduced_mass: Vec<f64>,
+    /// `C` restricted to the active components, row-major `k×k`.
+    reduced_compliance: Vec<f64>,
+}
+
+thread_local! {
+    /// Per-thread midpoint buffer of [`Beam::step_residual`] (no allocation per call).
+    static MID_SCRATCH: std::cell::RefCell<Vec<f64>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 impl Beam {
@@ -143,7 +152,14 @@ impl Beam {
             *w = 1.0;
         }
         let has_flux_damping = section.d1.iter().chain(section.d2.iter()).any(|&x| x != 0.0);
+        let reduce = |m: &Matrix6<f64>| {
+            (0..k * k).map(|ab| components.entry(m, ab / k, ab % k)).collect::<Vec<_>>()
+        };
+        let reduced_mass = reduce(&section.mass);
+        let reduced_compliance = reduce(&section.compliance);
         Ok(Self {
+            reduced_mass,
+            reduced_compliance,
             e_mat: e_matrix(&section.kappa0),
             section,
             mesh,
@@ -233,8 +249,10 @@ impl Beam {
         check_len("old state", self.dim(), old.len())?;
         check_len("new state", self.dim(), new.len())?;
         check_len("midpoint", self.dim(), mid.len())?;
-        for i in 0..self.dim() {
-            mid[i] = if self.mid_weight[i] == 1.0 { new[i] } else { 0.5 * (old[i] + new[i]) };
+        // μ new + (1 − μ) old with μ ∈ {½, 1}: bitwise equal to ½(old + new) resp. new (the
+        // products by ½ are exact), and branch-free
+        for (((m, &w), &o), &x) in mid.iter_mut().zip(&self.mid_weight).zip(old).zip(new) {
+            *m = w * x + (1.0 - w) * o;
         }
         Ok(())
     }
@@ -556,13 +574,17 @@ impl Beam {
     ) -> Result<()> {
         self.check_input(input)?;
         check_len("residual", self.n_rows(), out.len())?;
-        let mut mid = vec![0.0; self.dim()];
-        self.midpoint(old, new, &mut mid)?;
-        let rot = self.midpoint_rotations(input, &mid);
-        let (loads, _) = self.node_loads(input.time + 0.5 * input.dt, input.loads, &rot);
-        self.rhs(&mid, &loads, out);
-        for i in 0..out.len() {
-            out[i] = -out[i];
+        MID_SCRATCH.with(|cell| -> Result<()> {
+            let mut mid = cell.borrow_mut();
+            mid.resize(self.dim(), 0.0);
+            self.midpoint(old, new, &mut mid)?;
+            let rot = self.midpoint_rotations(input, &mid);
+            let (loads, _) = self.node_loads(input.time + 0.5 * input.dt, input.loads, &rot);
+            self.rhs_into(&mid, &loads, out, None);
+            Ok(())
+        })?;
+        for v in out.iter_mut() {
+            *v = -*v;
         }
         self.add_inertia(old, new, input.dt, out);
         if out.iter().any(|v| !v.is_finite()) {
@@ -574,25 +596,25 @@ impl Beam {
     /// `out += B (new − old)/dt` on the beam rows.
     fn add_inertia(&self, old: &[f64], new: &[f64], dt: f64, out: &mut [f64]) {
         let k = self.k;
-        let (m, c) = (&self.section.mass, &self.section.compliance);
-        for node in 0..self.n_nodes() {
-            let w = self.mesh.weights()[node] / dt;
+        let (m, c) = (&self.reduced_mass, &self.reduced_compliance);
+        for (node, w) in self.mesh.weights().iter().enumerate() {
+            let w = w / dt;
             let s = node * k;
             for a in 0..k {
                 let mut acc = 0.0;
                 for b in 0..k {
-                    acc += self.components.entry(m, a, b) * (new[s + b] - old[s + b]);
+                    acc += m[a * k + b] * (new[s + b] - old[s + b]);
                 }
                 out[s + a] += w * acc;
             }
         }
-        for e in 0..self.n_elements() {
-            let h = self.mesh.lengths()[e] / dt;
+        for (e, h) in self.mesh.lengths().iter().enumerate() {
+            let h = h / dt;
             let s = self.x2_index(e, 0);
             for a in 0..k {
                 let mut acc = 0.0;
                 for b in 0..k {
-                    acc += self.components.entry(c, a, b) * (new[s + b] - old[s + b]);
+                    acc += c[a * k + b] * (new[s + b] - old[s + b]);
                 }
                 out[s + a] += h * acc;
             }

@@ -263,6 +263,8 @@ pub struct ImplicitMidpoint {
     factor_dt: Option<f64>,
     /// State before the last step and that step's size (for extrapolation).
     previous: Option<(Vec<f64>, f64)>,
+    /// End rows of the current step: (constrained unknown, target value), left then right.
+    end_rows: Vec<(usize, f64)>,
 }
 
 impl ImplicitMidpoint {
@@ -300,6 +302,7 @@ impl ImplicitMidpoint {
             counters: Counters::default(),
             factor_dt: None,
             previous: None,
+            end_rows: Vec::new(),
         })
     }
 
@@ -350,13 +353,8 @@ impl ImplicitMidpoint {
         };
         let rows = beam.n_rows();
         beam.step_residual(&input, &self.state, &self.new, &mut self.residual[..rows])?;
-        let k = beam.k();
-        for (e, end) in [End::Left, End::Right].into_iter().enumerate() {
-            for a in 0..k {
-                let col = self.problem.end_unknown(end, a);
-                self.residual[rows + e * k + a] =
-                    self.new[col] - self.problem.end_target(end, a, self.time, dt);
-            }
+        for (r, &(col, target)) in self.residual[rows..].iter_mut().zip(&self.end_rows) {
+            *r = self.new[col] - target;
         }
         Ok(())
     }
@@ -404,6 +402,14 @@ impl ImplicitMidpoint {
             return Err(BeamError::NonPositiveTime { field: "dt".into(), value: dt });
         }
         self.predict(dt);
+        let k = self.problem.beam.k();
+        self.end_rows.clear();
+        for end in [End::Left, End::Right] {
+            for a in 0..k {
+                let col = self.problem.end_unknown(end, a);
+                self.end_rows.push((col, self.problem.end_target(end, a, self.time, dt)));
+            }
+        }
         let mut last = f64::INFINITY;
         let mut previous_update = f64::INFINITY;
         let mut fresh = false;
@@ -449,7 +455,13 @@ impl ImplicitMidpoint {
             };
             if last <= self.settings.tolerance || estimate <= self.settings.tolerance {
                 self.kinematics.advance(&self.problem.beam, &self.state, &self.new, dt)?;
-                let old = std::mem::replace(&mut self.state, self.new.clone());
+                // the old state becomes `previous` (its buffer reused), `new` the state
+                let mut old = match self.previous.take() {
+                    Some((buffer, _)) => buffer,
+                    None => vec![0.0; self.new.len()],
+                };
+                old.copy_from_slice(&self.new);
+                std::mem::swap(&mut old, &mut self.state);
                 self.previous = Some((old, dt));
                 self.time += dt;
                 self.counters.steps += 1;
