@@ -40,7 +40,7 @@ pub struct PlantSettings {
     /// last states (default `true`).
     pub extrapolate: bool,
     /// Keep the factorised Jacobian across iterations and steps while Newton contracts by at
-    /// least 10× per iteration (default `true`); `false`: full Newton.
+    /// least 20× per iteration (default `true`); `false`: full Newton.
     pub reuse_jacobian: bool,
 }
 
@@ -663,7 +663,7 @@ impl Plant {
                 break;
             }
             // A reused Jacobian that converges slowly (or not at all) is refreshed.
-            if it >= 1 && rate > 0.1 && !fresh {
+            if it >= 1 && rate > 0.05 && !fresh {
                 refresh = true;
             }
             fresh = false;
