@@ -45,7 +45,7 @@ fn nmpc_short() -> CaseOutcome {
         // without control the rigid rate stays at ω0 (ratio 1)
         Metric::at_most("rigid rate ratio at t = 2 s", r.summary.rigid_rate_ratio, 0.5),
         Metric::at_most("max joint angle (deg)", r.summary.max_joint_angle_deg, 30.0),
-        Metric::at_most("max |u| (bound 5)", umax, 5.0),
+        Metric::at_most("max abs(u) (bound 5)", umax, 5.0),
     ])
 }
 

@@ -26,6 +26,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Ok(n) = std::env::var("MPC_SUBSTEPS") {
         c.integrator.substeps = n.parse()?;
     }
+    if let Ok(v) = std::env::var("MPC_LM") {
+        c.levenberg_marquardt = v.parse()?;
+    }
     let results = sweep(&setup, &omegas, &c, plant, &|| {});
     for r in results {
         let r = r?;
