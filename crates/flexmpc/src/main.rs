@@ -37,7 +37,7 @@ enum Command {
     Simulate {
         /// Scene file (TOML).
         scene: PathBuf,
-        /// Output folder (default `output/<scene name>`).
+        /// Output folder (default `out/<scene name>`).
         #[arg(long)]
         out: Option<PathBuf>,
     },
@@ -53,7 +53,7 @@ fn default_out(scene: &Path) -> PathBuf {
         .file_stem()
         .map(|s| s.to_string_lossy().to_string())
         .unwrap_or_else(|| "scene".into());
-    PathBuf::from("output").join(stem)
+    PathBuf::from("out").join(stem)
 }
 
 fn report(summary: &run::RunSummary, quiet: bool) {
