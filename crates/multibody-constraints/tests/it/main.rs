@@ -411,3 +411,57 @@ fn redundant_constraints_are_found_by_rank() {
     assert!(matches!(e, MultibodyError::RedundantConstraints { deficiency: 1, .. }), "{text}");
     assert!(text.contains("left") && text.contains("right"), "{text}");
 }
+
+/// The planar two-link (3 components) and the same structure on spatial components (paper 2D
+/// section: out-of-plane directions rigid or massless; hinges about e2) follow the same
+/// trajectory.
+#[test]
+fn planar_and_spatial_two_links_agree() {
+    let run = |components: Components| {
+        let beam =
+            Beam::new(Section::paper_2d(), Mesh::uniform(1.0, 8).unwrap(), components).unwrap();
+        let structure = Structure::new(
+            vec![
+                StructureBeam::new("link1", beam.clone(), Placement::origin()),
+                StructureBeam::new(
+                    "link2",
+                    beam,
+                    Placement::Attached {
+                        joint: "elbow".into(),
+                        axis: [0.0, 1.0, 0.0],
+                        angle: 0.4,
+                    },
+                ),
+            ],
+            vec![Joint {
+                name: "elbow".into(),
+                ends: vec![EndRef::new("link1", End::End), EndRef::new("link2", End::Start)],
+                kind: JointKind::hinge_on_first([0.0, 1.0, 0.0]),
+            }],
+            vec![Support {
+                name: "root".into(),
+                end: EndRef::new("link1", End::Start),
+                kind: JointKind::hinge_global([0.0, 1.0, 0.0]),
+            }],
+            StructureSettings::default(),
+        )
+        .unwrap();
+        let x = structure.rigid_rotation_state(Vector3::new(0.0, 1.5, 0.0), Vector3::zeros());
+        let settings = PlantSettings { dt: 2e-3, newton_tolerance: 1e-14, ..Default::default() };
+        let mut plant = Plant::new(structure, settings).unwrap();
+        plant.set_state(&x).unwrap();
+        plant.set_joint_torque("root", None, 0.3).unwrap();
+        for _ in 0..500 {
+            plant.step().unwrap();
+        }
+        (plant.position(1, 8), plant.joint_angles().to_vec(), plant.energy())
+    };
+    let (pp, ap, ep) = run(Components::Planar);
+    let (ps, as_, es) = run(Components::Spatial);
+    // Same equations on the active components; differences are Newton tolerance and round-off.
+    assert!((pp - ps).norm() < 1e-10, "tip {pp} vs {ps}");
+    for (a, b) in ap.iter().zip(&as_) {
+        assert!((a - b).abs() < 1e-10, "angles {ap:?} vs {as_:?}");
+    }
+    assert!((ep - es).abs() < 1e-10 * ep, "energy {ep} vs {es}");
+}
