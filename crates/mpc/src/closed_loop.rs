@@ -316,10 +316,7 @@ fn summarise(
         solve_time_median_s: median,
         failed_first_attempts: samples
             .iter()
-            .filter(|s| {
-                s.first_status != s.status
-                    || s.strategy != Strategy::Sqp && s.strategy != Strategy::Qp
-            })
+            .filter(|s| matches!(s.strategy, Strategy::Relaxed | Strategy::Fallback))
             .count(),
         relaxed_samples: samples.iter().filter(|s| s.strategy == Strategy::Relaxed).count(),
         fallback_samples: samples.iter().filter(|s| s.strategy == Strategy::Fallback).count(),
