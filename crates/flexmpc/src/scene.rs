@@ -132,6 +132,8 @@ pub struct JointSpec {
     pub rotation: Option<[String; 3]>,
     /// Custom: frame of the rotation axes (default: `frame`).
     pub rotation_frame: Option<String>,
+    /// Custom: the three axes (orthonormal columns in their frame; default e1, e2, e3).
+    pub axes: Option<[[f64; 3]; 3]>,
 }
 
 /// A time history of an input.
@@ -657,6 +659,7 @@ fn joint_kind(
                 translation_frame: frame,
                 rotation: freedoms(&j.rotation, "rotation")?,
                 rotation_frame: rf,
+                axes: j.axes,
             }
         }
         other => {

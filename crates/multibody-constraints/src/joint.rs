@@ -129,6 +129,10 @@ pub enum JointKind {
         rotation: [Freedom; 3],
         /// Frame of the rotation axes.
         rotation_frame: Frame,
+        /// The three axes (columns: directions in their frame), for both translations and
+        /// rotations; `None`: the frame's own `e1, e2, e3`. Must be orthonormal.
+        #[serde(default)]
+        axes: Option<[[f64; 3]; 3]>,
     },
 }
 
@@ -278,13 +282,43 @@ impl JointKind {
                     [ax(a, Free), ax(b, Rigid), ax(c, Rigid)],
                 )
             }
-            JointKind::Custom { translation, translation_frame, rotation, rotation_frame } => {
+            JointKind::Custom {
+                translation,
+                translation_frame,
+                rotation,
+                rotation_frame,
+                axes,
+            } => {
                 check_frame(*translation_frame)?;
                 check_frame(*rotation_frame)?;
-                (
-                    identity_axes(Part::Linear, *translation_frame, *translation),
-                    identity_axes(Part::Angular, *rotation_frame, *rotation),
-                )
+                let mut t = identity_axes(Part::Linear, *translation_frame, *translation);
+                let mut r = identity_axes(Part::Angular, *rotation_frame, *rotation);
+                if let Some(cols) = axes {
+                    let d: Vec<Vector3<f64>> = cols.iter().map(|c| Vector3::from(*c)).collect();
+                    for (i, c) in cols.iter().enumerate() {
+                        if !(d[i].norm().is_finite() && d[i].norm() > 1e-12) {
+                            return Err(MultibodyError::ZeroAxis {
+                                owner: owner.to_string(),
+                                axis: *c,
+                            });
+                        }
+                    }
+                    let m = Matrix3::from_columns(&d);
+                    let err = (m.transpose() * m - Matrix3::identity()).amax();
+                    if err > 1e-9 {
+                        return Err(MultibodyError::BadInput {
+                            input: owner.to_string(),
+                            reason: format!(
+                                "custom axes {cols:?} are not orthonormal (|AᵀA − I| = {err:.1e})"
+                            ),
+                        });
+                    }
+                    for i in 0..3 {
+                        t[i].direction = d[i];
+                        r[i].direction = d[i];
+                    }
+                }
+                (t, r)
             }
         };
         Ok([t[0], t[1], t[2], r[0], r[1], r[2]])
@@ -462,6 +496,22 @@ mod tests {
     }
 
     #[test]
+    fn custom_axes_must_be_orthonormal() {
+        let kind = JointKind::Custom {
+            translation: [Freedom::Free, Freedom::Rigid, Freedom::Rigid],
+            translation_frame: Frame::Global,
+            rotation: [Freedom::Rigid; 3],
+            rotation_frame: Frame::Global,
+            axes: Some([[1.0, 0.0, 0.0], [0.5, 1.0, 0.0], [0.0, 0.0, 1.0]]),
+        };
+        let err = kind.axes("slider", 2).unwrap_err();
+        assert!(
+            err.to_string().contains("orthonormal") && err.to_string().contains("slider"),
+            "{err}"
+        );
+    }
+
+    #[test]
     fn planar_hinge_off_e2_is_an_error() {
         let err = JointKind::hinge_global([1.0, 1.0, 0.0]).planar_axes("elbow", 2).unwrap_err();
         assert!(matches!(err, MultibodyError::NotPlanar { .. }), "{err}");
@@ -490,6 +540,17 @@ mod tests {
                 translation_frame: Frame::End(1),
                 rotation: [Freedom::Free, Freedom::Rigid, Freedom::Free],
                 rotation_frame: Frame::Global,
+                axes: None,
+            },
+            JointKind::Custom {
+                translation: [Freedom::Free, Freedom::Rigid, Freedom::Rigid],
+                translation_frame: Frame::Global,
+                rotation: [Freedom::Rigid, Freedom::Free, Freedom::Rigid],
+                rotation_frame: Frame::End(0),
+                axes: Some({
+                    let r = rot(Vector3::new(1.0, 2.0, 3.0), 0.8);
+                    [0, 1, 2].map(|i| [r[(0, i)], r[(1, i)], r[(2, i)]])
+                }),
             },
         ] {
             let axes = kind.axes("j", 3).unwrap();
