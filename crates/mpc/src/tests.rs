@@ -279,3 +279,29 @@ fn nmpc_on_the_fe_plant_short_run() {
     assert!(r.samples.iter().all(|s| s.strategy == crate::Strategy::Sqp), "{:?}", r.samples);
     assert!(r.summary.rigid_rate_ratio < 0.5, "{:?}", r.summary);
 }
+
+/// The exported first-sample problem carries the controller's data and the projected state.
+#[test]
+fn first_sample_export_round_trip() {
+    let setup = setup_2d();
+    let c = ControllerSettings::default();
+    let dir = std::env::temp_dir().join(format!("mpc-export-{}", std::process::id()));
+    let p = export_first_sample(setup, 0.5, &c, &dir).unwrap();
+    let text = std::fs::read_to_string(dir.join("ocp.json")).unwrap();
+    let back: OcpExport = serde_json::from_str(&text).unwrap();
+    assert_eq!(back, p);
+    let rom = modal_rom::ModalRom::read(&dir).unwrap();
+    assert_eq!(rom.n_state(), p.x0.len());
+    assert_eq!(p.q.len(), p.x0.len());
+    assert_eq!((p.horizon, p.intervals, p.u_max[0]), (6.0, 24, 5.0));
+    // V(0) of the exported data equals the setup's (same sums, other order: round-off)
+    let v = setup.weights.state_cost(&p.x0);
+    let v_export = {
+        let e: Vec<f64> = p.x0.iter().zip(&p.x_ref).map(|(a, b)| a - b).collect();
+        0.5 * (0..e.len())
+            .map(|i| (0..e.len()).map(|j| e[i] * p.q[i][j] * e[j]).sum::<f64>())
+            .sum::<f64>()
+    };
+    assert!((v - v_export).abs() <= 1e-13 * v, "{v} vs {v_export}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

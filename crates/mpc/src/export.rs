@@ -1,0 +1,121 @@
+//! Export of one sample's optimal control problem (the first sample of a run), so that any
+//! other solver can solve exactly the same problem: the modal model (modal-rom's JSON +
+//! `.npy` export) plus `ocp.json` with weights, references, bounds, horizon, `Nc`, integrator
+//! and initial state.
+
+use crate::controller::ControllerSettings;
+use crate::error::{invalid, MpcError, Result};
+use crate::scenario::Setup;
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// The optimal control problem (33)–(35) of one sample, in plain data.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OcpExport {
+    /// Format tag `flexmpc-ocp`.
+    pub format: String,
+    /// Format version (1).
+    pub version: u32,
+    /// `nmpc` (the nonlinear model) or `lmpc` (the model linearised at `x_ref`, `u_ref`).
+    pub controller: String,
+    /// Disturbance magnitude of the run (rad/s).
+    pub omega0: f64,
+    /// Horizon `τp` (s).
+    pub horizon: f64,
+    /// Control intervals `Nc` (piecewise-constant `u`).
+    pub intervals: usize,
+    /// Sampling time `τs` (s) of the closed loop.
+    pub sampling: f64,
+    /// State weight `Q`, row-major `n × n`.
+    pub q: Vec<Vec<f64>>,
+    /// Input weight `R`, row-major.
+    pub r: Vec<Vec<f64>>,
+    /// State reference.
+    pub x_ref: Vec<f64>,
+    /// Input reference.
+    pub u_ref: Vec<f64>,
+    /// Lower input bounds.
+    pub u_min: Vec<f64>,
+    /// Upper input bounds.
+    pub u_max: Vec<f64>,
+    /// Initial modal state `q_a(0)` (projection of the FE state).
+    pub x0: Vec<f64>,
+    /// Integrator inside each interval (`Debug` name) and its substeps.
+    pub integrator: String,
+    /// Substeps per interval.
+    pub substeps: usize,
+    /// How the cost is discretised.
+    pub cost_discretisation: String,
+    /// Input names, in the order of `u`.
+    pub inputs: Vec<String>,
+}
+
+/// The first sample's problem of a run with disturbance `omega0`.
+pub fn first_sample_problem(
+    setup: &Setup,
+    omega0: f64,
+    controller: &ControllerSettings,
+) -> Result<OcpExport> {
+    if !omega0.is_finite() {
+        return Err(invalid("omega0", omega0, "must be finite"));
+    }
+    let sc = &setup.scenario;
+    let w = Vector3::from_column_slice(&sc.omega_direction) * omega0;
+    let x0 = sc.structure.rigid_rotation_state(w, Vector3::from_column_slice(&sc.center));
+    let xi: Vec<[f64; 4]> = sc
+        .structure
+        .reference()
+        .iter()
+        .flat_map(|k| k.xi.iter().map(|v| [v[0], v[1], v[2], v[3]]))
+        .collect();
+    let q0 = setup.rom.project_full(&x0, Some(&xi))?;
+    let rows = |m: &nalgebra::DMatrix<f64>| -> Vec<Vec<f64>> {
+        (0..m.nrows()).map(|i| m.row(i).iter().copied().collect()).collect()
+    };
+    let nu = setup.rom.n_inputs();
+    Ok(OcpExport {
+        format: "flexmpc-ocp".into(),
+        version: 1,
+        controller: controller.kind.name().into(),
+        omega0,
+        horizon: sc.mpc.horizon,
+        intervals: sc.mpc.intervals,
+        sampling: sc.mpc.sampling,
+        q: rows(&setup.weights.q),
+        r: rows(&setup.weights.r),
+        x_ref: setup.weights.x_ref.iter().copied().collect(),
+        u_ref: vec![0.0; nu],
+        u_min: vec![-sc.mpc.u_max; nu],
+        u_max: vec![sc.mpc.u_max; nu],
+        x0: q0,
+        integrator: format!("{:?}", controller.integrator.kind),
+        substeps: controller.integrator.substeps,
+        cost_discretisation:
+            "J = Σ_k c_k Δt ½(s_k − x_ref)ᵀQ(s_k − x_ref) + Σ_k Δt ½(u_k − u_ref)ᵀR(u_k − u_ref), \
+            c_0 = c_Nc = ½, else 1 (trapezoidal on the shooting nodes), Δt = horizon/intervals"
+                .into(),
+        inputs: setup.rom.input_names().to_vec(),
+    })
+}
+
+/// Writes the modal model (modal-rom's export) and `ocp.json` of the first sample to `dir`.
+/// For `lmpc` the dynamics are those of the exported model linearised at `(x_ref, u_ref)`.
+pub fn export_first_sample(
+    setup: &Setup,
+    omega0: f64,
+    controller: &ControllerSettings,
+    dir: &Path,
+) -> Result<OcpExport> {
+    let p = first_sample_problem(setup, omega0, controller)?;
+    setup.rom.export(dir)?;
+    let text = serde_json::to_string_pretty(&p)
+        .map_err(|e| invalid("ocp.json", "serialisation", e.to_string()))?;
+    let path = dir.join("ocp.json");
+    std::fs::write(&path, text).map_err(|e| MpcError::Invalid {
+        field: path.display().to_string(),
+        value: "write".into(),
+        reason: e.to_string(),
+    })?;
+    Ok(p)
+}
