@@ -53,9 +53,9 @@ pub struct ControllerSettings {
     /// and constraint violation are at most this; otherwise it counts as failed (its plan is
     /// inconsistent) and the retry / fallback follow [1e-2].
     pub accept_kkt: f64,
-    /// Levenberg–Marquardt term of the first attempt [1e-2] (theory.md §8: LM plus
-    /// backtracking is what kept the SQP from diverging at large ω0; measured on the paper's
-    /// 2D sweep it rescued ω0 = 1.75–2.0, with 0 the NMPC lost the orientation at ω0 = 2).
+    /// Levenberg–Marquardt term of the first attempt [0]. 1e-2 helped the 2D sweep at
+    /// ω0 = 1.75–2.0 but stalled every 3D sample (no plan accepted, LMPC fallback throughout),
+    /// so it is an option, not the default.
     pub levenberg_marquardt: f64,
     /// Globalisation of the first attempt [merit line search].
     pub globalisation: Globalisation,
@@ -80,7 +80,7 @@ impl Default for ControllerSettings {
             max_iterations: 10,
             kkt_tolerance: 1e-4,
             accept_kkt: 1e-2,
-            levenberg_marquardt: 1e-2,
+            levenberg_marquardt: 0.0,
             globalisation: Globalisation::merit(),
             qp_form: QpForm::Auto,
             retry_relaxation: Some(0.5),
