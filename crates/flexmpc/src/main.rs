@@ -5,6 +5,7 @@
 //! inputs); `flexmpc check <scene.toml>` only validates it. Without arguments it runs the
 //! built-in default scene (`scenes/cantilever.toml`) and says where its results are.
 
+mod modes;
 mod plot;
 mod run;
 mod scene;
@@ -38,6 +39,23 @@ enum Command {
         /// Scene file (TOML).
         scene: PathBuf,
         /// Output folder (default `out/<scene name>`).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Constrained linear modes of a scene's structure: frequencies, labels, plots.
+    Modes {
+        /// Scene file (TOML).
+        scene: PathBuf,
+        /// Reference angle (degrees) of the structure's first joint (default: the scene's).
+        #[arg(long, allow_hyphen_values = true)]
+        angle: Option<f64>,
+        /// Number of modes, rigid ones included.
+        #[arg(long, default_value_t = 8)]
+        modes: usize,
+        /// Print `{"frequencies_rad_s": [..], "labels": [..], "n_rigid": n}` instead of a table.
+        #[arg(long)]
+        json: bool,
+        /// Output folder for the plots (default `out/<scene name>/modes`).
         #[arg(long)]
         out: Option<PathBuf>,
     },
@@ -82,6 +100,33 @@ fn main() -> Result<()> {
             let out = out.unwrap_or_else(|| default_out(&scene));
             let summary = run::simulate(s, &out, cli.quiet)?;
             report(&summary, cli.quiet);
+        }
+        Some(Command::Modes { scene, angle, modes: n_modes, json, out }) => {
+            if n_modes == 0 {
+                anyhow::bail!("--modes must be at least 1, got 0");
+            }
+            let s = match angle {
+                Some(a) => scene::load_at_angle(&scene, a)?,
+                None => scene::load(&scene)?,
+            };
+            let report = modes::report(s.plant.structure(), n_modes)?;
+            let dir = out.unwrap_or_else(|| default_out(&scene).join("modes"));
+            let figures = modes::plot(&report, &dir)?;
+            if json {
+                let summary = serde_json::json!({
+                    "frequencies_rad_s": report.frequencies_rad_s,
+                    "labels": report.labels,
+                    "n_rigid": report.n_rigid,
+                });
+                println!("{}", serde_json::to_string_pretty(&summary)?);
+            } else {
+                modes::print_table(&report);
+                if !cli.quiet {
+                    for f in figures {
+                        println!("plot: {}", f.display());
+                    }
+                }
+            }
         }
         Some(Command::Check { scene }) => {
             let s = scene::load(&scene)?;

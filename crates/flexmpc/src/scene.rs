@@ -706,6 +706,32 @@ pub fn load(file: &Path) -> Result<Scene, SceneError> {
     build(file, &text, spec)
 }
 
+/// Builds a scene from a file with the reference angle of its first joint-attached beam
+/// (the structure's first joint) replaced by `angle_deg`: `flexmpc modes --angle`.
+pub fn load_at_angle(file: &Path, angle_deg: f64) -> Result<Scene, SceneError> {
+    let (mut spec, text) = parse(file)?;
+    let Some(attach) = spec.beams.iter_mut().find_map(|b| b.get_mut().attach.as_mut()) else {
+        return Err(SceneError {
+            file: file.to_path_buf(),
+            line: None,
+            field: "beams.attach".into(),
+            message: "--angle needs a beam placed by a joint (`attach = { joint = .. }`); \
+                      this scene has none"
+                .into(),
+        });
+    };
+    if !angle_deg.is_finite() {
+        return Err(SceneError {
+            file: file.to_path_buf(),
+            line: None,
+            field: "--angle".into(),
+            message: format!("the angle must be finite, got {angle_deg}"),
+        });
+    }
+    attach.angle_deg = angle_deg;
+    build(file, &text, spec)
+}
+
 /// Builds a scene from text (`file` names it in errors).
 pub fn load_str(file: &Path, text: &str) -> Result<Scene, SceneError> {
     let spec = parse_str(file, text)?;
