@@ -64,7 +64,7 @@ fn determinism() -> CaseOutcome {
     }
     let same = if a == b { 0.0 } else { 1.0 };
     Ok(vec![
-        Metric::at_most("max |difference| of states and inputs", diff, 0.0),
+        Metric::at_most("max abs difference of states and inputs", diff, 0.0),
         Metric::at_most("results differ (0/1)", same, 0.0),
     ])
 }
