@@ -6,12 +6,14 @@
 //! in the 6-vectors `[1,2,3 | 1,2,3]`.
 
 use nalgebra::{Matrix6, Vector6};
+use serde::{Deserialize, Serialize};
 
 use crate::error::{BeamError, Result};
 use crate::section::Section;
 
 /// Which components of `x1`, `x2` a beam carries.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Components {
     /// `k = 3`: `[v1, v3, ω2]` and `[f1, f3, m2]` (6-vector positions 0, 2, 4).
     Planar,
@@ -41,6 +43,17 @@ impl Components {
             Self::Planar => &PLANAR_INDICES,
             Self::Spatial => &SPATIAL_INDICES,
         }
+    }
+
+    /// Index in the spatial 6-vector of active component `c` (`0 ≤ c < k`).
+    #[inline]
+    pub fn spatial_index(self, c: usize) -> usize {
+        self.indices()[c]
+    }
+
+    /// Active component holding spatial index `s` (`0..6`), if any.
+    pub fn active_index(self, s: usize) -> Option<usize> {
+        self.indices().iter().position(|&i| i == s)
     }
 
     /// Embeds `k` components into a 6-vector (zeros elsewhere).

@@ -7,50 +7,11 @@
 //! not appear in the modes. [`Layout`] maps between the three numberings.
 
 use crate::error::{invalid, Result};
-use nalgebra::{Vector3, Vector4, Vector6};
+use nalgebra::{Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 
-/// Active components per field: planar (`k = 3`: `v1, v3, ω2 | f1, f3, m2`) or spatial (`k = 6`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Components {
-    /// Beam in the local e1–e3 plane, bending about e2: `[v1, v3, ω2]`, `[f1, f3, m2]`.
-    Planar,
-    /// All six components `[v1, v2, v3, ω1, ω2, ω3]`, `[f1, f2, f3, m1, m2, m3]`.
-    Spatial,
-}
-
-impl Components {
-    /// Number of components per field, `k`.
-    pub fn k(self) -> usize {
-        match self {
-            Components::Planar => 3,
-            Components::Spatial => 6,
-        }
-    }
-
-    /// Index in the spatial 6-vector of active component `c` (`0 ≤ c < k`).
-    pub fn spatial_index(self, c: usize) -> usize {
-        match self {
-            Components::Planar => [0, 2, 4][c],
-            Components::Spatial => c,
-        }
-    }
-
-    /// Active component holding spatial index `s` (`0..6`), if any.
-    pub fn active_index(self, s: usize) -> Option<usize> {
-        (0..self.k()).find(|&c| self.spatial_index(c) == s)
-    }
-
-    /// Embeds `k` active values into a spatial 6-vector (zeros elsewhere).
-    #[inline]
-    pub fn embed(self, values: &[f64]) -> Vector6<f64> {
-        match self {
-            Components::Planar => Vector6::new(values[0], 0.0, values[1], 0.0, values[2], 0.0),
-            Components::Spatial => Vector6::from_column_slice(&values[..6]),
-        }
-    }
-}
+/// Active components per field (planar `k = 3` or spatial `k = 6`): the beam layer's type.
+pub use intrinsic_beam::Components;
 
 /// One beam's discretisation and reference configuration.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -13,15 +13,6 @@ use multibody_constraints::joint::{Freedom, Part};
 use multibody_constraints::structure::{Placement, Structure};
 use nalgebra::{Matrix3, Vector3};
 
-impl From<intrinsic_beam::Components> for Components {
-    fn from(c: intrinsic_beam::Components) -> Self {
-        match c {
-            intrinsic_beam::Components::Planar => Components::Planar,
-            intrinsic_beam::Components::Spatial => Components::Spatial,
-        }
-    }
-}
-
 /// Everything the modal route needs from a structure at its reference configuration.
 #[derive(Clone, Debug)]
 pub struct StructureModel {
@@ -58,7 +49,7 @@ fn reachable(structure: &Structure, start: &[usize], skip: Option<usize>) -> Vec
 impl StructureModel {
     /// Extracts layout, operators, damping and rigid candidates from `structure`.
     pub fn new(structure: &Structure) -> Result<Self> {
-        let components: Components = structure.components().into();
+        let components: Components = structure.components();
         let mut beams = Vec::new();
         for (b, sb) in structure.beams().iter().enumerate() {
             let kin = &structure.reference()[b];
