@@ -5,7 +5,7 @@
 
 use anyhow::{bail, Result};
 use flexmpc_verification::{all_cases, run_case, Row, Tier};
-use std::io::Write;
+use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 
 const USAGE: &str = "\
@@ -68,8 +68,9 @@ fn verify(args: &[String]) -> Result<()> {
         );
     }
     let mut rows: Vec<Row> = Vec::new();
+    let progress = !json && std::io::stderr().is_terminal();
     for case in &cases {
-        if !json {
+        if progress {
             eprint!("running {:<50}\r", case.name);
             let _ = std::io::stderr().flush();
         }
@@ -85,7 +86,9 @@ fn verify(args: &[String]) -> Result<()> {
     if json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
-        eprint!("{:<70}\r", "");
+        if progress {
+            eprint!("{:<70}\r", "");
+        }
         println!("{table}");
         println!("{} passed, {} failed", rows.len() - failed, failed);
     }
