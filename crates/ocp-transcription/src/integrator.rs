@@ -125,6 +125,16 @@ enum Pow {
     E2,
 }
 
+impl Lawson {
+    /// The operator of `E^p`.
+    fn power(&self, p: Pow) -> &Operator {
+        match p {
+            Pow::E1 => &self.e,
+            Pow::E2 => &self.e2,
+        }
+    }
+}
+
 /// An integrator over one shooting interval with its workspace (allocated at construction;
 /// integrating does not allocate).
 pub struct Integrator {
@@ -457,13 +467,7 @@ impl Integrator {
         add: bool,
     ) {
         match lawson {
-            Some(lw) => {
-                let op = match p {
-                    Pow::E1 => &lw.e,
-                    Pow::E2 => &lw.e2,
-                };
-                op.apply_vec(dst, src, alpha, add)
-            }
+            Some(lw) => lw.power(p).apply_vec(dst, src, alpha, add),
             None => {
                 if add {
                     axpy(dst, alpha, src)
@@ -485,13 +489,7 @@ impl Integrator {
         add: bool,
     ) {
         match lawson {
-            Some(lw) => {
-                let op = match p {
-                    Pow::E1 => &lw.e,
-                    Pow::E2 => &lw.e2,
-                };
-                op.apply_right_t(dst, src, alpha, add)
-            }
+            Some(lw) => lw.power(p).apply_right_t(dst, src, alpha, add),
             None => {
                 if add {
                     axpy(dst.as_mut_slice(), alpha, src.as_slice())
@@ -515,13 +513,7 @@ impl Integrator {
         add: bool,
     ) {
         match lawson {
-            Some(lw) => {
-                let op = match p {
-                    Pow::E1 => &lw.e,
-                    Pow::E2 => &lw.e2,
-                };
-                op.apply_t_vec(dst, src, alpha, add)
-            }
+            Some(lw) => lw.power(p).apply_t_vec(dst, src, alpha, add),
             None => Self::pow_vec(&None, p, dst, src, alpha, add),
         }
     }
