@@ -1032,6 +1032,43 @@ mod tests {
         }
     }
 
+    /// The beam's Jacobian assembled densely from its pattern and values.
+    fn assembled_jacobian(
+        beam: &Beam,
+        input: &StepInput<'_>,
+        old: &[f64],
+        new: &[f64],
+    ) -> DMatrix<f64> {
+        let mut pattern = Vec::new();
+        beam.jacobian_pattern(0, 0, &mut pattern);
+        assert_eq!(pattern.len(), beam.jacobian_nnz());
+        let mut vals = vec![0.0; beam.jacobian_nnz()];
+        beam.jacobian_values(input, old, new, &mut vals).unwrap();
+        let mut jac = DMatrix::zeros(beam.n_rows(), beam.dim());
+        for (&(r, c), v) in pattern.iter().zip(&vals) {
+            jac[(r, c)] += v;
+        }
+        jac
+    }
+
+    /// Central finite differences (step 1e-6) of the step residual with respect to `new`.
+    fn fd_jacobian(beam: &Beam, input: &StepInput<'_>, old: &[f64], new: &[f64]) -> DMatrix<f64> {
+        let eps = 1e-6;
+        let mut fd = DMatrix::zeros(beam.n_rows(), beam.dim());
+        let (mut rp, mut rm) = (vec![0.0; beam.n_rows()], vec![0.0; beam.n_rows()]);
+        for j in 0..beam.dim() {
+            let (mut xp, mut xm) = (new.to_vec(), new.to_vec());
+            xp[j] += eps;
+            xm[j] -= eps;
+            beam.step_residual(input, old, &xp, &mut rp).unwrap();
+            beam.step_residual(input, old, &xm, &mut rm).unwrap();
+            for i in 0..beam.n_rows() {
+                fd[(i, j)] = (rp[i] - rm[i]) / (2.0 * eps);
+            }
+        }
+        fd
+    }
+
     /// The analytic Jacobian matches central finite differences of the residual.
     #[test]
     fn jacobian_matches_finite_differences() {
@@ -1043,49 +1080,16 @@ mod tests {
         ] {
             let (beam, loads, kin, old, new) = setup(seed, comp, true);
             let input = StepInput { time: 0.3, dt: 0.01, loads: &loads, kinematics: &kin };
-            let mut pattern = Vec::new();
-            beam.jacobian_pattern(0, 0, &mut pattern);
-            assert_eq!(pattern.len(), beam.jacobian_nnz());
-            let mut vals = vec![0.0; beam.jacobian_nnz()];
-            beam.jacobian_values(&input, &old, &new, &mut vals).unwrap();
-            let mut jac = DMatrix::zeros(beam.n_rows(), beam.dim());
-            for (&(r, c), v) in pattern.iter().zip(&vals) {
-                jac[(r, c)] += v;
-            }
-            let eps = 1e-6;
-            let mut fd = DMatrix::zeros(beam.n_rows(), beam.dim());
-            let (mut rp, mut rm) = (vec![0.0; beam.n_rows()], vec![0.0; beam.n_rows()]);
-            for j in 0..beam.dim() {
-                let (mut xp, mut xm) = (new.clone(), new.clone());
-                xp[j] += eps;
-                xm[j] -= eps;
-                beam.step_residual(&input, &old, &xp, &mut rp).unwrap();
-                beam.step_residual(&input, &old, &xm, &mut rm).unwrap();
-                for i in 0..beam.n_rows() {
-                    fd[(i, j)] = (rp[i] - rm[i]) / (2.0 * eps);
-                }
-            }
+            let jac = assembled_jacobian(&beam, &input, &old, &new);
+            let fd = fd_jacobian(&beam, &input, &old, &new);
             // Exact except the dead-load rotation derivative, approximated to O(dt |ω|)
             // relative (≈ 1e-2 here on entries of size O(1)); everything else to FD error 1e-7.
             let diff = (&jac - &fd).abs().max();
             assert!(diff < 2e-2, "max |J − FD| = {diff}");
             let no_dead = Loads { point: vec![loads.point[1].clone()], distributed: vec![] };
             let input = StepInput { loads: &no_dead, ..input };
-            beam.jacobian_values(&input, &old, &new, &mut vals).unwrap();
-            let mut jac = DMatrix::zeros(beam.n_rows(), beam.dim());
-            for (&(r, c), v) in pattern.iter().zip(&vals) {
-                jac[(r, c)] += v;
-            }
-            for j in 0..beam.dim() {
-                let (mut xp, mut xm) = (new.clone(), new.clone());
-                xp[j] += eps;
-                xm[j] -= eps;
-                beam.step_residual(&input, &old, &xp, &mut rp).unwrap();
-                beam.step_residual(&input, &old, &xm, &mut rm).unwrap();
-                for i in 0..beam.n_rows() {
-                    fd[(i, j)] = (rp[i] - rm[i]) / (2.0 * eps);
-                }
-            }
+            let jac = assembled_jacobian(&beam, &input, &old, &new);
+            let fd = fd_jacobian(&beam, &input, &old, &new);
             // residual entries O(1e3) (1/dt scaling): central FD error ~ 1e-6 relative
             let diff = (&jac - &fd).abs().max();
             assert!(diff < 1e-5 * (1.0 + jac.abs().max()), "max |J − FD| = {diff}");
@@ -1138,27 +1142,8 @@ mod tests {
         let old = random_vec(&mut rng, beam.dim());
         let new = random_vec(&mut rng, beam.dim());
         let input = StepInput { time: 0.1, dt: 0.01, loads: &loads, kinematics: &kin };
-        let mut pattern = Vec::new();
-        beam.jacobian_pattern(0, 0, &mut pattern);
-        let mut vals = vec![0.0; beam.jacobian_nnz()];
-        beam.jacobian_values(&input, &old, &new, &mut vals).unwrap();
-        let mut jac = DMatrix::<f64>::zeros(beam.n_rows(), beam.dim());
-        for (&(r, c), v) in pattern.iter().zip(&vals) {
-            jac[(r, c)] += v;
-        }
-        let eps = 1e-6;
-        let (mut rp, mut rm) = (vec![0.0; beam.n_rows()], vec![0.0; beam.n_rows()]);
-        let mut worst: f64 = 0.0;
-        for j in 0..beam.dim() {
-            let (mut xp, mut xm) = (new.clone(), new.clone());
-            xp[j] += eps;
-            xm[j] -= eps;
-            beam.step_residual(&input, &old, &xp, &mut rp).unwrap();
-            beam.step_residual(&input, &old, &xm, &mut rm).unwrap();
-            for i in 0..beam.n_rows() {
-                worst = worst.max((jac[(i, j)] - (rp[i] - rm[i]) / (2.0 * eps)).abs());
-            }
-        }
+        let jac = assembled_jacobian(&beam, &input, &old, &new);
+        let worst = (&jac - fd_jacobian(&beam, &input, &old, &new)).abs().max();
         // entries up to ~1e2 (h/dt scaling); central differences: ~1e-7 absolute
         assert!(worst < 1e-5, "max |J − FD| = {worst}");
     }
