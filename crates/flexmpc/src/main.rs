@@ -5,18 +5,14 @@
 //! inputs); `flexmpc check <scene.toml>` only validates it. Without arguments it runs the
 //! built-in default scene (`scenes/cantilever.toml`) and says where its results are.
 
-mod modes;
-mod plot;
-mod run;
-mod scene;
+use flexmpc::{modes, run, scene};
 
 use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
-/// The default scene, built in so that `cargo run --release` works from anywhere.
-const DEFAULT_SCENE: &str = include_str!("../../../scenes/cantilever.toml");
+use flexmpc::DEFAULT_SCENE;
 
 #[derive(Parser)]
 #[command(
