@@ -17,7 +17,9 @@
 //!   `k1 = g(x)`, `k2 = g(E(x + h/2 k1))`, `k3 = g(Ex + h/2 k2)`, `k4 = g(E²x + hEk3)`,
 //!   `x⁺ = E²x + h/6 (E²k1 + 2E(k2 + k3) + k4)`. Exact for `ẋ = Lx`; `E` is computed once
 //!   (nalgebra's Padé scaling-and-squaring `exp`) and applied sparsely when it is sparse
-//!   (block-diagonal modal `W`).
+//!   (block-diagonal modal `W`). `Ex` and `Ek1` (and their sensitivities) are shared by the
+//!   later stages (`X4 = E(Ex + hk3)`, `x⁺ = E(Ex + h/6 Ek1 + h/3(k2 + k3)) + h/6 k4`): four
+//!   propagator products per substep.
 //!
 //! For the explicit methods, [`Integrator::adjoint_hessian`] also returns the exact second
 //! derivative `∇²_{(x,u)} (λᵀΦ)`: the only nonlinear operations are evaluations of `f`, so
@@ -27,7 +29,7 @@
 
 use crate::dynamics::Dynamics;
 use crate::error::{check_dim, invalid, OcpError, Result};
-use crate::la::{all_finite, axpy, gemm, gemv, gemv_t, norm_inf, Operator};
+use crate::la::{all_finite, axpy, gemm, gemv_t, norm_inf, Operator};
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::lu::partial_pivoting::{factor as lu_factor, solve as lu_solve};
 use faer::{Conj, Par};
@@ -114,6 +116,7 @@ impl IntegratorSettings {
 #[derive(Clone, Debug)]
 struct Lawson {
     l: DMatrix<f64>,
+    l_op: Operator,
     e: Operator,
     e2: Operator,
 }
@@ -150,6 +153,10 @@ pub struct Integrator {
     x: Vec<f64>,
     xs: Vec<f64>,
     t: Vec<f64>,
+    ex: Vec<f64>,
+    ek1: Vec<f64>,
+    es: DMatrix<f64>,
+    eks: DMatrix<f64>,
     k: [Vec<f64>; 4],
     fx: DMatrix<f64>,
     fu: DMatrix<f64>,
@@ -220,7 +227,12 @@ impl Integrator {
             if !all_finite(e2.as_slice()) {
                 return Err(OcpError::NonFiniteDynamics { stage: "matrix exponential" });
             }
-            Some(Lawson { l, e: Operator::new(e), e2: Operator::new(e2) })
+            Some(Lawson {
+                l_op: Operator::new(l.clone()),
+                l,
+                e: Operator::new(e),
+                e2: Operator::new(e2),
+            })
         } else {
             None
         };
@@ -246,6 +258,10 @@ impl Integrator {
             x: zv(),
             xs: zv(),
             t: zv(),
+            ex: zv(),
+            ek1: zv(),
+            es: zm(),
+            eks: zm(),
             k: [zv(), zv(), zv(), zv()],
             fx: DMatrix::zeros(nx, nx),
             fu: DMatrix::zeros(nx, nu),
@@ -529,7 +545,7 @@ impl Integrator {
     ) -> Result<()> {
         model.rhs(&self.xs, u, &mut self.k[j]);
         if let Some(lw) = &self.lawson {
-            gemv(&mut self.k[j], &lw.l, &self.xs, -1.0, true);
+            lw.l_op.apply_vec(&mut self.k[j], &self.xs, -1.0, true);
         }
         if !all_finite(&self.k[j]) {
             return Err(OcpError::NonFiniteDynamics { stage: "rhs" });
@@ -569,48 +585,60 @@ impl Integrator {
             self.sx.copy_from(&self.s);
         }
         self.stage(model, u, 0, sens, tape)?;
-        // stage 2: X2 = E (x + h/2 k1)
-        self.t.copy_from_slice(&self.x);
-        axpy(&mut self.t, 0.5 * h, &self.k[0]);
-        Self::pow_vec(&self.lawson, Pow::E1, &mut self.xs, &self.t, 1.0, false);
+        // E x, E k1 (and E S, E K1) serve stages 2 to 4 and the update, so that E² is never
+        // applied: 4 propagator products per substep instead of 6
+        Self::pow_vec(&self.lawson, Pow::E1, &mut self.ex, &self.x, 1.0, false);
+        Self::pow_vec(&self.lawson, Pow::E1, &mut self.ek1, &self.k[0], 1.0, false);
         if sens {
-            self.tm.copy_from(&self.s);
-            axpy(self.tm.as_mut_slice(), 0.5 * h, self.ks[0].as_slice());
-            Self::pow_mat(&self.lawson, Pow::E1, &mut self.sx, &self.tm, 1.0, false);
+            Self::pow_mat(&self.lawson, Pow::E1, &mut self.es, &self.s, 1.0, false);
+            Self::pow_mat(&self.lawson, Pow::E1, &mut self.eks, &self.ks[0], 1.0, false);
+        }
+        // stage 2: X2 = E (x + h/2 k1) = Ex + h/2 Ek1
+        self.xs.copy_from_slice(&self.ex);
+        axpy(&mut self.xs, 0.5 * h, &self.ek1);
+        if sens {
+            self.sx.copy_from(&self.es);
+            axpy(self.sx.as_mut_slice(), 0.5 * h, self.eks.as_slice());
         }
         self.stage(model, u, 1, sens, tape)?;
         // stage 3: X3 = E x + h/2 k2
-        Self::pow_vec(&self.lawson, Pow::E1, &mut self.xs, &self.x, 1.0, false);
+        self.xs.copy_from_slice(&self.ex);
         axpy(&mut self.xs, 0.5 * h, &self.k[1]);
         if sens {
-            Self::pow_mat(&self.lawson, Pow::E1, &mut self.sx, &self.s, 1.0, false);
+            self.sx.copy_from(&self.es);
             axpy(self.sx.as_mut_slice(), 0.5 * h, self.ks[1].as_slice());
         }
         self.stage(model, u, 2, sens, tape)?;
-        // stage 4: X4 = E² x + h E k3
-        Self::pow_vec(&self.lawson, Pow::E2, &mut self.xs, &self.x, 1.0, false);
-        Self::pow_vec(&self.lawson, Pow::E1, &mut self.xs, &self.k[2], h, true);
+        // stage 4: X4 = E² x + h E k3 = E (Ex + h k3)
+        self.t.copy_from_slice(&self.ex);
+        axpy(&mut self.t, h, &self.k[2]);
+        Self::pow_vec(&self.lawson, Pow::E1, &mut self.xs, &self.t, 1.0, false);
         if sens {
-            Self::pow_mat(&self.lawson, Pow::E2, &mut self.sx, &self.s, 1.0, false);
-            Self::pow_mat(&self.lawson, Pow::E1, &mut self.sx, &self.ks[2], h, true);
+            self.tm.copy_from(&self.es);
+            axpy(self.tm.as_mut_slice(), h, self.ks[2].as_slice());
+            Self::pow_mat(&self.lawson, Pow::E1, &mut self.sx, &self.tm, 1.0, false);
         }
         self.stage(model, u, 3, sens, tape)?;
         // x⁺ = E²(x + h/6 k1) + h/3 E(k2 + k3) + h/6 k4
-        self.t.copy_from_slice(&self.x);
-        axpy(&mut self.t, h / 6.0, &self.k[0]);
-        Self::pow_vec(&self.lawson, Pow::E2, &mut self.x, &self.t, 1.0, false);
+        //    = E (Ex + h/6 Ek1 + h/3 (k2 + k3)) + h/6 k4
         for i in 0..self.nx {
-            self.t[i] = self.k[1][i] + self.k[2][i];
+            self.t[i] =
+                self.ex[i] + h / 6.0 * self.ek1[i] + h / 3.0 * (self.k[1][i] + self.k[2][i]);
         }
-        Self::pow_vec(&self.lawson, Pow::E1, &mut self.x, &self.t, h / 3.0, true);
+        Self::pow_vec(&self.lawson, Pow::E1, &mut self.x, &self.t, 1.0, false);
         axpy(&mut self.x, h / 6.0, &self.k[3]);
         if sens {
-            self.tm.copy_from(&self.s);
-            axpy(self.tm.as_mut_slice(), h / 6.0, self.ks[0].as_slice());
-            Self::pow_mat(&self.lawson, Pow::E2, &mut self.s, &self.tm, 1.0, false);
-            self.tm.copy_from(&self.ks[1]);
-            self.tm += &self.ks[2];
-            Self::pow_mat(&self.lawson, Pow::E1, &mut self.s, &self.tm, h / 3.0, true);
+            let (tm, es, eks, k2, k3) = (
+                self.tm.as_mut_slice(),
+                self.es.as_slice(),
+                self.eks.as_slice(),
+                self.ks[1].as_slice(),
+                self.ks[2].as_slice(),
+            );
+            for i in 0..tm.len() {
+                tm[i] = es[i] + h / 6.0 * eks[i] + h / 3.0 * (k2[i] + k3[i]);
+            }
+            Self::pow_mat(&self.lawson, Pow::E1, &mut self.s, &self.tm, 1.0, false);
             axpy(self.s.as_mut_slice(), h / 6.0, self.ks[3].as_slice());
         }
         Ok(())

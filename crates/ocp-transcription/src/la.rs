@@ -1,6 +1,7 @@
 //! Thin helpers: faer kernels (matrix products, Cholesky, LU) on nalgebra column-major storage.
 
 use faer::linalg::matmul::matmul;
+use faer::reborrow::ReborrowMut;
 use faer::traits::pulp::{Arch, Simd, WithSimd};
 use faer::{Accum, MatMut, MatRef, Par};
 use nalgebra::DMatrix;
@@ -40,17 +41,34 @@ pub(crate) fn gemm_tn(
     matmul(fmut(dst), acc, fref(a).transpose(), fref(b), alpha, Par::Seq);
 }
 
-/// Row-compressed scratch for a sparse Jacobian (capacity `n²`, allocated once).
+/// Row-compressed scratch for a sparse Jacobian (capacity `n²`, allocated once), and the
+/// row groups / column ranges of its nonzero blocks.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct SparseRows {
     row_ptr: Vec<usize>,
     col: Vec<usize>,
     val: Vec<f64>,
+    /// Row groups `(r0, r1, first range, end range)` into `ranges`.
+    groups: Vec<(usize, usize, usize, usize)>,
+    /// Column ranges `[c0, c1)` of the groups.
+    ranges: Vec<(usize, usize)>,
+    /// Column ranges of the current row (scratch).
+    row_ranges: Vec<(usize, usize)>,
 }
+
+/// Zero runs shorter than this are computed through (dense blocks) in [`mul_right_t`].
+const RANGE_GAP: usize = 8;
 
 impl SparseRows {
     pub(crate) fn with_capacity(n: usize) -> Self {
-        Self { row_ptr: vec![0; n + 1], col: vec![0; n * n], val: vec![0.0; n * n] }
+        Self {
+            row_ptr: vec![0; n + 1],
+            col: vec![0; n * n],
+            val: vec![0.0; n * n],
+            groups: Vec::with_capacity(n),
+            ranges: Vec::with_capacity(n * n),
+            row_ranges: Vec::with_capacity(n),
+        }
     }
 
     /// Compresses the nonzeros of the column-major `n × n` matrix `j` by rows (branch-free;
@@ -69,12 +87,58 @@ impl SparseRows {
         }
         len
     }
+
+    /// From the compressed rows: column ranges of each row's nonzeros (zero runs shorter than
+    /// [`RANGE_GAP`] merged), consecutive rows with the same number of pairwise overlapping
+    /// ranges grouped (ranges united). Returns the entries of the resulting dense blocks.
+    fn block_ranges(&mut self, n: usize) -> usize {
+        self.groups.clear();
+        self.ranges.clear();
+        for i in 0..n {
+            self.row_ranges.clear();
+            for p in self.row_ptr[i]..self.row_ptr[i + 1] {
+                let c = self.col[p];
+                match self.row_ranges.last_mut() {
+                    Some(last) if c < last.1 + RANGE_GAP => last.1 = c + 1,
+                    _ => self.row_ranges.push((c, c + 1)),
+                }
+            }
+            let joins = match self.groups.last() {
+                Some(&(_, r1, a, b)) if r1 == i && b - a == self.row_ranges.len() => self.ranges
+                    [a..b]
+                    .iter()
+                    .zip(&self.row_ranges)
+                    .all(|(g, r)| r.0 < g.1 + RANGE_GAP && g.0 < r.1 + RANGE_GAP),
+                _ => false,
+            };
+            if joins {
+                let g = self.groups.last_mut().expect("joins implies a group");
+                g.1 = i + 1;
+                for (gr, r) in self.ranges[g.2..g.3].iter_mut().zip(&self.row_ranges) {
+                    gr.0 = gr.0.min(r.0);
+                    gr.1 = gr.1.max(r.1);
+                }
+            } else {
+                let a = self.ranges.len();
+                self.ranges.extend_from_slice(&self.row_ranges);
+                self.groups.push((i, i + 1, a, self.ranges.len()));
+            }
+        }
+        self.groups
+            .iter()
+            .map(|&(r0, r1, a, b)| {
+                (r1 - r0) * self.ranges[a..b].iter().map(|r| r.1 - r.0).sum::<usize>()
+            })
+            .sum()
+    }
 }
 
 /// `dst = src · jᵀ` for the transposed sensitivity layout (`src`, `dst`: `m × n`, `j`: `n × n`):
-/// column `i` of `dst` is `Σ_k j[i, k] · src[:, k]`. When at most 30 % of `j` is nonzero the
-/// nonzeros are compressed by rows and each column of `dst` is accumulated in registers over
-/// them (one store per column), else a dense faer product runs.
+/// column `i` of `dst` is `Σ_k j[i, k] · src[:, k]`. The nonzeros of `j` are compressed by
+/// rows; when at most 30 % are nonzero each column of `dst` is accumulated in registers over
+/// them (one store per column). Otherwise the nonzeros are covered by dense blocks (row groups
+/// × column ranges: the zero blocks of a modal ROM's Jacobian, e.g. `(q1, q2) × qξ`, are
+/// skipped) and each block is one faer product.
 pub(crate) fn mul_right_t(
     dst: &mut DMatrix<f64>,
     src: &DMatrix<f64>,
@@ -86,21 +150,58 @@ pub(crate) fn mul_right_t(
         *rows = SparseRows::with_capacity(n);
     }
     let nnz = rows.compress(j.as_slice(), n);
-    if nnz * 10 > 3 * n * n {
+    let m = src.nrows();
+    if nnz * 10 <= 3 * n * n {
+        Arch::new().dispatch(SparseRightT {
+            dst: dst.as_mut_slice(),
+            src: src.as_slice(),
+            row_ptr: &rows.row_ptr,
+            col: &rows.col,
+            val: &rows.val,
+            m,
+            alpha: 1.0,
+            add: false,
+        });
+        return;
+    }
+    let covered = rows.block_ranges(n);
+    if covered * 10 > 9 * n * n {
         matmul(fmut(dst), Accum::Replace, fref(src), fref(j).transpose(), 1.0, Par::Seq);
         return;
     }
-    let m = src.nrows();
-    Arch::new().dispatch(SparseRightT { dst: dst.as_mut_slice(), src: src.as_slice(), rows, m });
+    let (jr, sr) = (fref(j), fref(src));
+    let mut dm = fmut(dst);
+    for &(r0, r1, a, b) in &rows.groups {
+        let mut d = dm.rb_mut().subcols_mut(r0, r1 - r0);
+        if a == b {
+            d.fill(0.0);
+        }
+        for (q, &(c0, c1)) in rows.ranges[a..b].iter().enumerate() {
+            let acc = if q == 0 { Accum::Replace } else { Accum::Add };
+            matmul(
+                d.rb_mut(),
+                acc,
+                sr.subcols(c0, c1 - c0),
+                jr.submatrix(r0, c0, r1 - r0, c1 - c0).transpose(),
+                1.0,
+                Par::Seq,
+            );
+        }
+    }
 }
 
-/// The sparse kernel of [`mul_right_t`], compiled for the best SIMD level available at run
-/// time (pulp dispatch, so the fixed-size accumulators below vectorise with FMA).
+/// The sparse kernel of [`mul_right_t`] and of sparse [`Operator`]s: `dst = alpha src · jᵀ`
+/// (+= when `add`) with `j` compressed by rows, compiled for the best SIMD level available at
+/// run time (pulp dispatch, so the fixed-size accumulators below vectorise with FMA).
 struct SparseRightT<'a> {
     dst: &'a mut [f64],
     src: &'a [f64],
-    rows: &'a SparseRows,
+    row_ptr: &'a [usize],
+    col: &'a [usize],
+    val: &'a [f64],
     m: usize,
+    alpha: f64,
+    add: bool,
 }
 
 const CHUNK: usize = 16;
@@ -109,36 +210,46 @@ impl WithSimd for SparseRightT<'_> {
     type Output = ();
     #[inline(always)]
     fn with_simd<S: Simd>(self, _simd: S) {
-        let SparseRightT { dst, src, rows, m } = self;
-        let n = rows.row_ptr.len() - 1;
+        let SparseRightT { dst, src, row_ptr, col, val, m, alpha, add } = self;
+        let n = row_ptr.len() - 1;
         for i in 0..n {
-            let (p0, p1) = (rows.row_ptr[i], rows.row_ptr[i + 1]);
+            let (p0, p1) = (row_ptr[i], row_ptr[i + 1]);
             let d = &mut dst[i * m..(i + 1) * m];
             let mut c0 = 0;
-            while c0 + CHUNK <= m {
+            while c0 < m {
+                let w = CHUNK.min(m - c0);
                 let mut acc = [0.0_f64; CHUNK];
-                for p in p0..p1 {
-                    let v = rows.val[p];
-                    let s = &src[rows.col[p] * m + c0..rows.col[p] * m + c0 + CHUNK];
-                    for t in 0..CHUNK {
-                        acc[t] = v.mul_add(s[t], acc[t]);
+                if w == CHUNK {
+                    for p in p0..p1 {
+                        let v = val[p];
+                        let s = &src[col[p] * m + c0..col[p] * m + c0 + CHUNK];
+                        for t in 0..CHUNK {
+                            acc[t] = v.mul_add(s[t], acc[t]);
+                        }
+                    }
+                } else {
+                    for p in p0..p1 {
+                        let v = val[p];
+                        let base = col[p] * m + c0;
+                        let s = &src[base..base + w];
+                        for t in 0..w {
+                            acc[t] = v.mul_add(s[t], acc[t]);
+                        }
                     }
                 }
-                d[c0..c0 + CHUNK].copy_from_slice(&acc);
-                c0 += CHUNK;
-            }
-            let rest = m - c0;
-            if rest > 0 {
-                let mut acc = [0.0_f64; CHUNK];
-                for p in p0..p1 {
-                    let v = rows.val[p];
-                    let base = rows.col[p] * m + c0;
-                    let s = &src[base..base + rest];
-                    for t in 0..rest {
-                        acc[t] = v.mul_add(s[t], acc[t]);
+                let dd = &mut d[c0..c0 + w];
+                if add {
+                    for t in 0..w {
+                        dd[t] = alpha.mul_add(acc[t], dd[t]);
+                    }
+                } else if alpha == 1.0 {
+                    dd.copy_from_slice(&acc[..w]);
+                } else {
+                    for t in 0..w {
+                        dd[t] = alpha * acc[t];
                     }
                 }
-                d[c0..].copy_from_slice(&acc[..rest]);
+                c0 += w;
             }
         }
     }
@@ -370,19 +481,16 @@ impl Operator {
                     }
                 }
             }
-            Operator::Sparse { row_ptr, col, val, .. } => {
-                let ss = src.as_slice();
-                let ds = dst.as_mut_slice();
-                for i in 0..row_ptr.len() - 1 {
-                    let d = &mut ds[i * m..(i + 1) * m];
-                    if !add {
-                        d.fill(0.0);
-                    }
-                    for p in row_ptr[i]..row_ptr[i + 1] {
-                        axpy(d, alpha * val[p], &ss[col[p] * m..(col[p] + 1) * m]);
-                    }
-                }
-            }
+            Operator::Sparse { row_ptr, col, val, .. } => Arch::new().dispatch(SparseRightT {
+                dst: dst.as_mut_slice(),
+                src: src.as_slice(),
+                row_ptr,
+                col,
+                val,
+                m,
+                alpha,
+                add,
+            }),
         }
     }
 
@@ -464,6 +572,30 @@ fn block_apply(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A Jacobian with the modal ROM's zero blocks (dense-ish, > 30 % nonzero) goes through
+    /// the block-range path and gives the dense product, scattered zeros and all.
+    #[test]
+    fn block_range_product_matches_dense() {
+        let n = 30;
+        let mut rng = crate::samples::SplitMix64::new(5);
+        let j = DMatrix::from_fn(n, n, |r, c| {
+            let inside = if r < 18 { c < 18 } else { !(7..18).contains(&c) };
+            if inside && rng.uniform(0.0, 1.0) < 0.8 {
+                rng.uniform(-1.0, 1.0)
+            } else {
+                0.0
+            }
+        });
+        let src = DMatrix::from_fn(35, n, |_, _| rng.uniform(-1.0, 1.0));
+        let mut rows = SparseRows::with_capacity(n);
+        let mut dst = DMatrix::from_element(35, n, f64::NAN);
+        mul_right_t(&mut dst, &src, &j, &mut rows);
+        assert!(rows.groups.len() >= 2, "groups {:?}", rows.groups);
+        let covered = rows.block_ranges(n);
+        assert!(covered * 10 <= 9 * n * n, "covered {covered}");
+        assert!((dst - &src * j.transpose()).amax() < 1e-13);
+    }
 
     /// The three storages give the same products as the dense matrix.
     #[test]

@@ -241,3 +241,34 @@ fn nan_dynamics_is_an_error() {
         );
     }
 }
+
+/// The ROM-structured sample: energy identity, the ROM's zero blocks in the Jacobian (so the
+/// block-range product path runs: > 30 % nonzero, dense blocks cover < 90 %), and Lawson
+/// sensitivities against central differences (tolerance as in `fd_sensitivity_error`).
+#[test]
+fn rom_like_model_has_the_rom_structure_and_exact_sensitivities() {
+    let m = ModalLike::rom_like(24, 3, 60.0, 1.0, 5).unwrap();
+    let n = m.nx();
+    assert_eq!(n, 24);
+    let mut rng = ocp_transcription::samples::SplitMix64::new(9);
+    let x: Vec<f64> = (0..n).map(|_| rng.uniform(-0.3, 0.3)).collect();
+    let u = [0.2, -0.4, 0.1];
+    // xᵀN(x)x = 0: sums of ~100 products of size ≤ 30·0.3³, round-off ~1e-14
+    assert!(m.nonlinear_power(&x).abs() < 1e-12, "{}", m.nonlinear_power(&x));
+    let (mut fx, mut fu) = (DMatrix::zeros(n, n), DMatrix::zeros(n, 3));
+    m.jacobians(&x, &u, &mut fx, &mut fu);
+    let w = m.linear_part().unwrap();
+    let nl = &fx - &w;
+    let nnz = nl.iter().filter(|v| **v != 0.0).count();
+    assert!(nnz * 10 > 3 * n * n, "nonlinear Jacobian too sparse: {nnz}");
+    // x = [q1 (m = 10), q2 (6), qξ (8)]: zero blocks (q1, q2) × qξ and qξ × q2
+    for i in 0..n {
+        for j in 0..n {
+            if (i < 16 && j >= 16) || (i >= 16 && (10..16).contains(&j)) {
+                assert_eq!(nl[(i, j)], 0.0, "({i}, {j})");
+            }
+        }
+    }
+    let err = fd_sensitivity_error(&m, IntegratorKind::LawsonRk4, &x, &u);
+    assert!(err < 1e-6, "{err}");
+}
