@@ -1,12 +1,15 @@
-//! Newton iterations, factorisations and time per implicit-midpoint step of the 100-element
+//! Newton iterations, factorisations and time per implicit-midpoint step (minimum over 40 batches of 20 steps) of the 100-element
 //! bench cantilevers (planar and spatial, release and swing), for given Newton settings:
 //! `cargo run --release -p intrinsic-beam --example step_cost -- [tolerance] [contraction_limit]
-//! [extrapolate 0/1] [reuse 0/1]`.
+//! [extrapolate 0/1] [reuse 0/1] [sparse LU 0/1] [3/6: one component set only, 0 both]
+//! [step refresh 0 never/1 always/2 auto]`.
 
 use std::time::Instant;
 
 use intrinsic_beam::samples::{self, Sample};
-use intrinsic_beam::{Components, ImplicitMidpoint, NewtonSettings};
+use intrinsic_beam::{
+    Components, ImplicitMidpoint, LinearSolver, NewtonSettings, StepInput, StepRefresh,
+};
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -17,6 +20,15 @@ fn main() {
         contraction_limit: arg(1).unwrap_or(d.contraction_limit),
         extrapolate: arg(2).map_or(d.extrapolate, |v| v != 0.0),
         reuse_jacobian: arg(3).map_or(d.reuse_jacobian, |v| v != 0.0),
+        step_refresh: match arg(6).map(|v| v as i64) {
+            Some(0) => StepRefresh::Never,
+            Some(1) => StepRefresh::Always,
+            _ => d.step_refresh,
+        },
+        linear_solver: match arg(4) {
+            Some(v) if v != 0.0 => LinearSolver::SparseLu,
+            _ => d.linear_solver,
+        },
         ..d
     };
     println!("{settings:?}");
@@ -27,6 +39,11 @@ fn main() {
     for (name, make) in cases {
         let mut row = Vec::new();
         for comp in [Components::Planar, Components::Spatial] {
+            // optional 6th argument: 3 = planar only, 6 = spatial only (profiling)
+            if arg(5).is_some_and(|k| k != 0.0 && k as usize != comp.k()) {
+                row.push((0.0, 0.0, f64::NAN));
+                continue;
+            }
             let s = make(comp, 100).expect("sample");
             let mut sim =
                 ImplicitMidpoint::new(s.problem, s.state, s.kinematics, settings).expect("valid");
@@ -34,15 +51,43 @@ fn main() {
                 sim.step(1e-3).expect("step");
             }
             let c0 = sim.counters();
-            let steps = 400;
-            let t = Instant::now();
-            for _ in 0..steps {
-                sim.step(1e-3).expect("step");
+            // minimum over batches of 20 steps: robust against preemption on a loaded machine
+            let (batches, per_batch) = (40, 20);
+            let mut us = f64::INFINITY;
+            for _ in 0..batches {
+                let t = Instant::now();
+                for _ in 0..per_batch {
+                    sim.step(1e-3).expect("step");
+                }
+                us = us.min(t.elapsed().as_secs_f64() / per_batch as f64 * 1e6);
             }
-            let us = t.elapsed().as_secs_f64() / steps as f64 * 1e6;
+            let steps = batches * per_batch;
             let c1 = sim.counters();
             let its = (c1.newton_iterations - c0.newton_iterations) as f64 / steps as f64;
             let fac = (c1.factorizations - c0.factorizations) as f64 / steps as f64;
+            // the step residual alone, at the converged state (one Newton iteration's share)
+            let beam = &sim.problem().beam;
+            let mut res = vec![0.0; beam.n_rows()];
+            let input = StepInput {
+                time: sim.time(),
+                dt: 1e-3,
+                loads: &sim.problem().loads,
+                kinematics: sim.kinematics(),
+            };
+            let mut res_us = f64::INFINITY;
+            for _ in 0..40 {
+                let t = Instant::now();
+                for _ in 0..50 {
+                    beam.step_residual(&input, sim.state(), sim.state(), &mut res)
+                        .expect("residual");
+                }
+                res_us = res_us.min(t.elapsed().as_secs_f64() / 50.0 * 1e6);
+            }
+            println!(
+                "  {name} {comp:?}: {} ({} fallbacks), residual {res_us:.1} µs",
+                sim.linear_solver_name(),
+                c1.sparse_fallbacks
+            );
             row.push((its, fac, us));
         }
         println!(

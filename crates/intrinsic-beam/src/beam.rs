@@ -332,7 +332,11 @@ impl Beam {
     }
 
     /// Midpoint rotation of every node: `T(exp(dt/2 U(ω_mid)) ξ_n)`.
-    fn midpoint_rotations(&self, input: &StepInput<'_>, mid: &[f64]) -> Vec<Matrix3<f64>> {
+    pub(crate) fn midpoint_rotations(
+        &self,
+        input: &StepInput<'_>,
+        mid: &[f64],
+    ) -> Vec<Matrix3<f64>> {
         if !input.loads.has_dead() {
             return Vec::new();
         }
