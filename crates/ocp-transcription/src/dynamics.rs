@@ -22,6 +22,22 @@ pub trait Dynamics: Sync {
     fn rhs(&self, x: &[f64], u: &[f64], xdot: &mut [f64]);
     /// `fx = ∂f/∂x`, `fu = ∂f/∂u` at `(x, u)`.
     fn jacobians(&self, x: &[f64], u: &[f64], fx: &mut DMatrix<f64>, fu: &mut DMatrix<f64>);
+    /// `xdot = f(x, u)`, `fx = ∂f/∂x`, `fu = ∂f/∂u` at the same point (an integrator stage
+    /// with sensitivities needs all three). The default calls [`Dynamics::rhs`] and
+    /// [`Dynamics::jacobians`]; a model may share work between them (a quadratic model
+    /// `f = Wx + N(x)x + Bu` has `f = ½(∂f/∂x + W)x + Bu` by Euler's identity, one
+    /// matrix–vector product instead of a pass over its tensor).
+    fn rhs_and_jacobians(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        xdot: &mut [f64],
+        fx: &mut DMatrix<f64>,
+        fu: &mut DMatrix<f64>,
+    ) {
+        self.rhs(x, u, xdot);
+        self.jacobians(x, u, fx, fu);
+    }
     /// Whether [`Dynamics::weighted_hessian`] is implemented (needed by the exact-Hessian SQP).
     fn has_second_order(&self) -> bool {
         false
@@ -52,6 +68,16 @@ impl<D: Dynamics + ?Sized> Dynamics for &D {
     }
     fn jacobians(&self, x: &[f64], u: &[f64], fx: &mut DMatrix<f64>, fu: &mut DMatrix<f64>) {
         (**self).jacobians(x, u, fx, fu)
+    }
+    fn rhs_and_jacobians(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        xdot: &mut [f64],
+        fx: &mut DMatrix<f64>,
+        fu: &mut DMatrix<f64>,
+    ) {
+        (**self).rhs_and_jacobians(x, u, xdot, fx, fu)
     }
     fn has_second_order(&self) -> bool {
         (**self).has_second_order()

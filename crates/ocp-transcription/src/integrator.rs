@@ -29,7 +29,7 @@
 
 use crate::dynamics::Dynamics;
 use crate::error::{check_dim, invalid, OcpError, Result};
-use crate::la::{all_finite, axpy, gemm, gemv_t, norm_inf, Operator};
+use crate::la::{all_finite, axpy, gemm, gemv_t, lincomb, norm_inf, Operator};
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::lu::partial_pivoting::{factor as lu_factor, solve as lu_solve};
 use faer::{Conj, Par};
@@ -543,7 +543,11 @@ impl Integrator {
         sens: bool,
         tape: Option<usize>,
     ) -> Result<()> {
-        model.rhs(&self.xs, u, &mut self.k[j]);
+        if sens {
+            model.rhs_and_jacobians(&self.xs, u, &mut self.k[j], &mut self.fx, &mut self.fu);
+        } else {
+            model.rhs(&self.xs, u, &mut self.k[j]);
+        }
         if let Some(lw) = &self.lawson {
             lw.l_op.apply_vec(&mut self.k[j], &self.xs, -1.0, true);
         }
@@ -555,7 +559,6 @@ impl Integrator {
             self.tape_s[base + j].copy_from(&self.sx);
         }
         if sens {
-            model.jacobians(&self.xs, u, &mut self.fx, &mut self.fu);
             if let Some(lw) = &self.lawson {
                 self.fx -= &lw.l;
             }
@@ -594,28 +597,22 @@ impl Integrator {
             Self::pow_mat(&self.lawson, Pow::E1, &mut self.eks, &self.ks[0], 1.0, false);
         }
         // stage 2: X2 = E (x + h/2 k1) = Ex + h/2 Ek1
-        self.xs.copy_from_slice(&self.ex);
-        axpy(&mut self.xs, 0.5 * h, &self.ek1);
+        lincomb(&mut self.xs, &self.ex, 0.5 * h, &self.ek1);
         if sens {
-            self.sx.copy_from(&self.es);
-            axpy(self.sx.as_mut_slice(), 0.5 * h, self.eks.as_slice());
+            lincomb(self.sx.as_mut_slice(), self.es.as_slice(), 0.5 * h, self.eks.as_slice());
         }
         self.stage(model, u, 1, sens, tape)?;
         // stage 3: X3 = E x + h/2 k2
-        self.xs.copy_from_slice(&self.ex);
-        axpy(&mut self.xs, 0.5 * h, &self.k[1]);
+        lincomb(&mut self.xs, &self.ex, 0.5 * h, &self.k[1]);
         if sens {
-            self.sx.copy_from(&self.es);
-            axpy(self.sx.as_mut_slice(), 0.5 * h, self.ks[1].as_slice());
+            lincomb(self.sx.as_mut_slice(), self.es.as_slice(), 0.5 * h, self.ks[1].as_slice());
         }
         self.stage(model, u, 2, sens, tape)?;
         // stage 4: X4 = E² x + h E k3 = E (Ex + h k3)
-        self.t.copy_from_slice(&self.ex);
-        axpy(&mut self.t, h, &self.k[2]);
+        lincomb(&mut self.t, &self.ex, h, &self.k[2]);
         Self::pow_vec(&self.lawson, Pow::E1, &mut self.xs, &self.t, 1.0, false);
         if sens {
-            self.tm.copy_from(&self.es);
-            axpy(self.tm.as_mut_slice(), h, self.ks[2].as_slice());
+            lincomb(self.tm.as_mut_slice(), self.es.as_slice(), h, self.ks[2].as_slice());
             Self::pow_mat(&self.lawson, Pow::E1, &mut self.sx, &self.tm, 1.0, false);
         }
         self.stage(model, u, 3, sens, tape)?;

@@ -46,6 +46,7 @@ pub(crate) fn gemm_tn(
 #[derive(Clone, Debug, Default)]
 pub(crate) struct SparseRows {
     row_ptr: Vec<usize>,
+    row_end: Vec<usize>,
     col: Vec<usize>,
     val: Vec<f64>,
     /// Row groups `(r0, r1, first range, end range)` into `ranges`.
@@ -54,6 +55,11 @@ pub(crate) struct SparseRows {
     ranges: Vec<(usize, usize)>,
     /// Column ranges of the current row (scratch).
     row_ranges: Vec<(usize, usize)>,
+    /// Column-major mask of the entries covered by the dense blocks of `groups`/`ranges`
+    /// (valid when `blocks_valid`): a later matrix with no nonzero outside it reuses the
+    /// blocks without compressing.
+    covered: Vec<bool>,
+    blocks_valid: bool,
 }
 
 /// Zero runs shorter than this are computed through (dense blocks) in [`mul_right_t`].
@@ -63,29 +69,35 @@ impl SparseRows {
     pub(crate) fn with_capacity(n: usize) -> Self {
         Self {
             row_ptr: vec![0; n + 1],
+            row_end: vec![0; n],
             col: vec![0; n * n],
             val: vec![0.0; n * n],
             groups: Vec::with_capacity(n),
             ranges: Vec::with_capacity(n * n),
             row_ranges: Vec::with_capacity(n),
+            covered: vec![false; n * n],
+            blocks_valid: false,
         }
     }
 
-    /// Compresses the nonzeros of the column-major `n × n` matrix `j` by rows (branch-free;
-    /// no allocation); returns the number of nonzeros.
+    /// Compresses the nonzeros of the column-major `n × n` matrix `j` by rows: row `i`'s
+    /// nonzeros go to slots `i·n ..` (`row_ptr[i]` to `row_end[i]`), columns ascending.
+    /// One contiguous, branch-free pass over `j` (no allocation); returns the number of
+    /// nonzeros.
     fn compress(&mut self, j: &[f64], n: usize) -> usize {
-        let mut len = 0;
-        self.row_ptr[0] = 0;
         for i in 0..n {
-            for k in 0..n {
-                let v = j[i + k * n];
-                self.col[len] = k;
-                self.val[len] = v;
-                len += (v != 0.0) as usize;
-            }
-            self.row_ptr[i + 1] = len;
+            self.row_ptr[i] = i * n;
+            self.row_end[i] = i * n;
         }
-        len
+        for (k, column) in j.chunks_exact(n).enumerate() {
+            for (i, &v) in column.iter().enumerate() {
+                let p = self.row_end[i];
+                self.col[p] = k;
+                self.val[p] = v;
+                self.row_end[i] = p + (v != 0.0) as usize;
+            }
+        }
+        (0..n).map(|i| self.row_end[i] - self.row_ptr[i]).sum()
     }
 
     /// From the compressed rows: column ranges of each row's nonzeros (zero runs shorter than
@@ -96,7 +108,7 @@ impl SparseRows {
         self.ranges.clear();
         for i in 0..n {
             self.row_ranges.clear();
-            for p in self.row_ptr[i]..self.row_ptr[i + 1] {
+            for p in self.row_ptr[i]..self.row_end[i] {
                 let c = self.col[p];
                 match self.row_ranges.last_mut() {
                     Some(last) if c < last.1 + RANGE_GAP => last.1 = c + 1,
@@ -149,13 +161,23 @@ pub(crate) fn mul_right_t(
     if rows.row_ptr.len() != n + 1 || rows.col.len() < n * n {
         *rows = SparseRows::with_capacity(n);
     }
-    let nnz = rows.compress(j.as_slice(), n);
     let m = src.nrows();
+    // the Jacobian's pattern rarely changes between stages: reuse the blocks when every
+    // nonzero lies inside them (one branch-free pass, no compression)
+    if rows.blocks_valid
+        && Arch::new().dispatch(CoveredCheck { j: j.as_slice(), covered: &rows.covered })
+    {
+        blocks_product(dst, src, j, rows);
+        return;
+    }
+    rows.blocks_valid = false;
+    let nnz = rows.compress(j.as_slice(), n);
     if nnz * 10 <= 3 * n * n {
         Arch::new().dispatch(SparseRightT {
             dst: dst.as_mut_slice(),
             src: src.as_slice(),
-            row_ptr: &rows.row_ptr,
+            row_ptr: &rows.row_ptr[..n],
+            row_end: &rows.row_end,
             col: &rows.col,
             val: &rows.val,
             m,
@@ -169,6 +191,20 @@ pub(crate) fn mul_right_t(
         matmul(fmut(dst), Accum::Replace, fref(src), fref(j).transpose(), 1.0, Par::Seq);
         return;
     }
+    rows.covered.fill(false);
+    for &(r0, r1, a, b) in &rows.groups {
+        for &(c0, c1) in &rows.ranges[a..b] {
+            for c in c0..c1 {
+                rows.covered[c * n + r0..c * n + r1].fill(true);
+            }
+        }
+    }
+    rows.blocks_valid = true;
+    blocks_product(dst, src, j, rows);
+}
+
+/// `dst = src · jᵀ` over the dense blocks of `rows` (the rest of `j` is zero).
+fn blocks_product(dst: &mut DMatrix<f64>, src: &DMatrix<f64>, j: &DMatrix<f64>, rows: &SparseRows) {
     let (jr, sr) = (fref(j), fref(src));
     let mut dm = fmut(dst);
     for &(r0, r1, a, b) in &rows.groups {
@@ -196,7 +232,10 @@ pub(crate) fn mul_right_t(
 struct SparseRightT<'a> {
     dst: &'a mut [f64],
     src: &'a [f64],
+    /// Start of each row's nonzeros.
     row_ptr: &'a [usize],
+    /// End of each row's nonzeros.
+    row_end: &'a [usize],
     col: &'a [usize],
     val: &'a [f64],
     m: usize,
@@ -210,10 +249,9 @@ impl WithSimd for SparseRightT<'_> {
     type Output = ();
     #[inline(always)]
     fn with_simd<S: Simd>(self, _simd: S) {
-        let SparseRightT { dst, src, row_ptr, col, val, m, alpha, add } = self;
-        let n = row_ptr.len() - 1;
-        for i in 0..n {
-            let (p0, p1) = (row_ptr[i], row_ptr[i + 1]);
+        let SparseRightT { dst, src, row_ptr, row_end, col, val, m, alpha, add } = self;
+        for i in 0..row_ptr.len() {
+            let (p0, p1) = (row_ptr[i], row_end[i]);
             let d = &mut dst[i * m..(i + 1) * m];
             let mut c0 = 0;
             while c0 < m {
@@ -321,6 +359,45 @@ pub(crate) fn norm_inf(x: &[f64]) -> f64 {
 /// Whether all entries are finite.
 pub(crate) fn all_finite(x: &[f64]) -> bool {
     x.iter().all(|v| v.is_finite())
+}
+
+struct Lincomb<'a> {
+    y: &'a mut [f64],
+    x: &'a [f64],
+    a: f64,
+    z: &'a [f64],
+}
+
+impl WithSimd for Lincomb<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) {
+        for ((yi, xi), zi) in self.y.iter_mut().zip(self.x).zip(self.z) {
+            *yi = self.a.mul_add(*zi, *xi);
+        }
+    }
+}
+
+/// `y = x + a * z` (one pass, SIMD-dispatched).
+pub(crate) fn lincomb(y: &mut [f64], x: &[f64], a: f64, z: &[f64]) {
+    Arch::new().dispatch(Lincomb { y, x, a, z })
+}
+
+struct CoveredCheck<'a> {
+    j: &'a [f64],
+    covered: &'a [bool],
+}
+
+impl WithSimd for CoveredCheck<'_> {
+    type Output = bool;
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) -> bool {
+        let mut outside = 0usize;
+        for (v, c) in self.j.iter().zip(self.covered) {
+            outside += ((*v != 0.0) & !*c) as usize;
+        }
+        outside == 0
+    }
 }
 
 /// `y += a * x` (SIMD-dispatched).
@@ -484,7 +561,8 @@ impl Operator {
             Operator::Sparse { row_ptr, col, val, .. } => Arch::new().dispatch(SparseRightT {
                 dst: dst.as_mut_slice(),
                 src: src.as_slice(),
-                row_ptr,
+                row_ptr: &row_ptr[..row_ptr.len() - 1],
+                row_end: &row_ptr[1..],
                 col,
                 val,
                 m,
