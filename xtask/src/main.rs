@@ -3,6 +3,8 @@
 //! `cargo xtask` is an alias (`.cargo/config.toml`) for `cargo run --release -p xtask --`, so
 //! every verification case runs optimised.
 
+mod bench;
+
 use anyhow::{bail, Result};
 use flexmpc_verification::{all_cases, run_case, Row, Tier};
 use std::io::{IsTerminal, Write};
@@ -23,6 +25,7 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     match args.first().map(String::as_str) {
         Some("verify") => verify(&args[1..]),
+        Some("bench") => bench::main(&args[1..]),
         Some("-h") | Some("--help") | Some("help") | None => {
             println!("{USAGE}");
             Ok(())

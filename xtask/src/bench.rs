@@ -1,0 +1,283 @@
+//! `cargo xtask bench`: run time against error for the four studies of issue 8 — (a) FE mesh
+//! against frequency error, (b) ROM mode count against trajectory error, (c) time step against
+//! error per integrator, (d) closed-loop cost against solve time per controller — written as
+//! markdown, CSV, JSON and SVG plots to `target/bench/` (`--publish`: also to `docs/perf/`).
+//!
+//! Every timing is the median of repeated runs (`Instant`) on one thread (the rayon pool is
+//! built with one thread); each table header records the command, the machine, the load
+//! average at the start and end of its study and the process CPU time over wall time.
+
+mod control;
+mod mesh;
+mod modes;
+mod plot;
+mod report;
+mod timestep;
+
+use anyhow::{bail, Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use report::Study;
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+pub(crate) const USAGE: &str = "\
+usage: cargo xtask bench [--quick] [--publish] [WHICH ...]
+
+  WHICH      any of: mesh (a), modes (b), timestep (c), control (d); default: all four
+  --quick    a coarse subset (about 2-3 minutes in all); the full run takes 10-20 minutes
+  --publish  also copy the tables (markdown) and plots (SVG) to docs/perf/
+
+Writes target/bench/<study>.{md,csv,json,svg} and target/bench/summary.md.
+Timings: median of repeated runs, one thread. Prefer a quiet machine: the header of each
+table records the load average and the CPU/wall ratio of the run.";
+
+/// The studies, in report order: (short name, letter, runner).
+type Runner = fn(&mut Ctx) -> Result<Study>;
+const STUDIES: [(&str, &str, Runner); 4] = [
+    ("mesh", "a", mesh::run),
+    ("modes", "b", modes::run),
+    ("timestep", "c", timestep::run),
+    ("control", "d", control::run),
+];
+
+/// What every study needs: the tier, the command line, the machine and progress reporting.
+pub(crate) struct Ctx {
+    /// Coarse subset (`--quick`).
+    pub quick: bool,
+    /// The exact command, for table headers.
+    pub command: String,
+    /// Static machine description (CPU model, cores).
+    pub machine: String,
+    bar: Option<ProgressBar>,
+    started: Instant,
+}
+
+impl Ctx {
+    /// Reports progress: a bar message on a terminal, a plain line otherwise.
+    pub fn progress(&self, what: &str) {
+        match &self.bar {
+            Some(b) => b.set_message(what.to_string()),
+            None => eprintln!("[bench {:>6.1} s] {what}", self.started.elapsed().as_secs_f64()),
+        }
+    }
+
+    /// Advances the bar by one unit of work (no-op without a terminal).
+    pub fn tick(&self) {
+        if let Some(b) = &self.bar {
+            b.inc(1);
+        }
+    }
+
+    /// Sets the number of work units of the running study (each followed by [`Self::tick`]).
+    pub fn plan(&self, units: u64) {
+        if let Some(b) = &self.bar {
+            b.set_length(units);
+        }
+    }
+
+    /// Resets the bar for the next study.
+    fn start_study(&self, name: &str) {
+        match &self.bar {
+            Some(b) => {
+                b.reset();
+                b.set_prefix(name.to_string());
+            }
+            None => {
+                eprintln!("[bench {:>6.1} s] study {name}", self.started.elapsed().as_secs_f64())
+            }
+        }
+    }
+}
+
+/// Process CPU time (user + system) in seconds, from `/proc/self/stat` (0 where unavailable).
+pub(crate) fn process_cpu_seconds() -> f64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return 0.0;
+    };
+    // fields after the parenthesised command name; utime and stime are fields 14 and 15
+    let Some(rest) = stat.rfind(')').map(|i| &stat[i + 2..]) else {
+        return 0.0;
+    };
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = |i: usize| f.get(i).and_then(|s| s.parse::<f64>().ok()).unwrap_or(0.0);
+    // `rest` starts at field 3 (state), so field n is index n − 3; clock ticks are 100 Hz on
+    // Linux (USER_HZ)
+    (ticks(11) + ticks(12)) / 100.0
+}
+
+/// The 1-, 5- and 15-minute load averages.
+pub(crate) fn load_average() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+        .unwrap_or_else(|| "unknown".into())
+}
+
+fn machine() -> String {
+    let cpus = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(0);
+    let model = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split(':').nth(1))
+                .map(|m| m.trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown CPU".into());
+    format!("{cpus} CPUs (nproc), {model}")
+}
+
+/// Median wall time (s) per call of `f` over up to `k` timing samples, stopping early once
+/// `budget` seconds are spent (at least one sample). Calls shorter than 20 ms are batched so
+/// that each sample lasts about 20 ms (the clock and scheduler noise stay small against it).
+/// Returns the last call's value with the median time per call.
+pub(crate) fn timed<T>(
+    k: usize,
+    budget: f64,
+    mut f: impl FnMut() -> Result<T>,
+) -> Result<(T, f64)> {
+    const SAMPLE: f64 = 0.02;
+    let start = Instant::now();
+    let t = Instant::now();
+    let mut last = f()?;
+    let first = t.elapsed().as_secs_f64();
+    let batch = if first < SAMPLE { (SAMPLE / first.max(1e-7)).ceil() as usize } else { 1 };
+    let mut times = vec![first];
+    while times.len() < k.max(1) && start.elapsed().as_secs_f64() < budget {
+        let t = Instant::now();
+        for _ in 0..batch {
+            last = f()?;
+        }
+        times.push(t.elapsed().as_secs_f64() / batch as f64);
+    }
+    if times.len() > 1 {
+        times.remove(0); // the first call warms caches and allocations
+    }
+    Ok((last, median(&mut times)))
+}
+
+/// Median of a non-empty slice (NaN for an empty one).
+pub(crate) fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// Observed order of convergence between consecutive refinements: `log(e_i/e_{i+1}) /
+/// log(h_i/h_{i+1})` (NaN where an error is not positive and finite).
+pub(crate) fn orders(h: &[f64], e: &[f64]) -> Vec<f64> {
+    let mut out = vec![f64::NAN];
+    for i in 1..h.len() {
+        let ok = |x: f64| x.is_finite() && x > 0.0;
+        out.push(if ok(e[i]) && ok(e[i - 1]) {
+            (e[i - 1] / e[i]).ln() / (h[i - 1] / h[i]).ln()
+        } else {
+            f64::NAN
+        });
+    }
+    out
+}
+
+/// Entry point of `cargo xtask bench ARGS`.
+pub fn main(args: &[String]) -> Result<()> {
+    let mut quick = false;
+    let mut publish = false;
+    let mut which: Vec<&str> = Vec::new();
+    for arg in args {
+        match arg.as_str() {
+            "--quick" => quick = true,
+            "--full" => quick = false,
+            "--publish" => publish = true,
+            "-h" | "--help" => {
+                println!("{USAGE}");
+                return Ok(());
+            }
+            s if s.starts_with("--") => bail!("unknown option `{s}`\n{USAGE}"),
+            s => match STUDIES.iter().find(|(n, l, _)| s == *n || s == *l) {
+                Some((n, _, _)) => which.push(n),
+                None => bail!("unknown study `{s}` (mesh, modes, timestep, control)\n{USAGE}"),
+            },
+        }
+    }
+    if which.is_empty() {
+        which = STUDIES.iter().map(|(n, _, _)| *n).collect();
+    }
+    // one worker thread: every timing is single-core (mpc sweeps and parallel intervals use
+    // rayon; nothing else spawns threads)
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build_global()
+        .context("building the one-thread rayon pool")?;
+    let mut command = String::from("cargo xtask bench");
+    for a in args {
+        command.push(' ');
+        command.push_str(a);
+    }
+    let bar = std::io::stderr().is_terminal().then(|| {
+        let b = ProgressBar::new(1);
+        b.set_style(
+            ProgressStyle::with_template(
+                "{prefix:>9} [{elapsed_precise}] {bar:30} {pos}/{len} {msg}",
+            )
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
+        b
+    });
+    let mut ctx = Ctx { quick, command, machine: machine(), bar, started: Instant::now() };
+    let dir = repo_root().join("target/bench");
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let mut studies = Vec::new();
+    for (name, _, runner) in STUDIES.iter().filter(|(n, _, _)| which.contains(n)) {
+        ctx.start_study(name);
+        let load0 = load_average();
+        let (cpu0, t0) = (process_cpu_seconds(), Instant::now());
+        let mut study = runner(&mut ctx).with_context(|| format!("study `{name}`"))?;
+        let wall = t0.elapsed().as_secs_f64();
+        study.header = report::Header {
+            command: ctx.command.clone(),
+            machine: ctx.machine.clone(),
+            load_start: load0,
+            load_end: load_average(),
+            wall_s: wall,
+            cpu_over_wall: (process_cpu_seconds() - cpu0) / wall.max(1e-9),
+            quick,
+        };
+        study.write(&dir)?;
+        ctx.progress(&format!("{name}: done in {wall:.1} s"));
+        studies.push(study);
+    }
+    if let Some(b) = &ctx.bar {
+        b.finish_and_clear();
+    }
+    let summary = report::summary(&studies);
+    std::fs::write(dir.join("summary.md"), &summary)?;
+    if publish {
+        let docs = repo_root().join("docs/perf");
+        std::fs::create_dir_all(&docs)?;
+        for s in &studies {
+            s.publish(&dir, &docs)?;
+        }
+        std::fs::write(docs.join("summary.md"), &summary)?;
+        eprintln!("copied tables and plots to {}", docs.display());
+    }
+    println!("{summary}");
+    eprintln!(
+        "wrote {} ({:.0} s in all)",
+        dir.join("summary.md").display(),
+        ctx.started.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+/// The repository root (parent of `xtask/`).
+pub(crate) fn repo_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
