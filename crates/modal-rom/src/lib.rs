@@ -30,6 +30,26 @@
 //! Also: projection of FE states and reconstruction of fields and positions
 //! ([`projection`]), export to JSON + `.npy` and a reader ([`export`]), a mode report for
 //! the CLI ([`report`]) and the paper's canonical models ([`samples`]).
+//!
+//! # Example
+//!
+//! The paper's 2D two-link (8 elements per link), its constrained modes and the reduced model
+//! on the paper's mode set (2 rigid + 4 axial + 4 bending), undamped:
+//!
+//! ```
+//! use modal_rom::{samples, RomOptions};
+//!
+//! let sample =
+//!     samples::paper_2d(8, 0.0, false, &samples::paper_2d_selection(), &RomOptions::default())?;
+//! let rom = &sample.rom;
+//! assert_eq!(rom.n_rigid(), 2);
+//! // The nonlinear terms do no work: qᵀN(q)q = 0 for any state (eq. 21), to round-off.
+//! let q: Vec<f64> = (0..rom.n_state()).map(|i| 0.1 * (i as f64 + 1.0).sin()).collect();
+//! assert!(rom.energy_neutrality(&q)?.abs() < 1e-12);
+//! let mut qdot = vec![0.0; rom.n_state()];
+//! rom.rhs(&q, &vec![0.0; rom.n_inputs()], &mut qdot)?;
+//! # Ok::<(), modal_rom::ModalError>(())
+//! ```
 
 pub mod basis;
 pub mod blocks;

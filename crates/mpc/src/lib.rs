@@ -36,6 +36,26 @@
 //! hard constraints, follower loads and joint torques as inputs) or the modal model itself;
 //! the paper's scenarios ([`Scenario::paper_2d`], [`Scenario::paper_3d`]); results with time
 //! series, snapshots, per-sample solver reports and the issue's summary metrics.
+//!
+//! # Example
+//!
+//! The paper's 2D scenario, coarse (6 elements per link), and one linear-MPC sample from a
+//! spinning state; the control respects the bound `|u| ≤ u_max`:
+//!
+//! ```
+//! use mpc::{Controller, ControllerKind, ControllerSettings, RomDynamics, Scenario, Setup};
+//!
+//! let scenario = Scenario::paper_2d(6)?;
+//! let setup = Setup::new(&scenario)?;
+//! let model = RomDynamics::new(&setup.rom)?;
+//! let settings = ControllerSettings::of(ControllerKind::Lmpc);
+//! let mut controller = Controller::new(model, &setup.weights, &scenario.mpc, &settings)?;
+//! let mut x0: Vec<f64> = setup.weights.x_ref.iter().copied().collect();
+//! x0[0] = 0.5; // velocity of the first (rigid) mode
+//! let report = controller.step(0.0, &x0)?;
+//! assert!(report.u.iter().all(|u| u.abs() <= scenario.mpc.u_max + 1e-9));
+//! # Ok::<(), mpc::MpcError>(())
+//! ```
 
 mod closed_loop;
 mod controller;
