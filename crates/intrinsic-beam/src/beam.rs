@@ -33,10 +33,11 @@
 //! Summing `mid·(rows)` telescopes: `ε(new) − ε(old) = dt · (boundary + load + damping power)`
 //! exactly ([`Beam::step_power`]).
 
-use nalgebra::{Matrix3, Matrix6, Vector6};
+use nalgebra::{Matrix3, Matrix6, SMatrix, SVector, Vector6};
 
 use crate::components::Components;
 use crate::error::{check_len, BeamError, Result};
+use crate::kernels::{Kernels, PlanarKernels, SpatialKernels};
 use crate::kinematics::Kinematics;
 use crate::loads::{LoadFrame, Loads};
 use crate::mesh::Mesh;
@@ -114,10 +115,6 @@ pub struct Beam {
     /// `½` (differential) or `1` (algebraic) per local unknown: `∂mid/∂new`.
     mid_weight: Vec<f64>,
     has_flux_damping: bool,
-    /// `M` restricted to the active components, row-major `k×k`.
-    reduced_mass: Vec<f64>,
-    /// `C` restricted to the active components, row-major `k×k`.
-    reduced_compliance: Vec<f64>,
 }
 
 thread_local! {
@@ -152,14 +149,7 @@ impl Beam {
             *w = 1.0;
         }
         let has_flux_damping = section.d1.iter().chain(section.d2.iter()).any(|&x| x != 0.0);
-        let reduce = |m: &Matrix6<f64>| {
-            (0..k * k).map(|ab| components.entry(m, ab / k, ab % k)).collect::<Vec<_>>()
-        };
-        let reduced_mass = reduce(&section.mass);
-        let reduced_compliance = reduce(&section.compliance);
         Ok(Self {
-            reduced_mass,
-            reduced_compliance,
             e_mat: e_matrix(&section.kappa0),
             section,
             mesh,
@@ -578,51 +568,125 @@ impl Beam {
     ) -> Result<()> {
         self.check_input(input)?;
         check_len("residual", self.n_rows(), out.len())?;
-        MID_SCRATCH.with(|cell| -> Result<()> {
-            let mut mid = cell.borrow_mut();
-            mid.resize(self.dim(), 0.0);
-            self.midpoint(old, new, &mut mid)?;
-            let rot = self.midpoint_rotations(input, &mid);
-            let (loads, _) = self.node_loads(input.time + 0.5 * input.dt, input.loads, &rot);
-            self.rhs_into(&mid, &loads, out, None);
-            Ok(())
-        })?;
-        for v in out.iter_mut() {
-            *v = -*v;
+        let dead = input.loads.has_dead();
+        let (loads, _) = if dead {
+            MID_SCRATCH.with(|cell| -> Result<_> {
+                let mut mid = cell.borrow_mut();
+                mid.resize(self.dim(), 0.0);
+                self.midpoint(old, new, &mut mid)?;
+                let rot = self.midpoint_rotations(input, &mid);
+                Ok(self.node_loads(input.time + 0.5 * input.dt, input.loads, &rot))
+            })?
+        } else {
+            check_len("old state", self.dim(), old.len())?;
+            check_len("new state", self.dim(), new.len())?;
+            self.node_loads(input.time + 0.5 * input.dt, input.loads, &[])
+        };
+        match self.components {
+            Components::Planar => self.residual_k(
+                &PlanarKernels { kappa: self.section.kappa0.y },
+                old,
+                new,
+                input.dt,
+                &loads,
+                out,
+            ),
+            Components::Spatial => self.residual_k(
+                &SpatialKernels { kappa0: self.section.kappa0 },
+                old,
+                new,
+                input.dt,
+                &loads,
+                out,
+            ),
         }
-        self.add_inertia(old, new, input.dt, out);
         if out.iter().any(|v| !v.is_finite()) {
             return Err(BeamError::NonFiniteState { what: "step residual".into() });
         }
         Ok(())
     }
 
-    /// `out += B (new − old)/dt` on the beam rows.
-    fn add_inertia(&self, old: &[f64], new: &[f64], dt: f64, out: &mut [f64]) {
-        let k = self.k;
-        let (m, c) = (&self.reduced_mass, &self.reduced_compliance);
-        for (node, w) in self.mesh.weights().iter().enumerate() {
-            let w = w / dt;
-            let s = node * k;
-            for a in 0..k {
-                let mut acc = 0.0;
-                for b in 0..k {
-                    acc += m[a * k + b] * (new[s + b] - old[s + b]);
-                }
-                out[s + a] += w * acc;
+    /// The step residual on `K`-vectors, streaming along the beam: midpoint values formed on
+    /// the fly (`μ new + (1 − μ) old`), `B (new − old)/dt − f(mid)` written per node and
+    /// element (the arithmetic of [`Beam::rhs_into`] plus the inertia term, fused).
+    fn residual_k<const K: usize, O: Kernels<K>>(
+        &self,
+        ops: &O,
+        old: &[f64],
+        new: &[f64],
+        dt: f64,
+        node_loads: &[Vector6<f64>],
+        out: &mut [f64],
+    ) {
+        type V<const K: usize> = SVector<f64, K>;
+        let restrict =
+            |m: &Matrix6<f64>| SMatrix::<f64, K, K>::from_fn(|a, b| self.components.entry(m, a, b));
+        let (m, c, d0) = (
+            restrict(&self.section.mass),
+            restrict(&self.section.compliance),
+            restrict(&self.section.d0),
+        );
+        let (d1, d2) = (restrict(&self.section.d1), restrict(&self.section.d2));
+        let has_d0 = d0.iter().any(|&v| v != 0.0);
+        let idx = self.components.indices();
+        let n = self.n_elements();
+        let hs = self.mesh.lengths();
+        let ws = self.mesh.weights();
+        let mu = &self.mid_weight;
+        let at = |i: usize| {
+            let (o, x, w) = (
+                V::<K>::from_column_slice(&old[i..i + K]),
+                V::<K>::from_column_slice(&new[i..i + K]),
+                V::<K>::from_column_slice(&mu[i..i + K]),
+            );
+            // mid = μ new + (1 − μ) old (bitwise as `midpoint`), and new − old
+            (x.component_mul(&w) + o.component_mul(&V::<K>::from_fn(|a, _| 1.0 - w[a])), x - o)
+        };
+        let inv_dt = 1.0 / dt;
+        // B (new − old)/dt − (node terms without x2) at node i
+        let node_term = |i: usize, x1: &V<K>, dx1: &V<K>| {
+            let w = ws[i];
+            let mut f = ops.l1_times(x1, &(m * x1)) * w + m * dx1 * (w * inv_dt);
+            if has_d0 {
+                f -= d0 * x1 * w;
             }
-        }
-        for (e, h) in self.mesh.lengths().iter().enumerate() {
-            let h = h / dt;
-            let s = self.x2_index(e, 0);
-            for a in 0..k {
-                let mut acc = 0.0;
-                for b in 0..k {
-                    acc += c[a * k + b] * (new[s + b] - old[s + b]);
-                }
-                out[s + a] += h * acc;
+            if !node_loads.is_empty() {
+                f -= V::<K>::from_fn(|a, _| node_loads[i][idx[a]]);
             }
+            f
+        };
+        let (x1_0, dx1_0) = at(0);
+        let (x2_left, _) = at(self.left_index(0));
+        let mut x1_prev = x1_0;
+        let mut r_prev = node_term(0, &x1_0, &dx1_0) + x2_left;
+        for e in 0..n {
+            let (x1_next, dx1_next) = at((e + 1) * K);
+            let mut r_next = node_term(e + 1, &x1_next, &dx1_next);
+            let s = K * (n + 1 + e);
+            let (x2, dx2) = at(s);
+            let cx2 = c * x2;
+            let h = hs[e];
+            let q = (ops.e_times(&x2) - ops.l2_times(&x2, &cx2)) * (0.5 * h);
+            r_prev -= x2 + q;
+            r_next -= q - x2;
+            let dx = x1_next - x1_prev;
+            if self.has_flux_damping {
+                let g = d2 * dx / h + d1 * dx * 0.5;
+                let g2 = -d2 * dx / h + d1 * dx * 0.5;
+                r_prev -= g;
+                r_next -= g2;
+            }
+            let xb = (x1_prev + x1_next) * 0.5;
+            let r2 =
+                c * dx2 * (h * inv_dt) - (dx + (ops.l1t_times(&xb, &cx2) - ops.et_times(&xb)) * h);
+            out[s..s + K].copy_from_slice(r2.as_slice());
+            out[e * K..(e + 1) * K].copy_from_slice(r_prev.as_slice());
+            x1_prev = x1_next;
+            r_prev = r_next;
         }
+        let (x2_right, _) = at(self.right_index(0));
+        r_prev -= x2_right;
+        out[n * K..(n + 1) * K].copy_from_slice(r_prev.as_slice());
     }
 
     /// Number of Jacobian entries the beam emits (fixed pattern, structural zeros included).

@@ -157,16 +157,16 @@ where
             }
         };
         self.inverse[0] = check(0, &self.blocks[1])?;
-        let extra = self.blocks[3 * n];
-        let has_extra = n > 2 && extra.iter().any(|&v| v != 0.0);
-        self.lower_extra = if has_extra { extra * self.inverse[0] } else { Block::<K>::zeros() };
+        let has_extra = n > 2 && self.blocks[3 * n].iter().any(|&v| v != 0.0);
+        self.lower_extra =
+            if has_extra { self.blocks[3 * n] * self.inverse[0] } else { Block::<K>::zeros() };
         for i in 1..n {
-            let mut sub = self.blocks[3 * i];
-            if i == 2 && has_extra {
+            let l = if i == 2 && has_extra {
                 // row 2 −= (A_20 S_0⁻¹) row 0: fills A_21 with −A_20 S_0⁻¹ A_01
-                sub -= self.lower_extra * self.blocks[2];
-            }
-            let l = sub * self.inverse[i - 1];
+                (self.blocks[3 * i] - self.lower_extra * self.blocks[2]) * self.inverse[i - 1]
+            } else {
+                self.blocks[3 * i] * self.inverse[i - 1]
+            };
             let s = self.blocks[3 * i + 1] - l * self.blocks[3 * (i - 1) + 2];
             self.lower[i] = l;
             self.inverse[i] = check(i, &s)?;
@@ -183,26 +183,39 @@ where
     /// Solves `A x = b` in place (`b` in block order, length `K n`); `false` if not factorised
     /// or `b` has the wrong length.
     pub fn solve_in_place(&self, b: &mut [f64]) -> bool {
-        if !self.factorized || b.len() != K * self.n {
+        if b.len() != K * self.n {
             return false;
         }
+        let starts: Vec<usize> = (0..self.n).map(|i| K * i).collect();
+        self.solve_in_place_at(b, &starts)
+    }
+
+    /// Solves `A x = b` in place where block `i` of both `b` and `x` occupies
+    /// `v[starts[i]..starts[i] + K]` (any placement of non-overlapping blocks); `false` if not
+    /// factorised or a block lies outside `v`.
+    pub fn solve_in_place_at(&self, v: &mut [f64], starts: &[usize]) -> bool {
         let n = self.n;
-        let get = |b: &[f64], i: usize| SVector::<f64, K>::from_column_slice(&b[K * i..K * i + K]);
-        let y0 = get(b, 0);
+        if !self.factorized || starts.len() != n || starts.iter().any(|&s| s + K > v.len()) {
+            return false;
+        }
+        let get = |v: &[f64], i: usize| {
+            SVector::<f64, K>::from_column_slice(&v[starts[i]..starts[i] + K])
+        };
+        let y0 = get(v, 0);
         let mut prev = y0;
         for i in 1..n {
-            let mut y = get(b, i) - self.lower[i] * prev;
+            let mut y = get(v, i) - self.lower[i] * prev;
             if i == 2 {
                 y -= self.lower_extra * y0;
             }
-            b[K * i..K * i + K].copy_from_slice(y.as_slice());
+            v[starts[i]..starts[i] + K].copy_from_slice(y.as_slice());
             prev = y;
         }
         let mut next = self.inverse[n - 1] * prev;
-        b[K * (n - 1)..K * n].copy_from_slice(next.as_slice());
+        v[starts[n - 1]..starts[n - 1] + K].copy_from_slice(next.as_slice());
         for i in (0..n - 1).rev() {
-            let x = self.inverse[i] * (get(b, i) - self.blocks[3 * i + 2] * next);
-            b[K * i..K * i + K].copy_from_slice(x.as_slice());
+            let x = self.inverse[i] * (get(v, i) - self.blocks[3 * i + 2] * next);
+            v[starts[i]..starts[i] + K].copy_from_slice(x.as_slice());
             next = x;
         }
         true

@@ -26,8 +26,9 @@
 //! sectional-force terms, which are `O(dt ‖x‖)` relative, and Schur complements of a matrix
 //! with positive definite symmetric part keep one, so every `S_i` is nonsingular. Rigid or
 //! massless directions (DAE sections) can make a block singular (e.g. a massless rotation at a
-//! free left end); [`BlockTridiagonal::factorize`] detects it and that factorisation falls back
-//! to the sparse LU (partial pivoting). An inaccurate factorisation cannot change the converged
+//! free left end, or the rigid/massless out-of-plane directions of a spatial paper section);
+//! [`BlockTridiagonal::factorize`] detects it and the solver switches to the sparse LU (partial
+//! pivoting) for the rest of the run. An inaccurate factorisation cannot change the converged
 //! step either: Newton stops on the residual's fixed point, the factorisation only sets its
 //! speed.
 
@@ -59,10 +60,10 @@ struct Interleaved<const K: usize> {
     /// Storage slot of every step-pattern entry (building it checks that the pattern fits).
     #[cfg_attr(not(test), allow(dead_code))]
     slots: Vec<usize>,
-    /// Step-system row of block-order row `i`.
-    row_of: Vec<usize>,
-    /// Step-system unknown of block-order column `i`.
-    col_of: Vec<usize>,
+    /// Offset of each position's rows (= columns, up to `swaps`) in the step vector.
+    starts: Vec<usize>,
+    /// Pairs `(x2_L[a], x1_0[a])` to swap after a solve (velocity-controlled left end).
+    swaps: Vec<(usize, usize)>,
     /// Inverse maps: block-order position of step-system row / unknown `i`.
     row_pos: Vec<usize>,
     col_pos: Vec<usize>,
@@ -73,7 +74,6 @@ struct Interleaved<const K: usize> {
     /// Midpoint weights `μ` of the unknowns, per node (`x1`) and per element (`x2`).
     mu_node: Vec<SVector<f64, K>>,
     mu_element: Vec<SVector<f64, K>>,
-    scratch: Vec<f64>,
 }
 
 impl<const K: usize> Interleaved<K>
@@ -131,11 +131,24 @@ where
         };
         let section = beam.section();
         let mu = |start: usize| SVector::<f64, K>::from_fn(|a, _| beam.midpoint_weight(start + a));
+        let starts: Vec<usize> = (0..2 * n + 3).map(|p| row_of[K * p]).collect();
+        let contiguous = (0..2 * n + 3).all(|p| {
+            (0..K).all(|a| {
+                row_of[K * p + a] == starts[p] + a && (p < 2 || col_of[K * p + a] == starts[p] + a)
+            })
+        });
+        let swaps: Vec<(usize, usize)> = (0..K)
+            .filter(|&a| col_of[a] != row_of[a])
+            .map(|a| (row_of[a], row_of[K + a]))
+            .collect();
+        if !contiguous {
+            return None;
+        }
         Some(Self {
+            starts,
+            swaps,
             matrix,
             slots,
-            row_of,
-            col_of,
             mass: restrict(&section.mass),
             compliance: restrict(&section.compliance),
             d0: restrict(&section.d0),
@@ -143,7 +156,6 @@ where
             mu_element: (0..n).map(|e| mu(beam.x2_index(e, 0))).collect(),
             row_pos,
             col_pos,
-            scratch: vec![0.0; dim],
         })
     }
 
@@ -210,8 +222,8 @@ where
             let w = ws[node];
             let mut g = SMatrix::<f64, K, K>::from_fn(|_, _| 0.0);
             for b in 0..K {
-                let eb = unit(b);
-                let col = (ops.l1_times(&eb, &mx1) + ops.l1_times(&x1, &(m * eb))) * w;
+                let mb: SVector<f64, K> = m.column(b).into_owned();
+                let col = (ops.l1_times(&unit(b), &mx1) + ops.l1_times(&x1, &mb)) * w;
                 g.set_column(b, &col);
             }
             if has_d0 {
@@ -242,7 +254,7 @@ where
             let mut d22 = dq;
             for b in 0..K {
                 let eb = unit(b);
-                let ceb = c * eb;
+                let ceb: SVector<f64, K> = c.column(b).into_owned();
                 let col = ops.e_times(&eb) - ops.l2_times(&eb, &cx2) - ops.l2_times(&x2, &ceb);
                 dq.set_column(b, &(col * (0.5 * h)));
                 let col = ops.l1t_times(&eb, &cx2) - ops.et_times(&eb);
@@ -286,14 +298,15 @@ where
     }
 
     fn solve(&mut self, rhs: &mut [f64]) -> bool {
-        for (s, &r) in self.scratch.iter_mut().zip(&self.row_of) {
-            *s = rhs[r];
-        }
-        if !self.matrix.solve_in_place(&mut self.scratch) {
+        // Every position's rows and columns are the same contiguous index range, except at
+        // the left end: position 0 reads the end rows (at x2_L) and position 1 the node-0 rows
+        // (at x1_0), but a velocity-controlled component `a` has x1_0[a] at position 0 and
+        // x2_L[a] at position 1: their solution entries are swapped back afterwards.
+        if !self.matrix.solve_in_place_at(rhs, &self.starts) {
             return false;
         }
-        for (&s, &c) in self.scratch.iter().zip(&self.col_of) {
-            rhs[c] = s;
+        for &(i, j) in &self.swaps {
+            rhs.swap(i, j);
         }
         true
     }
@@ -403,7 +416,10 @@ impl StepSolver {
                 self.factorized = true;
                 return Ok(());
             }
+            // a singular or ill-conditioned Schur block comes from the section (rigid or
+            // massless directions) or the end rows and recurs: sparse LU from now on
             self.block_refusals += 1;
+            self.block = None;
         }
         let nnz_beam = problem.beam.jacobian_nnz();
         problem.beam.jacobian_values(input, old, new, &mut values[..nnz_beam])?;
@@ -430,6 +446,7 @@ impl StepSolver {
         };
         if self.block.is_some() && !ok {
             self.block_refusals += 1;
+            self.block = None;
         }
         self.block_active = ok;
         if !ok {
