@@ -6,11 +6,11 @@
 //! `[γ, κ] = C x2_e`, `ξ_{e+1} = exp(h_e U(κ + κ0)) ξ_e` and
 //! `r_{e+1} = r_e + h_e T(ξ_{e+½}) (e1 + γ)` — the same midpoint rule, with `s` for `t`.
 
-use nalgebra::{UnitQuaternion, Vector3, Vector4};
+use nalgebra::{UnitQuaternion, Vector3, Vector4, Vector6};
 
 use crate::beam::Beam;
 use crate::error::{check_len, BeamError, Result};
-use crate::operators::{halves, quaternion_step, rotation};
+use crate::operators::{halves, quaternion_half_and_full_step, quaternion_step, rotation};
 
 /// Quaternion `ξ_n = [ξ0, ξv]` and position `r_n` (global frame) of every node.
 #[derive(Clone, Debug, PartialEq)]
@@ -72,19 +72,36 @@ impl Kinematics {
     /// [`Beam::midpoint`]).
     pub fn advance(&mut self, beam: &Beam, old: &[f64], new: &[f64], dt: f64) -> Result<()> {
         check_len("kinematics nodes", beam.n_nodes(), self.xi.len())?;
-        let mut mid = vec![0.0; beam.dim()];
-        beam.midpoint(old, new, &mut mid)?;
-        self.advance_with_rates(beam, &mid, dt)
+        check_len("old state", beam.dim(), old.len())?;
+        check_len("new state", beam.dim(), new.len())?;
+        let k = beam.k();
+        let mut mid = [0.0; 6];
+        for n in 0..beam.n_nodes() {
+            // node velocities at the midpoint (`Beam::midpoint` restricted to x1_n)
+            for (a, m) in mid.iter_mut().enumerate().take(k) {
+                let i = beam.x1_index(n, a);
+                let w = beam.midpoint_weight(i);
+                *m = w * new[i] + (1.0 - w) * old[i];
+            }
+            self.advance_node(n, &beam.components().embed(&mid[..k]), dt);
+        }
+        Ok(())
+    }
+
+    /// Advances node `n` by `dt` with the velocities `x1 = [v, ω]` held constant.
+    #[inline]
+    fn advance_node(&mut self, n: usize, x1: &Vector6<f64>, dt: f64) {
+        let (v, w) = halves(x1);
+        let (x_mid, x_new) = quaternion_half_and_full_step(&self.xi[n], &w, dt);
+        self.r[n] += rotation(&x_mid) * v * dt;
+        self.xi[n] = x_new;
     }
 
     /// Advances by `dt` with the node velocities of `rates` (a beam vector) held constant.
     pub fn advance_with_rates(&mut self, beam: &Beam, rates: &[f64], dt: f64) -> Result<()> {
         check_len("rates", beam.dim(), rates.len())?;
         for n in 0..beam.n_nodes() {
-            let (v, w) = halves(&beam.x1(rates, n));
-            let x_mid = quaternion_step(&self.xi[n], &w, 0.5 * dt);
-            self.r[n] += rotation(&x_mid) * v * dt;
-            self.xi[n] = quaternion_step(&self.xi[n], &w, dt);
+            self.advance_node(n, &beam.x1(rates, n), dt);
         }
         Ok(())
     }
