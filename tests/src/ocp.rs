@@ -89,6 +89,16 @@ fn sensitivities() -> CaseOutcome {
             1e-6,
         ));
     }
+    // the ROM-structured sample: > 30 % nonzero Jacobian with the ROM's zero blocks, so the
+    // block-range products (and their cached pattern) are exercised
+    let rom = ModalLike::rom_like(24, 3, 60.0, 0.5, 5).map_err(err)?;
+    let mut e = 0.0_f64;
+    for _ in 0..8 {
+        let x: Vec<f64> = (0..24).map(|_| rng.uniform(-0.5, 0.5)).collect();
+        let u: Vec<f64> = (0..3).map(|_| rng.uniform(-1.0, 1.0)).collect();
+        e = e.max(fd_error(&rom, IntegratorKind::LawsonRk4, &x, &u)?);
+    }
+    out.push(Metric::at_most("LawsonRk4, ROM-structured nx = 24: max rel. deviation", e, 1e-6));
     Ok(out)
 }
 

@@ -1,7 +1,7 @@
 //! One shooting interval with sensitivities on the ROM-structured sample, in a loop, for
 //! profilers (`valgrind --tool=callgrind`, `perf stat`): `interval_profile [substeps] [calls]
-//! [amplitude]`. Prints the nonlinear Jacobian's max row sum at the state and the CPU time
-//! per interval.
+//! [omega0]` at the rotating state of `omega0` (default 2) with random inputs in [−1, 1].
+//! Prints the nonlinear Jacobian's max row sum at the state and the wall time per interval.
 
 use nalgebra::DMatrix;
 use ocp_transcription::samples::{ModalLike, SplitMix64};
@@ -13,11 +13,11 @@ fn main() {
     let arg = |i: usize, d: f64| args.get(i).and_then(|s| s.parse().ok()).unwrap_or(d);
     let substeps = arg(1, 20.0) as usize;
     let calls = arg(2, 200.0) as usize;
-    let amp = arg(3, 0.3);
+    let omega0 = arg(3, 2.0);
     let m = ModalLike::paper_sized_rom();
     let (nx, nu) = (m.nx(), m.nu());
     let mut rng = SplitMix64::new(2024);
-    let x: Vec<f64> = (0..nx).map(|_| rng.uniform(-amp, amp)).collect();
+    let x = m.rotating_state(omega0).expect("rom-like");
     let u: Vec<f64> = (0..nu).map(|_| rng.uniform(-1.0, 1.0)).collect();
     let (mut fx, mut fu) = (DMatrix::zeros(nx, nx), DMatrix::zeros(nx, nu));
     m.jacobians(&x, &u, &mut fx, &mut fu);
@@ -32,7 +32,7 @@ fn main() {
         int.integrate_with_sensitivities(&m, &x, &u, &mut xe, &mut a, &mut b).expect("finite");
     }
     println!(
-        "nx {nx}, {} tensor entries, amplitude {amp}: max row sum of ∂(N(x)x)/∂x {row_sum:.1}; Lawson × {substeps}: {:.1} µs per interval (wall)",
+        "nx {nx}, {} tensor entries, ω0 = {omega0}: max row sum of ∂(N(x)x)/∂x {row_sum:.1}; Lawson × {substeps}: {:.1} µs per interval (wall)",
         m.tensor_entries(),
         t.elapsed().as_secs_f64() * 1e6 / calls as f64
     );

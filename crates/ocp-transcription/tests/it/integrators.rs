@@ -272,3 +272,32 @@ fn rom_like_model_has_the_rom_structure_and_exact_sensitivities() {
     let err = fd_sensitivity_error(&m, IntegratorKind::LawsonRk4, &x, &u);
     assert!(err < 1e-6, "{err}");
 }
+
+/// `rhs_and_jacobians`: the default (rhs + jacobians) and the ROM-like sample's override by
+/// Euler's identity `f = ½(∂f/∂x + W)x + Bu` give the same values (round-off: sums of ~100
+/// terms of size ≤ 1, so 1e-12 relative).
+#[test]
+fn rhs_and_jacobians_agree_with_separate_calls() {
+    let m = ModalLike::rom_like(30, 4, 80.0, 0.5, 2).unwrap();
+    let c = CartPole::default();
+    let mut rng = ocp_transcription::samples::SplitMix64::new(4);
+    let x: Vec<f64> = (0..30).map(|_| rng.uniform(-1.0, 1.0)).collect();
+    let u = [0.3, -0.2, 0.9, -1.0];
+    let check = |d: &dyn Dynamics, x: &[f64], u: &[f64]| {
+        let (n, nu) = (d.nx(), d.nu());
+        let (mut f1, mut f2) = (vec![0.0; n], vec![0.0; n]);
+        let (mut a1, mut b1) = (DMatrix::zeros(n, n), DMatrix::zeros(n, nu));
+        let (mut a2, mut b2) = (DMatrix::zeros(n, n), DMatrix::zeros(n, nu));
+        d.rhs(x, u, &mut f1);
+        d.jacobians(x, u, &mut a1, &mut b1);
+        d.rhs_and_jacobians(x, u, &mut f2, &mut a2, &mut b2);
+        let scale = f1.iter().fold(1.0_f64, |s, v| s.max(v.abs()));
+        for i in 0..n {
+            assert!((f1[i] - f2[i]).abs() <= 1e-12 * scale, "row {i}: {} vs {}", f1[i], f2[i]);
+        }
+        assert_eq!(a1, a2);
+        assert_eq!(b1, b2);
+    };
+    check(&m, &x, &u);
+    check(&c, &[0.1, 0.5, -0.3, 0.2], &[2.0]);
+}
