@@ -9,6 +9,7 @@ use modal_rom::samples::{self, paper_2d_selection, paper_3d_selection};
 use modal_rom::{BasisSettings, ModalBasis, ModeKind, ModeSelection, RomOptions, StructureModel};
 use multibody_constraints::joint::{End, EndRef, JointKind, Support};
 use multibody_constraints::structure::{Placement, Structure, StructureBeam, StructureSettings};
+use nalgebra::{Vector3, Vector4};
 use std::f64::consts::PI;
 
 /// The cases of `modal-rom`.
@@ -32,6 +33,7 @@ pub fn cases() -> Vec<Case> {
             run: quaternions,
         },
         Case { name: "modal-rom/rom-vs-fe", tier: Tier::Full, run: rom_vs_fe },
+        Case { name: "modal-rom/rom-vs-fe-3d", tier: Tier::Full, run: rom_vs_fe_3d },
     ]
 }
 
@@ -520,49 +522,122 @@ fn quaternions() -> CaseOutcome {
     Ok(out)
 }
 
-/// Joint angle about e2 between the end of link 1 and the start of link 2 (planar), from
-/// the two end quaternions: `2 atan2(ξrel_2, ξrel_0)`, `ξrel = conj(ξa) ⊗ ξb`.
-fn hinge_angle(xa: &nalgebra::Vector4<f64>, xb: &nalgebra::Vector4<f64>) -> f64 {
+// ----------------------------------------------------------------------------------------
+// Issue item 4: ROM against the FE plant.
+
+/// Rotation vector of the joint's relative rotation `conj(ξa) ⊗ ξb` (in link 1's tip frame).
+/// Planar: `(0, θ, 0)` with θ the signed hinge angle about e2.
+fn relative_rotation(xa: &Vector4<f64>, xb: &Vector4<f64>) -> [f64; 3] {
     use multibody_constraints::structure::{quat_conj, quat_mul};
-    let rel = quat_mul(&quat_conj(xa), xb);
-    2.0 * rel[2].atan2(rel[0])
+    let mut rel = quat_mul(&quat_conj(xa), xb);
+    if rel[0] < 0.0 {
+        rel = -rel;
+    }
+    let s = (rel[1] * rel[1] + rel[2] * rel[2] + rel[3] * rel[3]).sqrt();
+    let scale = if s > 1e-150 { 2.0 * s.atan2(rel[0]) / s } else { 2.0 };
+    [rel[1] * scale, rel[2] * scale, rel[3] * scale]
 }
 
-/// Trajectory samples: time, tip position (global), joint angle.
-type Track = Vec<(f64, [f64; 3], f64)>;
+/// Trajectory samples: time, tip position (global), joint relative rotation vector.
+type Track = Vec<(f64, [f64; 3], [f64; 3])>;
 
 const FE_ELEMENTS: usize = 20;
 const DT: f64 = 2e-3;
 const HORIZON: f64 = 2.0;
-const IMPULSE: (f64, f64) = (0.05, 0.05); // transverse tip force (N) held for 0.05 s
-const SAMPLE_EVERY: usize = 5;
+/// Follower tip force (N, along link 2's local e3; in 3D also along e2) held for
+/// `IMPULSE_TIME` seconds.
+const IMPULSE_FORCE: f64 = 0.05;
+const IMPULSE_TIME: f64 = 0.05;
+const SAMPLE_TIME: f64 = 0.01;
 
-fn fe_track(omega0: f64) -> Result<(Track, f64), String> {
+/// A ROM-vs-FE run: the paper's 2D or 3D two-link at 0°, 2×`FE_ELEMENTS` elements, initial
+/// rigid rotation about the root (2D: `ω0 e2`; 3D: the paper's diagonal `ω0 (e2 + e3)`, §5.3)
+/// plus the follower tip impulse.
+#[derive(Clone, Copy, Debug)]
+struct Scene {
+    spatial: bool,
+    omega0: f64,
+    /// Elements per link (FE plant and modes alike).
+    n: usize,
+    /// Time step (FE plant and ROM alike).
+    dt: f64,
+}
+
+impl Scene {
+    fn new(spatial: bool, omega0: f64) -> Self {
+        Self { spatial, omega0, n: FE_ELEMENTS, dt: DT }
+    }
+
+    fn structure(&self) -> Result<Structure, String> {
+        if self.spatial {
+            multibody_constraints::samples::paper_3d(Section::paper_3d(), self.n, 0.0)
+        } else {
+            multibody_constraints::samples::paper_2d(Section::paper_2d(), self.n, 0.0)
+        }
+        .map_err(err)
+    }
+
+    fn steps(&self) -> (usize, usize, usize) {
+        let n = |t: f64| (t / self.dt).round() as usize;
+        (n(HORIZON), n(IMPULSE_TIME), n(SAMPLE_TIME))
+    }
+
+    fn initial_state(&self, structure: &Structure) -> Vec<f64> {
+        let w = self.omega0;
+        let omega = if self.spatial { Vector3::new(0.0, w, w) } else { Vector3::new(0.0, w, 0.0) };
+        structure.rigid_rotation_state(omega, Vector3::zeros())
+    }
+
+    /// The tip force in link 2's local frame.
+    fn tip_force(&self) -> Vector3<f64> {
+        let f = IMPULSE_FORCE;
+        if self.spatial {
+            Vector3::new(0.0, f, f)
+        } else {
+            Vector3::new(0.0, 0.0, f)
+        }
+    }
+
+    /// The same force as ROM input (`samples::inputs_2d` / `inputs_3d` order).
+    fn input(&self) -> Vec<f64> {
+        let f = self.tip_force();
+        if self.spatial {
+            vec![0.0, 0.0, f.x, f.y, f.z]
+        } else {
+            vec![0.0, f.x, f.z]
+        }
+    }
+}
+
+fn fe_track(scene: Scene) -> Result<(Track, f64), String> {
     use intrinsic_beam::{Amplitude, LoadFrame, PointLoad};
     use multibody_constraints::{Plant, PlantSettings};
-    let structure = multibody_constraints::samples::paper_2d(Section::paper_2d(), FE_ELEMENTS, 0.0)
-        .map_err(err)?;
-    let x0 = structure
-        .rigid_rotation_state(nalgebra::Vector3::new(0.0, omega0, 0.0), nalgebra::Vector3::zeros());
+    let structure = scene.structure()?;
+    let x0 = scene.initial_state(&structure);
     let mut plant =
-        Plant::new(structure, PlantSettings { dt: DT, ..PlantSettings::default() }).map_err(err)?;
+        Plant::new(structure, PlantSettings { dt: scene.dt, ..PlantSettings::default() })
+            .map_err(err)?;
     plant.set_state(&x0).map_err(err)?;
-    let tip = FE_ELEMENTS;
+    let tip = scene.n;
+    let f = scene.tip_force();
     plant.loads_mut(1).point.push(PointLoad {
         node: tip,
         frame: LoadFrame::Follower,
-        value: nalgebra::Vector6::new(0.0, 0.0, IMPULSE.0, 0.0, 0.0, 0.0),
+        value: nalgebra::Vector6::new(f.x, f.y, f.z, 0.0, 0.0, 0.0),
         amplitude: Amplitude::Constant,
     });
-    let steps = (HORIZON / DT).round() as usize;
-    let on = (IMPULSE.1 / DT).round() as usize;
+    let (steps, on, every) = scene.steps();
     let start = std::time::Instant::now();
     let mut track = Vec::new();
     for s in 0..=steps {
-        if s % SAMPLE_EVERY == 0 {
+        if s % every == 0 {
             let k = plant.kinematics();
             let r = k[1].r[tip];
-            track.push((s as f64 * DT, [r.x, r.y, r.z], hinge_angle(&k[0].xi[tip], &k[1].xi[0])));
+            track.push((
+                s as f64 * scene.dt,
+                [r.x, r.y, r.z],
+                relative_rotation(&k[0].xi[tip], &k[1].xi[0]),
+            ));
         }
         if s == on {
             plant.loads_mut(1).point.clear();
@@ -574,128 +649,411 @@ fn fe_track(omega0: f64) -> Result<(Track, f64), String> {
     Ok((track, start.elapsed().as_secs_f64()))
 }
 
+/// The structure, its operators and all its modes (computed once per scene kind).
+struct RomSetup {
+    structure: Structure,
+    model: StructureModel,
+    basis: ModalBasis,
+}
+
+impl RomSetup {
+    fn new(scene: Scene) -> Result<Self, String> {
+        let structure = scene.structure()?;
+        let model = StructureModel::new(&structure).map_err(err)?;
+        let basis = model.modes(&BasisSettings::default()).map_err(err)?;
+        Ok(Self { structure, model, basis })
+    }
+}
+
+/// The augmented ROM (eq. 29, implicit midpoint, same `dt`) from the projected FE initial
+/// state. The joint rotation is kinematics, as in the plant: the two joint ends' quaternions
+/// are advanced with the ROM's body rates at those nodes, `ξ⁺ = exp(dt U(ω_mid)) ξ` (in 2D this
+/// is exactly the integral of the relative rate; the quaternion-mode field of eq. 22 preserves
+/// |ξ| only weakly and blurs a small relative rotation on top of a large rigid one).
 fn rom_track(
-    basis: &ModalBasis,
-    model: &StructureModel,
-    structure: &Structure,
-    n_elastic: usize,
-    omega0: f64,
+    setup: &RomSetup,
+    selection: &ModeSelection,
+    scene: Scene,
 ) -> Result<(Track, f64), String> {
-    let sel = basis.select(&ModeSelection::Lowest(basis.n_rigid() + n_elastic)).map_err(err)?;
-    let inputs = samples::inputs_2d(structure, model).map_err(err)?;
-    let rom = modal_rom::ModalRom::new(&sel, Some(&model.damping), &inputs, &RomOptions::default())
-        .map_err(err)?;
-    let x0 = structure
-        .rigid_rotation_state(nalgebra::Vector3::new(0.0, omega0, 0.0), nalgebra::Vector3::zeros());
+    use intrinsic_beam::operators::quaternion_step;
+    let sel = setup.basis.select(selection).map_err(err)?;
+    let inputs = if scene.spatial {
+        samples::inputs_3d(&setup.structure, &setup.model)
+    } else {
+        samples::inputs_2d(&setup.structure, &setup.model)
+    }
+    .map_err(err)?;
+    let rom =
+        modal_rom::ModalRom::new(&sel, Some(&setup.model.damping), &inputs, &RomOptions::default())
+            .map_err(err)?;
+    let x0 = scene.initial_state(&setup.structure);
     let mut q = rom.project_full(&x0, None).map_err(err)?;
-    let steps = (HORIZON / DT).round() as usize;
-    let on = (IMPULSE.1 / DT).round() as usize;
-    let tip = FE_ELEMENTS;
-    // 2D: rotations add, so the joint angle is the integral of ω2(link 2, s = 0) − ω2(link 1,
-    // s = L) over the midpoint rates (the quaternion-mode field of eq. 22 only preserves |ξ|
-    // weakly and blurs a small relative angle on top of a large rigid rotation).
+    let tip = scene.n;
     let layout = rom.layout();
-    let (ia, ib) = (layout.x1_index(0, tip, 2), layout.x1_index(1, 0, 2));
     let m = rom.n_modes();
-    let rate_row: Vec<f64> = (0..m).map(|j| sel.phi1()[(ib, j)] - sel.phi1()[(ia, j)]).collect();
+    // body-rate rows of φ1 at link 1's tip and link 2's root
+    let rate_rows = |b: usize, n: usize| -> Vec<[f64; 3]> {
+        (0..m)
+            .map(|j| {
+                if layout.k() == 6 {
+                    [3, 4, 5].map(|c| sel.phi1()[(layout.x1_index(b, n, c), j)])
+                } else {
+                    [0.0, sel.phi1()[(layout.x1_index(b, n, 2), j)], 0.0]
+                }
+            })
+            .collect()
+    };
+    let (rows_a, rows_b) = (rate_rows(0, tip), rate_rows(1, 0));
+    let rate = |rows: &[[f64; 3]], q: &[f64]| -> Vector3<f64> {
+        (0..m).fold(Vector3::zeros(), |acc, j| acc + Vector3::from(rows[j]) * q[j])
+    };
+    let mut xa = setup.structure.reference()[0].xi[tip];
+    let mut xb = setup.structure.reference()[1].xi[0];
+    let (steps, on, every) = scene.steps();
+    let dt = scene.dt;
     let start = std::time::Instant::now();
     let mut track = Vec::new();
-    let mut u = vec![0.0, 0.0, IMPULSE.0];
-    let mut angle = 0.0;
+    let mut u = scene.input();
+    let mut mid = vec![0.0; m];
     for s in 0..=steps {
-        if s % SAMPLE_EVERY == 0 {
+        if s % every == 0 {
             let pos = rom.positions(&q).map_err(err)?;
-            track.push((s as f64 * DT, pos[1][tip], angle));
+            track.push((s as f64 * dt, pos[1][tip], relative_rotation(&xa, &xb)));
         }
         if s == on {
-            u = vec![0.0; 3];
+            u.iter_mut().for_each(|v| *v = 0.0);
         }
         if s < steps {
-            let old = q.clone();
-            rom.midpoint_step(&mut q, &u, DT, 1e-12, 30).map_err(err)?;
-            angle += DT * (0..m).map(|j| rate_row[j] * 0.5 * (old[j] + q[j])).sum::<f64>();
+            mid.copy_from_slice(&q[..m]);
+            rom.midpoint_step(&mut q, &u, dt, 1e-12, 30).map_err(err)?;
+            mid.iter_mut().zip(&q[..m]).for_each(|(a, b)| *a = 0.5 * (*a + b));
+            xa = quaternion_step(&xa, &rate(&rows_a, &mid), dt);
+            xb = quaternion_step(&xb, &rate(&rows_b, &mid), dt);
         }
     }
     Ok((track, start.elapsed().as_secs_f64()))
 }
 
-/// `(tip error, joint-angle error)`, each relative to the FE excursion.
-fn track_errors(rom: &Track, fe: &Track) -> (f64, f64) {
+/// `(tip error, joint-rotation error)` over `t ≤ upto`: max over time of the tip-position
+/// error over the max tip excursion, and of `|Δ rotation vector|` over its max FE magnitude.
+fn track_errors(rom: &Track, fe: &Track, upto: f64) -> (f64, f64) {
     let r0 = fe[0].1;
     let (mut et, mut ea, mut st, mut sa) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-    for (a, b) in rom.iter().zip(fe) {
-        let d: f64 = (0..3).map(|i| (a.1[i] - b.1[i]).powi(2)).sum::<f64>().sqrt();
-        let s: f64 = (0..3).map(|i| (b.1[i] - r0[i]).powi(2)).sum::<f64>().sqrt();
-        et = et.max(d);
-        st = st.max(s);
-        ea = ea.max((a.2 - b.2).abs());
-        sa = sa.max(b.2.abs());
+    let norm = |a: [f64; 3], b: [f64; 3]| (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt();
+    for (a, b) in rom.iter().zip(fe).take_while(|(a, _)| a.0 <= upto + 1e-9) {
+        et = et.max(norm(a.1, b.1));
+        st = st.max(norm(b.1, r0));
+        ea = ea.max(norm(a.2, b.2));
+        sa = sa.max(norm(b.2, [0.0; 3]));
     }
     (et / st, ea / sa)
 }
 
-fn rom_vs_fe() -> CaseOutcome {
-    let structure = multibody_constraints::samples::paper_2d(Section::paper_2d(), FE_ELEMENTS, 0.0)
-        .map_err(err)?;
-    let model = StructureModel::new(&structure).map_err(err)?;
-    let basis = model.modes(&BasisSettings::default()).map_err(err)?;
+/// Rigid reference of the 2D elbow: two uniform rods of the paper's section (mass 1 and rotary
+/// inertia 1e-5 per length, L = 1), absolute angles α1, α2 about e2, the same spin ω0 and
+/// follower tip impulse (force along link 2's e3: generalised forces `−F L1 cos θ`, `−F L2`).
+/// Lagrange: `M(θ) α̈ = Q + c sin θ (α̇2², −α̇1²)`, `M12 = c cos θ`, `c = μ L1 L2²/2`.
+/// `frozen`: `M` and the load map taken at θ = 0 and no `sin θ` terms — all a model whose joint
+/// constraint is linearised at 0° can represent. `frozen − full` is then the joint-angle
+/// error predicted for such a model; its leading term is the centrifugal elbow moment
+/// `c ω0² θ`, a relative error ∝ (ω0 t)². Returns θ = α2 − α1 at the track's sample times
+/// (RK4, 20 substeps per `DT`: its error is ≪ the effects measured).
+fn rigid_two_link(omega0: f64, frozen: bool) -> Vec<f64> {
+    let (mu, j, l1, l2) = (1.0f64, 1e-5f64, 1.0f64, 1.0f64);
+    let m11 = mu * l1.powi(3) / 3.0 + j * l1 + mu * l2 * l1 * l1;
+    let m22 = mu * l2.powi(3) / 3.0 + j * l2;
+    let c = mu * l1 * l2 * l2 / 2.0;
+    let rhs = |y: [f64; 4], force: f64| -> [f64; 4] {
+        let th = if frozen { 0.0 } else { y[1] - y[0] };
+        let (ct, st) = (th.cos(), th.sin());
+        let q1 = -force * l1 * ct + c * st * y[3] * y[3];
+        let q2 = -force * l2 - c * st * y[2] * y[2];
+        let m12 = c * ct;
+        let det = m11 * m22 - m12 * m12;
+        [y[2], y[3], (m22 * q1 - m12 * q2) / det, (m11 * q2 - m12 * q1) / det]
+    };
+    let sub = 20;
+    let h = DT / sub as f64;
+    let (steps, on, every) = Scene::new(false, omega0).steps();
+    let mut y = [0.0, 0.0, omega0, omega0];
     let mut out = Vec::new();
-    eprintln!("\nROM vs FE (2D two-link, 2×{FE_ELEMENTS} elements, dt {DT}, {HORIZON} s, tip impulse {} N × {} s)", IMPULSE.0, IMPULSE.1);
-    eprintln!("| ω0 | modes | tip error | joint-angle error | ROM wall (s) | FE wall (s) |");
+    let add =
+        |y: [f64; 4], k: [f64; 4], a: f64| std::array::from_fn::<f64, 4, _>(|i| y[i] + a * k[i]);
+    for s in 0..=steps {
+        if s % every == 0 {
+            out.push(y[1] - y[0]);
+        }
+        let force = if s < on { IMPULSE_FORCE } else { 0.0 };
+        for _ in 0..sub {
+            let k1 = rhs(y, force);
+            let k2 = rhs(add(y, k1, h / 2.0), force);
+            let k3 = rhs(add(y, k2, h / 2.0), force);
+            let k4 = rhs(add(y, k3, h), force);
+            y = std::array::from_fn(|i| {
+                y[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+            });
+        }
+    }
+    out
+}
+
+/// Least-squares slope of `ln y` against `ln x`.
+fn log_slope(points: &[(f64, f64)]) -> f64 {
+    let n = points.len() as f64;
+    let (lx, ly): (Vec<f64>, Vec<f64>) = points.iter().map(|&(x, y)| (x.ln(), y.ln())).unzip();
+    let (mx, my) = (lx.iter().sum::<f64>() / n, ly.iter().sum::<f64>() / n);
+    let sxy: f64 = lx.iter().zip(&ly).map(|(x, y)| (x - mx) * (y - my)).sum();
+    let sxx: f64 = lx.iter().map(|x| (x - mx).powi(2)).sum();
+    sxy / sxx
+}
+
+/// 2D ROM vs FE (issue item 4) and the test of why the joint angle departs with spin.
+fn rom_vs_fe() -> CaseOutcome {
+    let setup = RomSetup::new(Scene::new(false, 0.0))?;
+    let n_rigid = setup.basis.n_rigid();
+    let counts = [4usize, 8, 16, 32];
+    let mut selections: Vec<(String, ModeSelection)> =
+        counts.iter().map(|&n| (format!("2+{n}"), ModeSelection::Lowest(n_rigid + n))).collect();
+    selections.push(("paper 2+4ax+4b".into(), paper_2d_selection()));
+    let mut out = Vec::new();
+    eprintln!(
+        "\nROM vs FE, 2D two-link, 2×{FE_ELEMENTS} elements, dt {DT}, tip impulse \
+         {IMPULSE_FORCE} N × {IMPULSE_TIME} s; errors over [0, T]"
+    );
+    eprintln!("| ω0 | modes | T | tip error | joint-angle error | ROM wall (s) | FE wall (s) |");
+    // errors[(ω0, selection)] over T = 0.5, 1, 2
+    let windows = [0.5, 1.0, HORIZON];
+    let omegas = [0.0, 0.05, 0.1, 0.2, 1.0, 2.0];
+    let mut table = Vec::new();
+    let mut fe_tracks = Vec::new();
+    for &omega0 in &omegas {
+        let scene = Scene::new(false, omega0);
+        let (fe, fe_time) = fe_track(scene)?;
+        for (si, (name, sel)) in selections.iter().enumerate() {
+            let (rom, t) = rom_track(&setup, sel, scene)?;
+            for &w in &windows {
+                let (et, ea) = track_errors(&rom, &fe, w);
+                eprintln!(
+                    "| {omega0} | {name} | {w} | {et:.2e} | {ea:.2e} | {t:.2} | {fe_time:.2} |"
+                );
+                table.push((omega0, si, w, et, ea, rom.clone()));
+            }
+        }
+        fe_tracks.push((omega0, fe));
+    }
+    let get = |omega0: f64, si: usize, w: f64| {
+        table
+            .iter()
+            .find(|e| e.0 == omega0 && e.1 == si && e.2 == w)
+            .map(|e| (e.3, e.4))
+            .ok_or_else(|| format!("missing table entry {omega0} {si} {w}"))
+    };
+    let (i4, i8, i16, i32) = (0, 1, 2, 3);
+    // the issue's table (T = 2 s), recorded
     for omega0 in [0.0, 0.1, 1.0, 2.0] {
-        let (fe, fe_time) = fe_track(omega0)?;
-        let amax = fe.iter().fold(0.0f64, |a, t| a.max(t.2.abs()));
-        let mut errs = Vec::new();
-        for n_el in [4, 8, 16, 32] {
-            let (rom, t) = rom_track(&basis, &model, &structure, n_el, omega0)?;
-            let (et, ea) = track_errors(&rom, &fe);
-            eprintln!("| {omega0} | 2+{n_el} | {et:.3e} | {ea:.3e} (max |θ_FE| {amax:.2e}) | {t:.2} | {fe_time:.2} |");
-            errs.push((n_el, et, ea));
-        }
-        if omega0 <= 0.1 {
-            let e8 = errs[1];
+        for (si, (name, _)) in selections.iter().enumerate() {
+            let (et, ea) = get(omega0, si, HORIZON)?;
             out.push(Metric::at_most(
-                format!("ω0 = {omega0}, rigid + 8: tip error / tip excursion"),
-                e8.1,
-                0.01,
-            ));
-            out.push(Metric::at_most(
-                format!("ω0 = {omega0}: tip error(rigid+32) / tip error(rigid+4)"),
-                errs[3].1 / errs[0].1,
-                1.0,
-            ));
-            out.push(Metric::at_most(
-                format!("ω0 = {omega0}: angle error(rigid+32) / angle error(rigid+4)"),
-                errs[3].2 / errs[0].2,
-                1.0,
-            ));
-            out.push(Metric::at_most(
-                format!("ω0 = {omega0}: tip error(rigid+8) / tip error(rigid+4)"),
-                errs[1].1 / errs[0].1,
-                1.0,
-            ));
-        }
-        if omega0 == 0.0 {
-            // without spin the joint-angle error is modal truncation (falls with modes)
-            out.push(Metric::at_most(
-                "ω0 = 0, rigid + 8: joint-angle error / max |angle|",
-                errs[1].2,
-                0.01,
-            ));
-        }
-        for (n_el, et, ea) in errs {
-            // the table itself: recorded; with spin the modes fixed at 0° cannot follow a
-            // joint angle (axial sliding of link 2 ∝ ω0 θ is not in their span, paper §3.2),
-            // so only finiteness is required here
-            out.push(Metric::at_most(
-                format!("ω0 = {omega0}, rigid + {n_el}: tip error (table)"),
+                format!("ω0 = {omega0}, {name}: tip error (table)"),
                 et,
                 f64::MAX,
             ));
             out.push(Metric::at_most(
-                format!("ω0 = {omega0}, rigid + {n_el}: joint-angle error (table)"),
+                format!(
+                    "ω0 = {omega0}, {name}: joint-angle error (table; model limit with spin, docs)"
+                ),
                 ea,
                 f64::MAX,
+            ));
+        }
+    }
+    // tip position: the issue's criterion
+    let e = |o, s| get(o, s, HORIZON);
+    out.push(Metric::at_most(
+        "ω0 = 0.1, rigid + 8: tip error / tip excursion",
+        e(0.1, i8)?.0,
+        0.01,
+    ));
+    for omega0 in [0.0, 0.1] {
+        out.push(Metric::at_most(
+            format!("ω0 = {omega0}: tip error(rigid+8) / tip error(rigid+4)"),
+            e(omega0, i8)?.0 / e(omega0, i4)?.0,
+            1.0,
+        ));
+        out.push(Metric::at_most(
+            format!("ω0 = {omega0}: tip error(rigid+32) / tip error(rigid+4)"),
+            e(omega0, i32)?.0 / e(omega0, i4)?.0,
+            1.0,
+        ));
+    }
+    // joint angle without spin: pure modal truncation, below 1 % with rigid + 8 and falling
+    out.push(Metric::at_most("ω0 = 0, rigid + 8: joint-angle error", e(0.0, i8)?.1, 0.01));
+    out.push(Metric::at_most(
+        "ω0 = 0: joint-angle error(rigid+8) / (rigid+4)",
+        e(0.0, i8)?.1 / e(0.0, i4)?.1,
+        1.0,
+    ));
+    out.push(Metric::at_most(
+        "ω0 = 0: joint-angle error(rigid+16) / (rigid+8)",
+        e(0.0, i16)?.1 / e(0.0, i8)?.1,
+        1.0,
+    ));
+    // with spin: the joint-angle error is the centrifugal elbow term that modes linearised at
+    // 0° cannot carry (rigid+16: truncation ≤ 0.4 %, so the geometric term dominates).
+    // (a) exponent in ω0 at T = 2 s: 2 for a moment ∝ ω0² θ (±0.3: the (ω0 T)⁴ term adds
+    //     ≈ +0.1 at ω0 T = 0.4, truncation ≈ −0.1 at the smallest ω0)
+    let pts: Vec<(f64, f64)> =
+        [0.05, 0.1, 0.2].iter().map(|&o| Ok((o, e(o, i16)?.1))).collect::<Result<_, String>>()?;
+    let p_omega = log_slope(&pts);
+    out.push(Metric::at_most(
+        "rigid + 16, T = 2 s: |exponent of angle error vs ω0 − 2|",
+        (p_omega - 2.0).abs(),
+        0.3,
+    ));
+    // (b) exponent in the horizon (1 s → 2 s): 2 (relative error ∝ t²)
+    for omega0 in [0.1, 0.2] {
+        let p = log_slope(&[(1.0, get(omega0, i16, 1.0)?.1), (2.0, get(omega0, i16, 2.0)?.1)]);
+        out.push(Metric::at_most(
+            format!("rigid + 16, ω0 = {omega0}: |exponent of angle error vs T (1→2 s) − 2|"),
+            (p - 2.0).abs(),
+            0.3,
+        ));
+    }
+    // (c) size: the rigid two-link predicts the error (frozen − full) within 25 %
+    //     (elastic rotations at the joint ends and the normalisation by the FE angle differ)
+    for omega0 in [0.05, 0.1, 0.2] {
+        let full = rigid_two_link(omega0, false);
+        let frozen = rigid_two_link(omega0, true);
+        let smax = full.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let pred = full.iter().zip(&frozen).fold(0.0f64, |m, (a, b)| m.max((a - b).abs())) / smax;
+        let ratio = e(omega0, i16)?.1 / pred;
+        eprintln!("ω0 = {omega0}: rigid-link prediction {pred:.3e}, ROM–FE (rigid+16) {:.3e}, ratio {ratio:.3}", e(omega0, i16)?.1);
+        out.push(Metric::at_most(
+            format!("ω0 = {omega0}, T = 2 s: |ln(angle error rigid+16 / rigid-link prediction)|"),
+            ratio.ln().abs(),
+            1.25f64.ln(),
+        ));
+    }
+    // (d) the ROM angle plus the rigid-link correction (full − frozen) matches the FE angle to
+    //     the truncation level of ω0 = 0 (rigid + 8 below 1 %): nothing else is missing.
+    let full = rigid_two_link(0.1, false);
+    let frozen = rigid_two_link(0.1, true);
+    let fe = &fe_tracks.iter().find(|f| f.0 == 0.1).ok_or("fe")?.1;
+    for (si, label) in [(i8, "rigid + 8"), (i16, "rigid + 16")] {
+        let rom = &table.iter().find(|t| t.0 == 0.1 && t.1 == si).ok_or("rom")?.5;
+        let (mut res, mut smax) = (0.0f64, 0.0f64);
+        for k in 0..fe.len() {
+            let corrected = rom[k].2[1] + (full[k] - frozen[k]);
+            res = res.max((corrected - fe[k].2[1]).abs());
+            smax = smax.max(fe[k].2[1].abs());
+        }
+        let res = res / smax;
+        let trunc = e(0.0, si)?.1;
+        eprintln!("ω0 = 0.1, {label}: corrected joint-angle error {res:.3e} (ω0 = 0 truncation {trunc:.3e})");
+        out.push(Metric::at_most(
+            format!(
+                "ω0 = 0.1, {label}: joint-angle error with the rigid-link centrifugal term added"
+            ),
+            res,
+            0.01,
+        ));
+        // ≤ 1.5× the spin-free truncation error: the remainder is truncation plus O((ω0 T)⁴)
+        out.push(Metric::at_most(
+            format!("ω0 = 0.1, {label}: corrected angle error / angle error at ω0 = 0"),
+            res / trunc,
+            1.5,
+        ));
+    }
+    // (e) not a measurement artefact: the same ROM–FE angle error (rigid + 8, ω0 = 0.1) with
+    //     both meshes at 2×50 and with dt/4 (a discretisation artefact would change it by
+    //     its own order; the mesh moves the FE angle itself by ≈ 3 %, so 10 % is a clear margin)
+    let base = e(0.1, i8)?.1;
+    for (label, scene) in [
+        ("2×50 elements", Scene { n: 50, ..Scene::new(false, 0.1) }),
+        ("dt / 4", Scene { dt: DT / 4.0, ..Scene::new(false, 0.1) }),
+    ] {
+        let setup = RomSetup::new(scene)?;
+        let sel = ModeSelection::Lowest(setup.basis.n_rigid() + 8);
+        let (fe, _) = fe_track(scene)?;
+        let (rom, _) = rom_track(&setup, &sel, scene)?;
+        let (_, ea) = track_errors(&rom, &fe, HORIZON);
+        eprintln!("ω0 = 0.1, rigid + 8, {label}: joint-angle error {ea:.3e} (2×{FE_ELEMENTS}, dt {DT}: {base:.3e})");
+        out.push(Metric::at_most(
+            format!("ω0 = 0.1, rigid + 8: |angle error ({label}) / angle error (base) − 1|"),
+            (ea / base - 1.0).abs(),
+            0.1,
+        ));
+    }
+    Ok(out)
+}
+
+/// 3D ROM vs FE (the paper's §5.3 two-link, universal joints, spin about the diagonal).
+fn rom_vs_fe_3d() -> CaseOutcome {
+    let setup = RomSetup::new(Scene::new(true, 0.0))?;
+    let n_rigid = setup.basis.n_rigid();
+    let mut selections: Vec<(String, ModeSelection)> = [4usize, 8, 16]
+        .iter()
+        .map(|&n| (format!("4+{n}"), ModeSelection::Lowest(n_rigid + n)))
+        .collect();
+    selections.push(("paper 4+4ax+4t+4+4b".into(), paper_3d_selection()));
+    let mut out = Vec::new();
+    eprintln!(
+        "\nROM vs FE, 3D two-link, 2×{FE_ELEMENTS} elements, dt {DT}, spin ω0 (e2 + e3), tip \
+         impulse {IMPULSE_FORCE} N (e2 and e3) × {IMPULSE_TIME} s; errors over [0, T]"
+    );
+    eprintln!("| ω0 | modes | T | tip error | joint-rotation error | ROM wall (s) | FE wall (s) |");
+    for omega0 in [0.0, 0.1, 1.0] {
+        let scene = Scene::new(true, omega0);
+        let (fe, fe_time) = fe_track(scene)?;
+        let mut errs = Vec::new();
+        for (name, sel) in &selections {
+            let (rom, t) = rom_track(&setup, sel, scene)?;
+            for w in [0.5, 1.0, HORIZON] {
+                let (et, ea) = track_errors(&rom, &fe, w);
+                eprintln!(
+                    "| {omega0} | {name} | {w} | {et:.2e} | {ea:.2e} | {t:.2} | {fe_time:.2} |"
+                );
+            }
+            let (et, ea) = track_errors(&rom, &fe, HORIZON);
+            out.push(Metric::at_most(
+                format!("3D ω0 = {omega0}, {name}: tip error (table)"),
+                et,
+                f64::MAX,
+            ));
+            out.push(Metric::at_most(
+                format!("3D ω0 = {omega0}, {name}: joint-rotation error (table)"),
+                ea,
+                f64::MAX,
+            ));
+            errs.push((et, ea));
+        }
+        if omega0 == 0.0 {
+            // without spin: modal truncation only, both errors fall with the modes
+            for (k, what) in [(0, "tip"), (1, "joint-rotation")] {
+                let e = |i: usize| if k == 0 { errs[i].0 } else { errs[i].1 };
+                out.push(Metric::at_most(
+                    format!("3D ω0 = 0: {what} error(4+8) / (4+4)"),
+                    e(1) / e(0),
+                    1.0,
+                ));
+                out.push(Metric::at_most(
+                    format!("3D ω0 = 0: {what} error(4+16) / (4+8)"),
+                    e(2) / e(1),
+                    1.0,
+                ));
+            }
+            out.push(Metric::at_most("3D ω0 = 0, 4+16: tip error", errs[2].0, 0.01));
+        }
+        if omega0 == 0.1 {
+            out.push(Metric::at_most(
+                "3D ω0 = 0.1, 4+16: tip error / tip excursion",
+                errs[2].0,
+                0.01,
+            ));
+            out.push(Metric::at_most(
+                "3D ω0 = 0.1, paper set: tip error / tip excursion",
+                errs[3].0,
+                0.01,
             ));
         }
     }
