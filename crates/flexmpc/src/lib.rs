@@ -7,7 +7,13 @@
 //!   line and field ([`scene::SceneError`]).
 //! - [`run`]: time simulation of a scene with CSV output.
 //! - [`modes`]: constrained linear modes of a scene's structure, with tables and plots.
-//! - [`plot`]: SVG time-series plots (plotters).
+//! - [`control`]: closed loops (`flexmpc mpc`) and sweeps over ω0 (`flexmpc sweep`) of a
+//!   scene's `[scenario]` with the `mpc` crate, written as CSV/JSON.
+//! - [`report`]: the offline HTML report (`index.html` + SVG figures) of a closed loop.
+//! - [`plot`]: SVG plots (plotters).
+//!
+//! [`DEFAULT_SCENE`] is the paper's 2D NMPC example (`scenes/paper-2d-mpc.toml`), what
+//! `cargo run --release` runs without arguments.
 //!
 //! ```
 //! use std::path::Path;
@@ -33,10 +39,17 @@
 //! assert_eq!(scene.plant.structure().beams().len(), 1);
 //! ```
 
+pub mod control;
 pub mod modes;
 pub mod plot;
+pub mod report;
 pub mod run;
 pub mod scene;
 
-/// The default scene, built in so that `cargo run --release` works from any directory.
-pub const DEFAULT_SCENE: &str = include_str!("../../../scenes/cantilever.toml");
+/// Path (relative to the repository root) of the default scene, used in messages and for the
+/// output folder `out/paper-2d-mpc`.
+pub const DEFAULT_SCENE_PATH: &str = "scenes/paper-2d-mpc.toml";
+
+/// The default scene — the paper's 2D NMPC example (§5.2) — built in so that
+/// `cargo run --release` works from any directory.
+pub const DEFAULT_SCENE: &str = include_str!("../../../scenes/paper-2d-mpc.toml");

@@ -1,36 +1,51 @@
-//! `flexmpc`: the command-line front end — scene files, simulations, CSV outputs and plots.
+//! `flexmpc`: the command-line front end — scene files, simulations, modes, MPC closed loops,
+//! sweeps, reports.
 //!
-//! `flexmpc simulate <scene.toml>` runs a scene's constrained FE plant (multibody-constraints)
-//! and writes `timeseries.csv` (energy, joint angles, end positions, support reactions,
-//! inputs); `flexmpc check <scene.toml>` only validates it. Without arguments it runs the
-//! built-in default scene (`scenes/cantilever.toml`) and says where its results are.
+//! Without arguments it runs the built-in default scene, the paper's 2D NMPC example
+//! (`scenes/paper-2d-mpc.toml`), and writes its report to `out/paper-2d-mpc/index.html`.
+//! `flexmpc mpc <scene.toml>` runs one closed loop (CSV, per-sample solver log, report),
+//! `flexmpc sweep <scene.toml>` runs ω0 × controllers in parallel (table, Fig. 6-style plot),
+//! `flexmpc simulate <scene.toml>` runs the uncontrolled FE plant, `flexmpc modes` lists and
+//! plots the constrained modes, `flexmpc check` validates a scene. Global flags: `--quiet`
+//! (no progress, no extra prints), `--json` (machine-readable summary on stdout),
+//! `--threads N` (rayon pool).
 
+use flexmpc::control::{self, Overrides};
 use flexmpc::{modes, run, scene};
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Result;
+use anyhow::{bail, Result};
 use clap::{Parser, Subcommand};
 
-use flexmpc::DEFAULT_SCENE;
+use flexmpc::{DEFAULT_SCENE, DEFAULT_SCENE_PATH};
 
 #[derive(Parser)]
 #[command(
     name = "flexmpc",
     version,
-    about = "Simulation and control of very flexible multibody structures"
+    about = "Simulation and control of very flexible multibody structures",
+    long_about = "Simulation and control of very flexible multibody structures.\n\nWithout a \
+                  command, runs the paper's 2D NMPC example (scenes/paper-2d-mpc.toml, built \
+                  in) and writes its report to out/paper-2d-mpc/index.html."
 )]
 struct Cli {
     #[command(subcommand)]
     command: Option<Command>,
-    /// No progress bar.
+    /// No progress bars and no informational output (errors still go to stderr).
     #[arg(long, global = true)]
     quiet: bool,
+    /// Print a machine-readable JSON summary on stdout (and nothing else there).
+    #[arg(long, global = true)]
+    json: bool,
+    /// Worker threads of the parallel runs (rayon pool; default: one per core).
+    #[arg(long, global = true)]
+    threads: Option<usize>,
 }
 
 #[derive(Subcommand)]
 enum Command {
-    /// Run a scene and write its time series (CSV) to an output folder.
+    /// Run a scene's uncontrolled FE plant and write its time series (CSV) to an output folder.
     Simulate {
         /// Scene file (TOML).
         scene: PathBuf,
@@ -42,15 +57,13 @@ enum Command {
     Modes {
         /// Scene file (TOML).
         scene: PathBuf,
-        /// Reference angle (degrees) of the structure's first joint (default: the scene's).
+        /// Reference angle (degrees) of the structure's first joint (default: the scene's
+        /// `[modes] angles`, else its `attach` angle).
         #[arg(long, allow_hyphen_values = true)]
         angle: Option<f64>,
-        /// Number of modes, rigid ones included.
-        #[arg(long, default_value_t = 8)]
-        modes: usize,
-        /// Print `{"frequencies_rad_s": [..], "labels": [..], "n_rigid": n}` instead of a table.
+        /// Number of modes, rigid ones included (default: `[modes] count`, else 8).
         #[arg(long)]
-        json: bool,
+        modes: Option<usize>,
         /// Output folder for the plots (default `out/<scene name>/modes`).
         #[arg(long)]
         out: Option<PathBuf>,
@@ -59,6 +72,46 @@ enum Command {
     Check {
         /// Scene file (TOML).
         scene: PathBuf,
+    },
+    /// One MPC closed loop of a scene's `[scenario]`: CSV, solver log, HTML report.
+    Mpc {
+        /// Scene file (TOML) with `[scenario]`.
+        scene: PathBuf,
+        /// Controller (default: `[controller] kind`).
+        #[arg(long, value_parser = ["nmpc", "lmpc"])]
+        controller: Option<String>,
+        /// Plant (default: `[scenario] plant`).
+        #[arg(long, value_parser = ["fe", "rom"])]
+        plant: Option<String>,
+        /// Disturbance ω0 (rad/s; default: `[scenario] omega0`).
+        #[arg(long, allow_hyphen_values = true)]
+        omega0: Option<f64>,
+        /// Duration of the loop (s; default: `[scenario] duration`).
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Output folder (default `out/<scene name>`).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Closed loops for several ω0 and controllers in parallel: table and Fig. 6-style plot.
+    Sweep {
+        /// Scene file (TOML) with `[scenario]` (and usually `[sweep]`).
+        scene: PathBuf,
+        /// ω0 values: a list `0.5,1,2` or a range `0.25:2.0:0.25` (default: `[sweep] omega0`).
+        #[arg(long)]
+        omega0: Option<String>,
+        /// Controllers, comma-separated `nmpc,lmpc` (default: `[sweep] controllers`).
+        #[arg(long)]
+        controller: Option<String>,
+        /// Plant (default: `[scenario] plant`).
+        #[arg(long, value_parser = ["fe", "rom"])]
+        plant: Option<String>,
+        /// Duration of each loop (s; default: `[scenario] duration`).
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Output folder (default `out/<scene name>/sweep`).
+        #[arg(long)]
+        out: Option<PathBuf>,
     },
 }
 
@@ -70,92 +123,338 @@ fn default_out(scene: &Path) -> PathBuf {
     PathBuf::from("out").join(stem)
 }
 
-fn report(summary: &run::RunSummary, quiet: bool) {
-    if quiet {
-        return;
+/// Whether human-readable lines go to stdout.
+fn chatty(cli: &Cli) -> bool {
+    !cli.quiet && !cli.json
+}
+
+fn print_simulation(summary: &run::RunSummary, cli: &Cli) -> Result<()> {
+    if cli.json {
+        let v = serde_json::json!({
+            "steps": summary.steps,
+            "seconds": summary.seconds,
+            "total_energy_start": summary.total_energy.0,
+            "total_energy_end": summary.total_energy.1,
+            "velocity_violation": summary.velocity_violation,
+            "csv": summary.csv,
+            "plot": summary.plot,
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else if chatty(cli) {
+        println!(
+            "{} steps in {:.2} s; energy + potential {:.6e} → {:.6e}; max velocity-constraint \
+             violation {:.1e}; wrote {}",
+            summary.steps,
+            summary.seconds,
+            summary.total_energy.0,
+            summary.total_energy.1,
+            summary.velocity_violation,
+            summary.csv.display()
+        );
+        if let Some(p) = &summary.plot {
+            println!("plot: {}", p.display());
+        }
     }
+    Ok(())
+}
+
+fn print_mpc(o: &control::MpcOutput, cli: &Cli) -> Result<()> {
+    if cli.json {
+        println!("{}", serde_json::to_string_pretty(&control::summary_json(&o.result))?);
+        return Ok(());
+    }
+    if !chatty(cli) {
+        return Ok(());
+    }
+    let s = &o.result.summary;
     println!(
-        "{} steps in {:.2} s; energy + potential {:.6e} → {:.6e}; max velocity-constraint violation {:.1e}; wrote {}",
-        summary.steps,
-        summary.seconds,
-        summary.total_energy.0,
-        summary.total_energy.1,
-        summary.velocity_violation,
-        summary.csv.display()
+        "{} on the {} plant, ω0 = {}: {} — V(T)/V(0) = {:.3e}, largest joint angle {:.1}°, \
+         orientation error {:.2}° (largest {:.1}°), rigid rate ratio {:.2e}",
+        s.controller.to_uppercase(),
+        s.plant,
+        s.omega0,
+        if s.stabilised { "stabilised" } else { "NOT stabilised" },
+        s.v_ratio_final,
+        s.max_joint_angle_deg,
+        s.orientation_error_deg,
+        s.max_orientation_deg,
+        s.rigid_rate_ratio
     );
-    if let Some(p) = &summary.plot {
-        println!("plot: {}", p.display());
+    println!(
+        "{} samples: solve time median {:.3} s, worst {:.3} s (τs = {} s); relaxed {}, LMPC \
+         fallback {}; loop wall time {:.1} s{}",
+        o.result.samples.len(),
+        s.solve_time_median_s,
+        s.solve_time_worst_s,
+        o.control.scenario.mpc.sampling,
+        s.relaxed_samples,
+        s.fallback_samples,
+        o.result.wall_time_s,
+        s.error.as_ref().map(|e| format!("; stopped at {} s: {e}", s.t_end)).unwrap_or_default()
+    );
+    println!(
+        "wrote {}, {}, {}; report: {}",
+        o.csv.display(),
+        o.samples.display(),
+        o.summary.display(),
+        o.report.display()
+    );
+    Ok(())
+}
+
+fn kind_of(name: Option<&str>) -> Result<Option<mpc::ControllerKind>> {
+    match name {
+        None => Ok(None),
+        Some(n) => match scene::controller_kind(n) {
+            Some(k) => Ok(Some(k)),
+            None => bail!("--controller `{n}` (allowed: nmpc, lmpc)"),
+        },
     }
+}
+
+fn plant_of(name: Option<&str>) -> Result<Option<mpc::PlantKind>> {
+    match name {
+        None => Ok(None),
+        Some(n) => match scene::plant_kind(n) {
+            Some(k) => Ok(Some(k)),
+            None => bail!("--plant `{n}` (allowed: fe, rom)"),
+        },
+    }
+}
+
+fn modes_json(report: &modal_rom::ModeReport) -> serde_json::Value {
+    serde_json::json!({
+        "frequencies_rad_s": report.frequencies_rad_s,
+        "labels": report.labels,
+        "n_rigid": report.n_rigid,
+    })
 }
 
 fn main() -> Result<()> {
     let cli = Cli::parse();
-    match cli.command {
-        Some(Command::Simulate { scene, out }) => {
-            let s = scene::load(&scene)?;
-            let out = out.unwrap_or_else(|| default_out(&scene));
-            let summary = run::simulate(s, &out, cli.quiet)?;
-            report(&summary, cli.quiet);
+    if let Some(n) = cli.threads {
+        if n == 0 {
+            bail!("--threads must be at least 1, got 0");
         }
-        Some(Command::Modes { scene, angle, modes: n_modes, json, out }) => {
+        rayon::ThreadPoolBuilder::new().num_threads(n).build_global()?;
+    }
+    match &cli.command {
+        Some(Command::Simulate { scene, out }) => {
+            let s = scene::load(scene)?;
+            let out = out.clone().unwrap_or_else(|| default_out(scene));
+            let summary = run::simulate(s, &out, cli.quiet || cli.json)?;
+            print_simulation(&summary, &cli)?;
+        }
+        Some(Command::Modes { scene, angle, modes: n_modes, out }) => {
+            let base = scene::load(scene)?;
+            let n_modes = n_modes.unwrap_or(base.mode_count);
             if n_modes == 0 {
-                anyhow::bail!("--modes must be at least 1, got 0");
+                bail!("--modes must be at least 1, got 0");
             }
-            let s = match angle {
-                Some(a) => scene::load_at_angle(&scene, a)?,
-                None => scene::load(&scene)?,
+            let angles: Vec<Option<f64>> = match angle {
+                Some(a) => vec![Some(*a)],
+                None if !base.mode_angles.is_empty() => {
+                    base.mode_angles.iter().map(|a| Some(*a)).collect()
+                }
+                None => vec![None],
             };
-            let report = modes::report(s.plant.structure(), n_modes)?;
-            let dir = out.unwrap_or_else(|| default_out(&scene).join("modes"));
-            let figures = modes::plot(&report, &dir)?;
-            if json {
-                let summary = serde_json::json!({
-                    "frequencies_rad_s": report.frequencies_rad_s,
-                    "labels": report.labels,
-                    "n_rigid": report.n_rigid,
-                });
-                println!("{}", serde_json::to_string_pretty(&summary)?);
-            } else {
-                modes::print_table(&report);
-                if !cli.quiet {
-                    for f in figures {
-                        println!("plot: {}", f.display());
+            let dir = out.clone().unwrap_or_else(|| default_out(scene).join("modes"));
+            let mut all = Vec::new();
+            for a in &angles {
+                let (s, dir) = match a {
+                    Some(a) if angles.len() > 1 => {
+                        (scene::load_at_angle(scene, *a)?, dir.join(format!("angle-{a}")))
+                    }
+                    Some(a) => (scene::load_at_angle(scene, *a)?, dir.clone()),
+                    None => (scene::load(scene)?, dir.clone()),
+                };
+                let report = modes::report(s.plant.structure(), n_modes)?;
+                let figures = modes::plot(&report, &dir)?;
+                if !cli.json {
+                    if angles.len() > 1 && !cli.quiet {
+                        println!("reference angle {}°:", a.unwrap_or(0.0));
+                    }
+                    if !cli.quiet {
+                        modes::print_table(&report);
+                        for f in figures {
+                            println!("plot: {}", f.display());
+                        }
                     }
                 }
+                all.push((*a, report));
+            }
+            if cli.json {
+                let v = if all.len() == 1 {
+                    modes_json(&all[0].1)
+                } else {
+                    serde_json::json!({
+                        "angles": all
+                            .iter()
+                            .map(|(a, r)| {
+                                let mut v = modes_json(r);
+                                v["angle_deg"] = serde_json::json!(a);
+                                v
+                            })
+                            .collect::<Vec<_>>()
+                    })
+                };
+                println!("{}", serde_json::to_string_pretty(&v)?);
             }
         }
         Some(Command::Check { scene }) => {
-            let s = scene::load(&scene)?;
-            if !cli.quiet {
-                let st = s.plant.structure();
+            let s = scene::load(scene)?;
+            let st = s.plant.structure();
+            if cli.json {
+                let v = serde_json::json!({
+                    "scene": scene,
+                    "ok": true,
+                    "beams": st.beams().len(),
+                    "joints": st.joints().len(),
+                    "unknowns": st.dim(),
+                    "steps": s.steps,
+                    "controlled": s.control.is_some(),
+                    "control_inputs": s.control.as_ref().map_or(0, |c| c.scenario.inputs.len()),
+                });
+                println!("{}", serde_json::to_string_pretty(&v)?);
+            } else if !cli.quiet {
                 println!(
-                    "{}: ok ({} beams, {} joints/supports, {} unknowns, {} steps)",
+                    "{}: ok ({} beams, {} joints/supports, {} unknowns, {} steps{})",
                     scene.display(),
                     st.beams().len(),
                     st.joints().len(),
                     st.dim(),
-                    s.steps
+                    s.steps,
+                    match &s.control {
+                        Some(c) => format!(
+                            "; closed loop: {} inputs, {} on the {} plant, ω0 = {}",
+                            c.scenario.inputs.len(),
+                            c.controller.kind.name(),
+                            c.plant.name(),
+                            c.omega0
+                        ),
+                        None => String::new(),
+                    }
+                );
+            }
+        }
+        Some(Command::Mpc { scene, controller, plant, omega0, duration, out }) => {
+            let s = scene::load(scene)?;
+            let ov = Overrides {
+                controller: kind_of(controller.as_deref())?,
+                plant: plant_of(plant.as_deref())?,
+                omega0: *omega0,
+                duration: *duration,
+            };
+            let out = out.clone().unwrap_or_else(|| default_out(scene));
+            let o = control::run_mpc(&s, &ov, &out, cli.quiet)?;
+            print_mpc(&o, &cli)?;
+        }
+        Some(Command::Sweep { scene, omega0, controller, plant, duration, out }) => {
+            let s = scene::load(scene)?;
+            let Some(c) = &s.control else {
+                bail!("{}: no [scenario] section (see scenes/paper-2d-mpc.toml)", scene.display());
+            };
+            let omegas = match omega0 {
+                Some(t) => control::parse_omegas(t)?,
+                None if !c.sweep_omegas.is_empty() => c.sweep_omegas.clone(),
+                None => bail!(
+                    "{}: no ω0 to sweep: give --omega0 0.25:2.0:0.25 or a [sweep] section",
+                    scene.display()
+                ),
+            };
+            let kinds = match controller {
+                Some(list) => list
+                    .split(',')
+                    .map(|k| kind_of(Some(k.trim())).map(|k| k.expect("some")))
+                    .collect::<Result<Vec<_>>>()?,
+                None => c.sweep_controllers.clone(),
+            };
+            let ov = Overrides {
+                controller: None,
+                plant: plant_of(plant.as_deref())?,
+                omega0: None,
+                duration: *duration,
+            };
+            let out = out.clone().unwrap_or_else(|| default_out(scene).join("sweep"));
+            let o = control::run_sweep(&s, &ov, &omegas, &kinds, &out, cli.quiet)?;
+            if cli.json {
+                let v: Vec<serde_json::Value> = o
+                    .runs
+                    .iter()
+                    .map(|r| match &r.result {
+                        Ok(res) => control::summary_json(res),
+                        Err(e) => serde_json::json!({
+                            "omega0": r.omega0, "controller": r.controller.name(),
+                            "stabilised": false, "error": e,
+                        }),
+                    })
+                    .collect();
+                println!("{}", serde_json::to_string_pretty(&v)?);
+            } else if !cli.quiet {
+                println!(
+                    "{:>5} {:>6} {:>11} {:>9} {:>12} {:>11} {:>8} {:>8}  stabilised",
+                    "ctrl",
+                    "ω0",
+                    "V(T)/V(0)",
+                    "joint°",
+                    "orient° err",
+                    "rigid rate",
+                    "relaxed",
+                    "fallback"
+                );
+                for r in &o.runs {
+                    match &r.result {
+                        Ok(res) => {
+                            let s = &res.summary;
+                            println!(
+                                "{:>5} {:>6} {:>11.3e} {:>9.1} {:>12.2} {:>11.2e} {:>8} {:>8}  {}{}",
+                                s.controller,
+                                s.omega0,
+                                s.v_ratio_final,
+                                s.max_joint_angle_deg,
+                                s.orientation_error_deg,
+                                s.rigid_rate_ratio,
+                                s.relaxed_samples,
+                                s.fallback_samples,
+                                if s.stabilised { "yes" } else { "no" },
+                                s.error
+                                    .as_ref()
+                                    .map(|e| format!(" (stopped at {} s: {e})", s.t_end))
+                                    .unwrap_or_default()
+                            );
+                        }
+                        Err(e) => {
+                            println!("{:>5} {:>6} failed: {e}", r.controller.name(), r.omega0)
+                        }
+                    }
+                }
+                println!(
+                    "wrote {}, {}, {} (V(t)/V(0) per ω0), runs/*.csv",
+                    o.csv.display(),
+                    o.json.display(),
+                    o.plot.display()
                 );
             }
         }
         None => {
-            let path = Path::new("scenes/cantilever.toml");
+            let path = Path::new(DEFAULT_SCENE_PATH);
             let s = scene::load_str(path, DEFAULT_SCENE)?;
             let out = default_out(path);
-            if !cli.quiet {
+            if chatty(&cli) {
                 println!(
-                    "flexmpc {}: running the default scene {} ({})",
+                    "flexmpc {}: running the default scene {} ({}) — the paper's 2D NMPC example",
                     env!("CARGO_PKG_VERSION"),
                     path.display(),
                     s.description.trim()
                 );
             }
-            let summary = run::simulate(s, &out, cli.quiet)?;
-            report(&summary, cli.quiet);
-            if !cli.quiet {
+            let o = control::run_mpc(&s, &Overrides::default(), &out, cli.quiet)?;
+            print_mpc(&o, &cli)?;
+            if chatty(&cli) {
                 println!(
-                    "results are in {}/ (run `flexmpc simulate <scene.toml>` for other scenes)",
-                    out.display()
+                    "open {} in a browser; `flexmpc --help` lists the commands (mpc, sweep, \
+                     simulate, modes, check)",
+                    o.report.display()
                 );
             }
         }

@@ -58,3 +58,248 @@ pub fn time_series(
     root.present()?;
     Ok(())
 }
+
+/// A named curve `(x, y)`.
+pub type Series = (String, Vec<(f64, f64)>);
+
+/// Axis options of [`lines`].
+#[derive(Clone, Debug, Default)]
+pub struct Axes {
+    /// Title.
+    pub title: String,
+    /// x label.
+    pub x: String,
+    /// y label.
+    pub y: String,
+    /// Logarithmic y axis (non-positive values are clipped to the smallest positive one).
+    pub log_y: bool,
+    /// A dashed horizontal reference line and its label.
+    pub reference: Option<(f64, String)>,
+    /// Draw markers only (no lines).
+    pub points: bool,
+}
+
+const PALETTE: [RGBColor; 8] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(148, 103, 189),
+    RGBColor(255, 127, 14),
+    RGBColor(23, 190, 207),
+    RGBColor(140, 86, 75),
+    RGBColor(0, 0, 0),
+];
+
+/// The `i`-th colour of the plots' palette.
+pub fn color(i: usize) -> RGBColor {
+    PALETTE[i % PALETTE.len()]
+}
+
+fn range_of(series: &[Series], f: impl Fn(&(f64, f64)) -> f64) -> (f64, f64) {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for (_, pts) in series {
+        for p in pts {
+            let v = f(p);
+            if v.is_finite() {
+                lo = lo.min(v);
+                hi = hi.max(v);
+            }
+        }
+    }
+    if !lo.is_finite() {
+        return (0.0, 1.0);
+    }
+    if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
+        return (lo - 0.5, hi + 0.5);
+    }
+    (lo, hi)
+}
+
+/// Draws `series` into one drawing area.
+fn draw_lines<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    axes: &Axes,
+    series: &[Series],
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let (x0, x1) = range_of(series, |p| p.0);
+    if axes.log_y {
+        let pos: Vec<Series> = series
+            .iter()
+            .map(|(n, p)| (n.clone(), p.iter().copied().filter(|q| q.1 > 0.0).collect()))
+            .collect();
+        let (mut lo, mut hi) = range_of(&pos, |p| p.1);
+        if let Some((r, _)) = axes.reference {
+            if r > 0.0 {
+                lo = lo.min(r);
+                hi = hi.max(r);
+            }
+        }
+        let (lo, hi) = (lo.max(1e-300) / 1.5, hi.max(1e-300) * 1.5);
+        let mut chart = ChartBuilder::on(area)
+            .caption(&axes.title, ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(38)
+            .y_label_area_size(70)
+            .build_cartesian_2d(x0..x1, (lo..hi).log_scale())?;
+        chart
+            .configure_mesh()
+            .x_desc(axes.x.as_str())
+            .y_desc(axes.y.as_str())
+            .y_label_formatter(&|v| format!("{v:.0e}"))
+            .draw()?;
+        for (k, (name, pts)) in pos.iter().enumerate() {
+            let c = color(k);
+            chart
+                .draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(2)))?
+                .label(name.clone())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
+                });
+        }
+        if let Some((r, label)) = &axes.reference {
+            if *r > 0.0 {
+                chart
+                    .draw_series(DashedLineSeries::new(
+                        [(x0, *r), (x1, *r)],
+                        6,
+                        4,
+                        BLACK.stroke_width(1),
+                    ))?
+                    .label(label.clone())
+                    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+            }
+        }
+        if series.len() > 1 || axes.reference.is_some() {
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK)
+                .draw()?;
+        }
+    } else {
+        let (mut lo, mut hi) = range_of(series, |p| p.1);
+        if let Some((r, _)) = axes.reference {
+            lo = lo.min(r);
+            hi = hi.max(r);
+        }
+        let pad = 0.05 * (hi - lo);
+        let mut chart = ChartBuilder::on(area)
+            .caption(&axes.title, ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(38)
+            .y_label_area_size(70)
+            .build_cartesian_2d(x0..x1, (lo - pad)..(hi + pad))?;
+        chart.configure_mesh().x_desc(axes.x.as_str()).y_desc(axes.y.as_str()).draw()?;
+        for (k, (name, pts)) in series.iter().enumerate() {
+            let c = color(k);
+            if axes.points {
+                chart
+                    .draw_series(pts.iter().map(|&p| Circle::new(p, 3, c.filled())))?
+                    .label(name.clone())
+                    .legend(move |(x, y)| Circle::new((x + 10, y), 3, c.filled()));
+            } else {
+                chart
+                    .draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(2)))?
+                    .label(name.clone())
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
+                    });
+            }
+        }
+        if let Some((r, label)) = &axes.reference {
+            chart
+                .draw_series(DashedLineSeries::new(
+                    [(x0, *r), (x1, *r)],
+                    6,
+                    4,
+                    BLACK.stroke_width(1),
+                ))?
+                .label(label.clone())
+                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+        }
+        if series.len() > 1 || axes.reference.is_some() {
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK)
+                .draw()?;
+        }
+    }
+    Ok(())
+}
+
+/// One chart of `series` into an SVG file of `size` pixels.
+pub fn lines(path: &Path, size: (u32, u32), axes: &Axes, series: &[Series]) -> Result<()> {
+    let root = SVGBackend::new(path, size).into_drawing_area();
+    root.fill(&WHITE)?;
+    draw_lines(&root, axes, series)?;
+    root.present()?;
+    Ok(())
+}
+
+/// Panels side by side (one per `(axes, series)`) into an SVG file.
+pub fn panels(path: &Path, size: (u32, u32), charts: &[(Axes, Vec<Series>)]) -> Result<()> {
+    let root = SVGBackend::new(path, size).into_drawing_area();
+    root.fill(&WHITE)?;
+    let areas = root.split_evenly((1, charts.len().max(1)));
+    for ((axes, series), area) in charts.iter().zip(areas.iter()) {
+        draw_lines(area, axes, series)?;
+    }
+    root.present()?;
+    Ok(())
+}
+
+/// A piecewise-constant signal (value held from each `t` to the next) as a step polyline.
+pub fn steps(pts: &[(f64, f64)]) -> Vec<(f64, f64)> {
+    let mut out = Vec::with_capacity(2 * pts.len());
+    for (i, &(t, v)) in pts.iter().enumerate() {
+        out.push((t, v));
+        if let Some(&(t1, _)) = pts.get(i + 1) {
+            out.push((t1, v));
+        }
+    }
+    out
+}
+
+/// Fig. 6 style: the scaled cost `V(t)/V(0)` (state part) against time, one curve per ω0,
+/// one panel per controller.
+pub fn sweep_cost(path: &Path, name: &str, runs: &[crate::control::SweepRun]) -> Result<()> {
+    let mut kinds: Vec<mpc::ControllerKind> = Vec::new();
+    for r in runs {
+        if !kinds.contains(&r.controller) {
+            kinds.push(r.controller);
+        }
+    }
+    let charts: Vec<(Axes, Vec<Series>)> = kinds
+        .iter()
+        .map(|k| {
+            let series = runs
+                .iter()
+                .filter(|r| r.controller == *k)
+                .filter_map(|r| r.result.as_ref().ok())
+                .map(|res| {
+                    let v0 = res.records.first().map_or(1.0, |x| x.v_state);
+                    (
+                        format!("ω0 = {}", res.summary.omega0),
+                        res.records.iter().map(|x| (x.t, x.v_state / v0)).collect(),
+                    )
+                })
+                .collect();
+            (
+                Axes {
+                    title: format!("{name}: {} — V(t)/V(0)", k.name().to_uppercase()),
+                    x: "t (s)".into(),
+                    y: "V/V(0)".into(),
+                    log_y: true,
+                    reference: Some((0.1, "0.1 (criterion)".into())),
+                    points: false,
+                },
+                series,
+            )
+        })
+        .collect();
+    panels(path, (620 * charts.len().max(1) as u32, 460), &charts)
+}

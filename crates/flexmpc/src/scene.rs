@@ -174,6 +174,11 @@ pub struct LoadSpec {
     pub moment: Option<[f64; 3]>,
     /// Time history (default constant 1).
     pub amplitude: Option<AmplitudeSpec>,
+    /// A control input of `flexmpc mpc`/`sweep` (default false): `force`/`moment` are then
+    /// the input's unit load `[f, m]` (follower frame only, no `amplitude`), scaled by the
+    /// controller's `u`; `simulate` applies it with `u = 0`.
+    #[serde(default)]
+    pub control: bool,
 }
 
 /// A torque at a joint or support about its free rotation axis.
@@ -188,6 +193,11 @@ pub struct TorqueSpec {
     pub value: f64,
     /// Time history (default constant 1).
     pub amplitude: Option<AmplitudeSpec>,
+    /// A control input of `flexmpc mpc`/`sweep` (default false): the controller sets the
+    /// torque (N·m) directly, so `value` must be 1 and `amplitude` absent; `simulate`
+    /// applies 0.
+    #[serde(default)]
+    pub control: bool,
 }
 
 /// A rigid-body velocity field on some beams.
@@ -236,6 +246,162 @@ pub struct OutputSpec {
     pub title: Option<String>,
 }
 
+/// The paper's mode counts per kind (a `[modes] kinds = { .. }` table); absent kinds are 0.
+#[derive(Debug, Deserialize, Clone, Copy, Default)]
+#[serde(deny_unknown_fields)]
+pub struct KindsSpec {
+    /// Rigid-body modes (2D two-link: 2; 3D: 4).
+    #[serde(default)]
+    pub rigid: usize,
+    /// Axial modes.
+    #[serde(default)]
+    pub axial: usize,
+    /// Torsion modes.
+    #[serde(default)]
+    pub torsion: usize,
+    /// Bending modes about e2 (the planar bending).
+    #[serde(default)]
+    pub bending_e2: usize,
+    /// Bending modes about e3.
+    #[serde(default)]
+    pub bending_e3: usize,
+    /// Mixed modes (axial and bending together, e.g. at 45°).
+    #[serde(default)]
+    pub mixed: usize,
+}
+
+/// `[modes]`: what `flexmpc modes` lists and the mode set of the controller's reduced model.
+///
+/// The controller's set is given by at most one of `selection`, `kinds`, `lowest`,
+/// `indices`; `flexmpc mpc`/`sweep` need one of them.
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct ModesSpec {
+    /// Number of modes (rigid ones included) listed and plotted by `flexmpc modes` and in
+    /// the report [8]; ≥ 1. `--modes` overrides.
+    pub count: Option<usize>,
+    /// Reference angles (degrees, finite) of the structure's first joint at which
+    /// `flexmpc modes` computes the modes, e.g. `[0, 45, 90]` (paper Figs. 4–5) [the angle of
+    /// the scene's `attach`]; needs a beam placed by `attach`. `--angle` overrides.
+    pub angles: Option<Vec<f64>>,
+    /// Controller model: a named set, `paper-2d` (2 rigid + 4 axial + 4 bending, §5.2) or
+    /// `paper-3d` (4 rigid + 4 axial + 4 torsion + 4 + 4 bending, §5.3).
+    pub selection: Option<String>,
+    /// Controller model: the lowest modes of each kind (counts, each ≥ 0, total ≥ 1).
+    pub kinds: Option<KindsSpec>,
+    /// Controller model: the lowest `n` modes (rigid first), n ≥ 1.
+    pub lowest: Option<usize>,
+    /// Controller model: explicit mode indices (0-based, basis order: rigid first, then by
+    /// frequency), non-empty.
+    pub indices: Option<Vec<usize>>,
+}
+
+/// `[controller.weights]`: the cost (34)–(36). Every field defaults to the paper's value
+/// (§5.2; `mpc::MpcSettings`); any other value is a deliberate deviation.
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct WeightsSpec {
+    /// `k_x1`, weight of the velocity coordinates `q1` (≥ 0) [0.01].
+    pub kx1: Option<f64>,
+    /// `k_x2`, weight of the strain coordinates `q2` (≥ 0) [0.01].
+    pub kx2: Option<f64>,
+    /// `k_Δξ`, weight of the quaternion jump across the joints (36) (≥ 0) [2].
+    pub k_dxi: Option<f64>,
+    /// `k_u`, `R = k_u I` (> 0) [0.1].
+    pub ku: Option<f64>,
+    /// `Kξ` entries of the shifting-equilibrium and rigid modes' quaternion modes (≥ 0) [1].
+    pub k_xi_rigid: Option<f64>,
+    /// `Kξ` entries of the elastic modes' quaternion modes (≥ 0) [0.01].
+    pub k_xi_elastic: Option<f64>,
+    /// Input bound `|u_i| ≤ u_max` (N or N·m, > 0) [5].
+    pub u_max: Option<f64>,
+}
+
+/// `[controller]`: which MPC and its solver settings (defaults in brackets, those of
+/// `mpc::ControllerSettings`).
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct ControllerSpec {
+    /// `nmpc` (SQP on the augmented modal model) or `lmpc` (one QP on the model linearised
+    /// at the reference) [nmpc]. `--controller` overrides.
+    pub kind: Option<String>,
+    /// One SQP iteration per sample from the shifted plan instead of iterating to the KKT
+    /// tolerance [false].
+    pub real_time_iteration: Option<bool>,
+    /// SQP iteration limit per sample (≥ 1) [10].
+    pub max_iterations: Option<usize>,
+    /// KKT tolerance of the SQP (> 0) [1e-4].
+    pub kkt_tolerance: Option<f64>,
+    /// An iteration-limit plan is accepted when its shooting defects are at most this
+    /// (> 0) [1e-2].
+    pub accept_violation: Option<f64>,
+    /// Levenberg–Marquardt term of the first SQP attempt (≥ 0) [0].
+    pub levenberg_marquardt: Option<f64>,
+    /// On failure, retry from the linear MPC plan with the paper's sub-relaxation [true].
+    pub retry: Option<bool>,
+    /// Sub-relaxation factor `α` of the retry, in (0, 1] [0.5].
+    pub retry_relaxation: Option<f64>,
+    /// Levenberg–Marquardt term of the retry (≥ 0) [1e-3].
+    pub retry_levenberg_marquardt: Option<f64>,
+    /// When every NMPC attempt fails, apply the linear MPC plan [true].
+    pub fallback_to_lmpc: Option<bool>,
+    /// Integrator in each shooting interval: `lawson-rk4`, `rk4` or `implicit-midpoint`
+    /// [lawson-rk4].
+    pub integrator: Option<String>,
+    /// Integrator substeps per shooting interval `τp/Nc` (≥ 1) [16].
+    pub substeps: Option<usize>,
+    /// Weights of the cost, the paper's by default.
+    pub weights: Option<Spanned<WeightsSpec>>,
+}
+
+/// `[scenario]`: one closed-loop stabilisation run (paper §5.2–5.3) of `flexmpc mpc`.
+/// The structure and its control inputs (`control = true` loads and torques) are the
+/// scene's; the plant's time step is `[run] dt`. Defaults are the paper's.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioSpec {
+    /// Disturbance magnitude `ω0` (rad/s, finite) [1]. `--omega0` overrides.
+    pub omega0: Option<f64>,
+    /// Axis of the initial rigid rotation (global, non-zero): the initial rate is
+    /// `ω0 · axis`, not normalised (the paper's 3D case: `[0, 1, 1]`, magnitude `√2 ω0`).
+    pub axis: [f64; 3],
+    /// Centre of the initial rigid rotation (global, m) [origin].
+    pub center: Option<[f64; 3]>,
+    /// Support whose angle measures the root link's orientation [the first support].
+    pub root: Option<String>,
+    /// Duration of the closed loop (s, > 0, a multiple of `output_interval`) [7.5].
+    /// `--duration` overrides.
+    pub duration: Option<f64>,
+    /// Sampling time `τs` (s, in (0, horizon], a multiple of `output_interval`): each control
+    /// is held for `τs` [0.2].
+    pub sampling: Option<f64>,
+    /// Prediction horizon `τp` (s, > 0) [6].
+    pub horizon: Option<f64>,
+    /// Number `Nc` of piecewise-constant control intervals over `τp` (≥ 1) [24].
+    pub intervals: Option<usize>,
+    /// Plant: `fe` (the constrained FE model, the paper's) or `rom` (the modal model
+    /// itself, fast studies) [fe]. `--plant` overrides.
+    pub plant: Option<String>,
+    /// Interval of the recorded time series (s, a multiple of `[run] dt`) [0.05].
+    pub output_interval: Option<f64>,
+    /// Interval of the snapshots of the deformed structure (s, a multiple of
+    /// `output_interval`) [0.25].
+    pub snapshot_interval: Option<f64>,
+    /// Lawson RK4 steps per output interval when the plant is `rom` (≥ 1) [16].
+    pub rom_plant_substeps: Option<usize>,
+}
+
+/// `[sweep]`: the runs of `flexmpc sweep` (every `omega0` × every controller, in parallel).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SweepSpec {
+    /// Disturbance magnitudes `ω0` (rad/s, finite, non-empty). `--omega0` overrides.
+    pub omega0: Vec<f64>,
+    /// Controllers, each `nmpc` or `lmpc` (non-empty) [the `[controller] kind`].
+    /// `--controller` overrides.
+    pub controllers: Option<Vec<String>>,
+}
+
 /// A whole scene.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -273,6 +439,14 @@ pub struct SceneSpec {
     /// Outputs.
     #[serde(default)]
     pub output: OutputSpec,
+    /// Modes listed by `flexmpc modes` and the controller model's mode set.
+    pub modes: Option<Spanned<ModesSpec>>,
+    /// Controller of `flexmpc mpc`/`sweep`.
+    pub controller: Option<Spanned<ControllerSpec>>,
+    /// Closed-loop scenario of `flexmpc mpc`/`sweep` (needs `[modes]` with a mode set).
+    pub scenario: Option<Spanned<ScenarioSpec>>,
+    /// The runs of `flexmpc sweep`.
+    pub sweep: Option<Spanned<SweepSpec>>,
 }
 
 /// An input applied during the run (for the CSV).
@@ -325,6 +499,32 @@ pub struct Scene {
     pub title: String,
     /// Description.
     pub description: String,
+    /// Scene name: the file stem (output folders are `out/<name>`).
+    pub name: String,
+    /// Modes listed and plotted by `flexmpc modes` and the report (`[modes] count`) [8].
+    pub mode_count: usize,
+    /// Reference angles (deg) for `flexmpc modes` (`[modes] angles`; empty: the scene's).
+    pub mode_angles: Vec<f64>,
+    /// The closed-loop setup (`[scenario]` present), for `flexmpc mpc`/`sweep`.
+    pub control: Option<Control>,
+}
+
+/// What `flexmpc mpc` and `flexmpc sweep` run: an `mpc::Scenario` built from the scene
+/// (structure, control inputs, mode set, disturbance, timing, weights) and the controller.
+#[derive(Clone, Debug)]
+pub struct Control {
+    /// The scenario (structure and inputs from the scene; `name` = the scene's name).
+    pub scenario: mpc::Scenario,
+    /// Controller settings (`[controller]`).
+    pub controller: mpc::ControllerSettings,
+    /// Plant (`[scenario] plant`).
+    pub plant: mpc::PlantKind,
+    /// Disturbance magnitude of `flexmpc mpc` (`[scenario] omega0`).
+    pub omega0: f64,
+    /// `[sweep] omega0` (empty when the scene has no `[sweep]`).
+    pub sweep_omegas: Vec<f64>,
+    /// `[sweep] controllers` (default: the `[controller] kind`).
+    pub sweep_controllers: Vec<mpc::ControllerKind>,
 }
 
 struct Ctx<'a> {
@@ -893,6 +1093,7 @@ fn build(file: &Path, text: &str, spec: SceneSpec) -> Result<Scene, SceneError> 
         plant.set_gravity(Vector3::from(g)).or_else(|e| ctx.err(None, "gravity", e.to_string()))?;
     }
     let mut inputs = Vec::new();
+    let mut controls = Vec::new();
     for (i, l) in spec.loads.iter().enumerate() {
         let span = l.span();
         let ls = l.get_ref();
@@ -937,14 +1138,52 @@ fn build(file: &Path, text: &str, spec: SceneSpec) -> Result<Scene, SceneError> 
         };
         let fo = ls.force.unwrap_or([0.0; 3]);
         let mo = ls.moment.unwrap_or([0.0; 3]);
-        let value = Vector6::new(fo[0], fo[1], fo[2], mo[0], mo[1], mo[2]);
+        let mut value = Vector6::new(fo[0], fo[1], fo[2], mo[0], mo[1], mo[2]);
         if value.iter().any(|v| !v.is_finite()) {
             return ctx.err(Some(span), f("force"), "entries must be finite");
+        }
+        let name = ls.name.clone().unwrap_or_else(|| format!("load{i}"));
+        if ls.control {
+            if frame != LoadFrame::Follower {
+                return ctx.err(
+                    Some(span),
+                    f("frame"),
+                    "a control load (`control = true`) must be `follower`",
+                );
+            }
+            if ls.amplitude.is_some() {
+                return ctx.err(
+                    Some(span),
+                    f("amplitude"),
+                    "a control load has no `amplitude` (the controller sets its history)",
+                );
+            }
+            if value.norm() == 0.0 {
+                return ctx.err(
+                    Some(span),
+                    f("force"),
+                    "a control load needs a non-zero unit load (`force` and/or `moment`), \
+                     e.g. force = [1.0, 0.0, 0.0]",
+                );
+            }
+            controls.push(mpc::ControlInput::Follower {
+                name: name.clone(),
+                beam: b,
+                node,
+                load: [value[0], value[1], value[2], value[3], value[4], value[5]],
+            });
+            value = Vector6::zeros();
+        } else if spec.scenario.is_some() {
+            return ctx.err(
+                Some(span),
+                f("control"),
+                "a scene with [scenario] takes only control inputs: set `control = true` \
+                 (the load is then a unit load scaled by the controller) or remove the load",
+            );
         }
         let amp = amplitude(&ctx, span.clone(), &f("amplitude"), &ls.amplitude)?;
         let index = plant.loads(b).point.len();
         plant.loads_mut(b).point.push(PointLoad { node, frame, value, amplitude: amp });
-        let name = ls.name.clone().unwrap_or_else(|| format!("load{i}"));
         inputs.push(Input { name, kind: InputKind::Load { beam: b, index } });
     }
     for (i, t) in spec.torques.iter().enumerate() {
@@ -952,15 +1191,52 @@ fn build(file: &Path, text: &str, spec: SceneSpec) -> Result<Scene, SceneError> 
         let ts = t.get_ref();
         let f = |x: &str| format!("torques[{i}].{x}");
         let amp = amplitude(&ctx, span.clone(), &f("amplitude"), &ts.amplitude)?;
+        let mut value = ts.value;
+        if ts.control {
+            if ts.value != 1.0 {
+                return ctx.err(
+                    Some(span),
+                    f("value"),
+                    format!(
+                        "a control torque's `value` is its unit and must be 1, got {} \
+                         (the controller sets the torque)",
+                        ts.value
+                    ),
+                );
+            }
+            if ts.amplitude.is_some() {
+                return ctx.err(
+                    Some(span),
+                    f("amplitude"),
+                    "a control torque has no `amplitude` (the controller sets its history)",
+                );
+            }
+            value = 0.0;
+            controls.push(mpc::ControlInput::JointTorque {
+                name: format!("torque:{}", ts.joint),
+                joint: ts.joint.clone(),
+                axis: ts.axis,
+            });
+        } else if spec.scenario.is_some() {
+            return ctx.err(
+                Some(span),
+                f("control"),
+                "a scene with [scenario] takes only control inputs: set `control = true` \
+                 (the controller then sets the torque) or remove the torque",
+            );
+        }
+        if !value.is_finite() {
+            return ctx.err(Some(span), f("value"), format!("must be finite, got {value}"));
+        }
         plant
-            .set_joint_torque(&ts.joint, ts.axis, ts.value * amp.at(0.0))
+            .set_joint_torque(&ts.joint, ts.axis, value * amp.at(0.0))
             .or_else(|e| ctx.err(Some(span.clone()), f("joint"), e.to_string()))?;
         inputs.push(Input {
             name: format!("torque:{}", ts.joint),
             kind: InputKind::Torque {
                 joint: ts.joint.clone(),
                 axis: ts.axis,
-                value: ts.value,
+                value,
                 amplitude: amp,
             },
         });
@@ -1006,6 +1282,10 @@ fn build(file: &Path, text: &str, spec: SceneSpec) -> Result<Scene, SceneError> 
     if output_every == 0 {
         return ctx.err(run_span, "run.output_every", "must be at least 1");
     }
+    let name =
+        file.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "scene".into());
+    let (mode_count, mode_angles) = modes_of(&ctx, &spec)?;
+    let control = control_of(&ctx, &spec, &plant, controls, &name)?;
     Ok(Scene {
         file: file.to_path_buf(),
         plant,
@@ -1015,7 +1295,453 @@ fn build(file: &Path, text: &str, spec: SceneSpec) -> Result<Scene, SceneError> 
         plot: spec.output.plot.clone(),
         title: spec.output.title.clone().unwrap_or_default(),
         description: spec.description.clone().unwrap_or_default(),
+        name,
+        mode_count,
+        mode_angles,
+        control,
     })
+}
+
+/// `[modes] count` and `angles`, checked.
+fn modes_of(ctx: &Ctx<'_>, spec: &SceneSpec) -> Result<(usize, Vec<f64>), SceneError> {
+    let Some(m) = &spec.modes else { return Ok((8, Vec::new())) };
+    let span = Some(m.span());
+    let ms = m.get_ref();
+    let count = ms.count.unwrap_or(8);
+    if count == 0 {
+        return ctx.err(span, "modes.count", "must be at least 1");
+    }
+    let angles = ms.angles.clone().unwrap_or_default();
+    if let Some(a) = angles.iter().find(|a| !a.is_finite()) {
+        return ctx.err(span, "modes.angles", format!("angles (deg) must be finite, got {a}"));
+    }
+    if ms.angles.as_ref().is_some_and(|a| a.is_empty()) {
+        return ctx.err(span, "modes.angles", "give at least one angle (deg), e.g. [0, 45, 90]");
+    }
+    if !angles.is_empty() && !spec.beams.iter().any(|b| b.get_ref().attach.is_some()) {
+        return ctx.err(
+            span,
+            "modes.angles",
+            "reference angles need a beam placed by a joint (`attach = { joint = .. }`)",
+        );
+    }
+    Ok((count, angles))
+}
+
+/// The controller model's mode set of `[modes]` (exactly one of its four forms).
+fn selection_of(ctx: &Ctx<'_>, spec: &SceneSpec) -> Result<modal_rom::ModeSelection, SceneError> {
+    use modal_rom::{KindCounts, ModeSelection};
+    const NEED: &str = "the controller model needs a mode set in [modes]: one of \
+                        `selection = \"paper-2d\"|\"paper-3d\"`, `kinds = { rigid = 2, axial = 4, \
+                        bending_e2 = 4 }`, `lowest = n` or `indices = [..]`";
+    let Some(m) = &spec.modes else {
+        let span = spec.scenario.as_ref().map(|s| s.span());
+        return ctx.err(span, "modes", NEED);
+    };
+    let span = Some(m.span());
+    let ms = m.get_ref();
+    let given =
+        [ms.selection.is_some(), ms.kinds.is_some(), ms.lowest.is_some(), ms.indices.is_some()];
+    match given.iter().filter(|g| **g).count() {
+        0 => return ctx.err(span, "modes.selection", NEED),
+        1 => {}
+        _ => {
+            return ctx.err(
+                span,
+                "modes.selection",
+                "give only one of `selection`, `kinds`, `lowest`, `indices`",
+            )
+        }
+    }
+    if let Some(p) = &ms.selection {
+        return match p.as_str() {
+            "paper-2d" => Ok(modal_rom::samples::paper_2d_selection()),
+            "paper-3d" => Ok(modal_rom::samples::paper_3d_selection()),
+            other => ctx.err(
+                span,
+                "modes.selection",
+                format!("unknown mode set `{other}` (allowed: paper-2d, paper-3d)"),
+            ),
+        };
+    }
+    if let Some(k) = ms.kinds {
+        let total = k.rigid + k.axial + k.torsion + k.bending_e2 + k.bending_e3 + k.mixed;
+        if total == 0 {
+            return ctx.err(span, "modes.kinds", "select at least one mode");
+        }
+        return Ok(ModeSelection::ByKind(KindCounts {
+            rigid: k.rigid,
+            axial: k.axial,
+            torsion: k.torsion,
+            bending_e2: k.bending_e2,
+            bending_e3: k.bending_e3,
+            mixed: k.mixed,
+        }));
+    }
+    if let Some(n) = ms.lowest {
+        if n == 0 {
+            return ctx.err(span, "modes.lowest", "must be at least 1");
+        }
+        return Ok(ModeSelection::Lowest(n));
+    }
+    match &ms.indices {
+        Some(v) if !v.is_empty() => Ok(ModeSelection::Indices(v.clone())),
+        _ => ctx.err(span, "modes.indices", "give at least one mode index"),
+    }
+}
+
+/// A positive finite value, or an error naming `field`.
+fn positive(
+    ctx: &Ctx<'_>,
+    span: Option<std::ops::Range<usize>>,
+    field: &str,
+    v: f64,
+) -> Result<f64, SceneError> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        ctx.err(span, field, format!("must be finite and > 0, got {v}"))
+    }
+}
+
+/// A finite value ≥ 0, or an error naming `field`.
+fn non_negative(
+    ctx: &Ctx<'_>,
+    span: Option<std::ops::Range<usize>>,
+    field: &str,
+    v: f64,
+) -> Result<f64, SceneError> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(v)
+    } else {
+        ctx.err(span, field, format!("must be finite and ≥ 0, got {v}"))
+    }
+}
+
+/// `nmpc` / `lmpc`.
+pub fn controller_kind(name: &str) -> Option<mpc::ControllerKind> {
+    match name {
+        "nmpc" => Some(mpc::ControllerKind::Nmpc),
+        "lmpc" => Some(mpc::ControllerKind::Lmpc),
+        _ => None,
+    }
+}
+
+/// `fe` / `rom`.
+pub fn plant_kind(name: &str) -> Option<mpc::PlantKind> {
+    match name {
+        "fe" => Some(mpc::PlantKind::Fe),
+        "rom" => Some(mpc::PlantKind::Rom),
+        _ => None,
+    }
+}
+
+/// `[controller]` → `mpc::ControllerSettings` and the weights part of `mpc::MpcSettings`.
+fn controller_of(
+    ctx: &Ctx<'_>,
+    spec: &SceneSpec,
+    mpc_settings: &mut mpc::MpcSettings,
+) -> Result<mpc::ControllerSettings, SceneError> {
+    use ocp_transcription::IntegratorKind;
+    let mut c = mpc::ControllerSettings::default();
+    let Some(cs) = &spec.controller else { return Ok(c) };
+    let span = Some(cs.span());
+    let sp = || span.clone();
+    let cs = cs.get_ref();
+    if let Some(k) = &cs.kind {
+        c.kind = match controller_kind(k) {
+            Some(k) => k,
+            None => {
+                return ctx.err(sp(), "controller.kind", format!("`{k}` (allowed: nmpc, lmpc)"))
+            }
+        };
+    }
+    if let Some(v) = cs.real_time_iteration {
+        c.real_time_iteration = v;
+    }
+    if let Some(n) = cs.max_iterations {
+        if n == 0 {
+            return ctx.err(sp(), "controller.max_iterations", "must be at least 1");
+        }
+        c.max_iterations = n;
+    }
+    if let Some(v) = cs.kkt_tolerance {
+        c.kkt_tolerance = positive(ctx, sp(), "controller.kkt_tolerance", v)?;
+    }
+    if let Some(v) = cs.accept_violation {
+        c.accept_violation = positive(ctx, sp(), "controller.accept_violation", v)?;
+    }
+    if let Some(v) = cs.levenberg_marquardt {
+        c.levenberg_marquardt = non_negative(ctx, sp(), "controller.levenberg_marquardt", v)?;
+    }
+    if let Some(v) = cs.retry_levenberg_marquardt {
+        c.retry_levenberg_marquardt =
+            non_negative(ctx, sp(), "controller.retry_levenberg_marquardt", v)?;
+    }
+    if let Some(a) = cs.retry_relaxation {
+        if !(a > 0.0 && a <= 1.0) {
+            return ctx.err(
+                sp(),
+                "controller.retry_relaxation",
+                format!("must be in (0, 1], got {a}"),
+            );
+        }
+        c.retry_relaxation = Some(a);
+    }
+    if cs.retry == Some(false) {
+        if cs.retry_relaxation.is_some() {
+            return ctx.err(
+                sp(),
+                "controller.retry_relaxation",
+                "is unused with `retry = false`; remove one of them",
+            );
+        }
+        c.retry_relaxation = None;
+    }
+    if let Some(v) = cs.fallback_to_lmpc {
+        c.fallback_to_lmpc = v;
+    }
+    if let Some(i) = &cs.integrator {
+        c.integrator.kind = match i.as_str() {
+            "lawson-rk4" => IntegratorKind::LawsonRk4,
+            "rk4" => IntegratorKind::Rk4,
+            "implicit-midpoint" => IntegratorKind::ImplicitMidpoint,
+            other => {
+                return ctx.err(
+                    sp(),
+                    "controller.integrator",
+                    format!("`{other}` (allowed: lawson-rk4, rk4, implicit-midpoint)"),
+                )
+            }
+        };
+    }
+    if let Some(n) = cs.substeps {
+        if n == 0 {
+            return ctx.err(sp(), "controller.substeps", "must be at least 1");
+        }
+        c.integrator.substeps = n;
+    }
+    if let Some(w) = &cs.weights {
+        let span = Some(w.span());
+        let w = w.get_ref();
+        let m = mpc_settings;
+        for (name, v, slot) in [
+            ("kx1", w.kx1, &mut m.kx1),
+            ("kx2", w.kx2, &mut m.kx2),
+            ("k_dxi", w.k_dxi, &mut m.k_dxi),
+            ("k_xi_rigid", w.k_xi_rigid, &mut m.k_xi_rigid),
+            ("k_xi_elastic", w.k_xi_elastic, &mut m.k_xi_elastic),
+        ] {
+            if let Some(v) = v {
+                *slot = non_negative(ctx, span.clone(), &format!("controller.weights.{name}"), v)?;
+            }
+        }
+        if let Some(v) = w.ku {
+            m.ku = positive(ctx, span.clone(), "controller.weights.ku", v)?;
+        }
+        if let Some(v) = w.u_max {
+            m.u_max = positive(ctx, span.clone(), "controller.weights.u_max", v)?;
+        }
+    }
+    if let Err(e) = c.validate() {
+        return ctx.err(sp(), "controller", e.to_string());
+    }
+    Ok(c)
+}
+
+/// `[scenario]`, `[controller]`, `[sweep]` and the mode set → the closed-loop setup.
+fn control_of(
+    ctx: &Ctx<'_>,
+    spec: &SceneSpec,
+    plant: &Plant,
+    controls: Vec<mpc::ControlInput>,
+    name: &str,
+) -> Result<Option<Control>, SceneError> {
+    let Some(sc) = &spec.scenario else {
+        for (what, present, span) in [
+            ("controller", spec.controller.is_some(), spec.controller.as_ref().map(|c| c.span())),
+            ("sweep", spec.sweep.is_some(), spec.sweep.as_ref().map(|c| c.span())),
+        ] {
+            if present {
+                return ctx.err(
+                    span,
+                    what,
+                    format!("[{what}] needs a [scenario] section (axis, omega0, …)"),
+                );
+            }
+        }
+        return Ok(None);
+    };
+    let span = Some(sc.span());
+    let sp = || span.clone();
+    let ss = sc.get_ref();
+    if spec.gravity.is_some() {
+        return ctx.err(
+            None,
+            "gravity",
+            "a scene with [scenario] has no gravity (the closed loop's plant has none)",
+        );
+    }
+    if controls.is_empty() {
+        return ctx.err(
+            sp(),
+            "scenario",
+            "a closed loop needs control inputs: mark [[loads]] or [[torques]] with \
+             `control = true`",
+        );
+    }
+    let selection = selection_of(ctx, spec)?;
+    let mut m = mpc::MpcSettings::default();
+    if let Some(v) = ss.horizon {
+        m.horizon = positive(ctx, sp(), "scenario.horizon", v)?;
+    }
+    if let Some(v) = ss.sampling {
+        m.sampling = positive(ctx, sp(), "scenario.sampling", v)?;
+        if m.sampling > m.horizon {
+            return ctx.err(
+                sp(),
+                "scenario.sampling",
+                format!("τs = {} must not exceed the horizon τp = {}", m.sampling, m.horizon),
+            );
+        }
+    }
+    if let Some(n) = ss.intervals {
+        if n == 0 {
+            return ctx.err(sp(), "scenario.intervals", "must be at least 1");
+        }
+        m.intervals = n;
+    }
+    let controller = controller_of(ctx, spec, &mut m)?;
+    let omega0 = ss.omega0.unwrap_or(1.0);
+    if !omega0.is_finite() {
+        return ctx.err(sp(), "scenario.omega0", format!("must be finite, got {omega0}"));
+    }
+    if ss.axis.iter().any(|v| !v.is_finite()) || ss.axis.iter().all(|v| *v == 0.0) {
+        return ctx.err(
+            sp(),
+            "scenario.axis",
+            format!("must be finite and non-zero, got {:?}", ss.axis),
+        );
+    }
+    let center = ss.center.unwrap_or([0.0; 3]);
+    if center.iter().any(|v| !v.is_finite()) {
+        return ctx.err(sp(), "scenario.center", "entries must be finite");
+    }
+    let structure = plant.structure().clone();
+    let supports: Vec<String> =
+        structure.joints().iter().filter(|j| j.ground).map(|j| j.name.clone()).collect();
+    let root = match &ss.root {
+        Some(r) if supports.contains(r) => r.clone(),
+        Some(r) => {
+            return ctx.err(
+                sp(),
+                "scenario.root",
+                format!("unknown support `{r}` (supports: {})", supports.join(", ")),
+            )
+        }
+        None => match supports.first() {
+            Some(r) => r.clone(),
+            None => return ctx.err(sp(), "scenario.root", "the structure has no support"),
+        },
+    };
+    let plant_kind = match ss.plant.as_deref() {
+        None => mpc::PlantKind::Fe,
+        Some(p) => match plant_kind(p) {
+            Some(k) => k,
+            None => return ctx.err(sp(), "scenario.plant", format!("`{p}` (allowed: fe, rom)")),
+        },
+    };
+    let duration = positive(ctx, sp(), "scenario.duration", ss.duration.unwrap_or(7.5))?;
+    let output_interval =
+        positive(ctx, sp(), "scenario.output_interval", ss.output_interval.unwrap_or(0.05))?;
+    let snapshot_interval =
+        positive(ctx, sp(), "scenario.snapshot_interval", ss.snapshot_interval.unwrap_or(0.25))?;
+    let rom_plant_substeps = ss.rom_plant_substeps.unwrap_or(16);
+    if rom_plant_substeps == 0 {
+        return ctx.err(sp(), "scenario.rom_plant_substeps", "must be at least 1");
+    }
+    let whole = |a: f64, b: f64| {
+        let r = a / b;
+        r.round() >= 1.0 && (r - r.round()).abs() <= 1e-9 * r.round()
+    };
+    let dt = plant.settings().dt;
+    for (field, a, b, what) in [
+        ("scenario.duration", duration, output_interval, "output_interval"),
+        ("scenario.sampling", m.sampling, output_interval, "output_interval"),
+        ("scenario.snapshot_interval", snapshot_interval, output_interval, "output_interval"),
+        ("scenario.output_interval", output_interval, dt, "[run] dt"),
+    ] {
+        if !whole(a, b) {
+            return ctx.err(
+                sp(),
+                field,
+                format!("{a} s must be a whole multiple (≥ 1) of {what} = {b} s"),
+            );
+        }
+    }
+    let scenario = mpc::Scenario {
+        name: name.to_string(),
+        structure,
+        inputs: controls,
+        selection,
+        rom_options: modal_rom::RomOptions::default(),
+        omega_direction: ss.axis,
+        center,
+        root,
+        duration,
+        output_interval,
+        snapshot_interval,
+        plant: *plant.settings(),
+        rom_plant_substeps,
+        mpc: m,
+    };
+    if let Err(e) = scenario.validate() {
+        return ctx.err(sp(), "scenario", e.to_string());
+    }
+    let (sweep_omegas, sweep_controllers) = match &spec.sweep {
+        None => (Vec::new(), vec![controller.kind]),
+        Some(sw) => {
+            let span = Some(sw.span());
+            let s = sw.get_ref();
+            if s.omega0.is_empty() {
+                return ctx.err(span, "sweep.omega0", "give at least one ω0 (rad/s)");
+            }
+            if let Some(w) = s.omega0.iter().find(|w| !w.is_finite()) {
+                return ctx.err(span, "sweep.omega0", format!("must be finite, got {w}"));
+            }
+            let kinds = match &s.controllers {
+                None => vec![controller.kind],
+                Some(v) if v.is_empty() => {
+                    return ctx.err(span, "sweep.controllers", "give at least one of nmpc, lmpc")
+                }
+                Some(v) => {
+                    let mut out = Vec::new();
+                    for k in v {
+                        match controller_kind(k) {
+                            Some(k) => out.push(k),
+                            None => {
+                                return ctx.err(
+                                    span,
+                                    "sweep.controllers",
+                                    format!("`{k}` (allowed: nmpc, lmpc)"),
+                                )
+                            }
+                        }
+                    }
+                    out
+                }
+            };
+            (s.omega0.clone(), kinds)
+        }
+    };
+    Ok(Some(Control {
+        scenario,
+        controller,
+        plant: plant_kind,
+        omega0,
+        sweep_omegas,
+        sweep_controllers,
+    }))
 }
 
 /// The entry (span and field) that a structure error message names, by joint/support/beam
@@ -1247,6 +1973,9 @@ duration = 0.01
                 continue;
             }
             let mut s = load(&path).unwrap_or_else(|e| panic!("{e}"));
+            if let Some(c) = &s.control {
+                c.scenario.validate().unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            }
             for _ in 0..3 {
                 s.plant.step().unwrap_or_else(|e| panic!("{}: {e}", path.display()));
             }
@@ -1255,10 +1984,17 @@ duration = 0.01
         assert!(n >= 5, "found {n} scenes");
     }
 
-    /// The built-in default scene is the shipped cantilever.
+    /// The built-in default scene is the shipped paper 2D NMPC scene, with paper defaults.
     #[test]
-    fn default_scene_is_the_shipped_cantilever() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cantilever.toml");
-        assert_eq!(std::fs::read_to_string(dir).unwrap(), crate::DEFAULT_SCENE);
+    fn default_scene_is_the_shipped_paper_2d_mpc() {
+        let path =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").join(crate::DEFAULT_SCENE_PATH);
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), crate::DEFAULT_SCENE);
+        let s = load_str(Path::new(crate::DEFAULT_SCENE_PATH), crate::DEFAULT_SCENE).unwrap();
+        let c = s.control.expect("the default scene has a [scenario]");
+        assert_eq!(c.scenario.mpc, mpc::MpcSettings::default());
+        assert_eq!(c.controller, mpc::ControllerSettings::default());
+        assert_eq!(c.scenario.inputs.len(), 3);
+        assert_eq!(s.name, "paper-2d-mpc");
     }
 }

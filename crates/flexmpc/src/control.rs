@@ -1,0 +1,344 @@
+//! `flexmpc mpc` and `flexmpc sweep`: closed loops of a scene's `[scenario]` with the `mpc`
+//! crate (paper §4–5, eqs. 33–36), written as CSV time series and JSON solver logs.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use anyhow::{bail, Context, Result};
+use mpc::{ControllerKind, PlantKind, RunResult, Setup};
+use rayon::prelude::*;
+
+use crate::scene::{Control, Scene};
+
+/// Command-line overrides of the scene's `[scenario]` / `[controller]`.
+#[derive(Clone, Debug, Default)]
+pub struct Overrides {
+    /// `--controller`.
+    pub controller: Option<ControllerKind>,
+    /// `--plant`.
+    pub plant: Option<PlantKind>,
+    /// `--omega0` (one value for `mpc`).
+    pub omega0: Option<f64>,
+    /// `--duration` (s).
+    pub duration: Option<f64>,
+}
+
+/// The scene's closed-loop setup with `overrides` applied and checked.
+pub fn control_of(scene: &Scene, overrides: &Overrides) -> Result<Control> {
+    let Some(c) = &scene.control else {
+        bail!(
+            "{}: no [scenario] section: `flexmpc mpc`/`sweep` need [scenario], [modes] with a \
+             mode set and control inputs (`control = true`); see scenes/paper-2d-mpc.toml",
+            scene.file.display()
+        );
+    };
+    let mut c = c.clone();
+    if let Some(k) = overrides.controller {
+        c.controller.kind = k;
+    }
+    if let Some(p) = overrides.plant {
+        c.plant = p;
+    }
+    if let Some(w) = overrides.omega0 {
+        if !w.is_finite() {
+            bail!("--omega0 must be finite, got {w}");
+        }
+        c.omega0 = w;
+    }
+    if let Some(d) = overrides.duration {
+        if !(d.is_finite() && d > 0.0) {
+            bail!("--duration must be finite and > 0, got {d}");
+        }
+        c.scenario.duration = d;
+    }
+    c.scenario.validate().map_err(|e| {
+        anyhow::anyhow!(
+            "{}: the scenario with the command-line overrides is invalid: {e} \
+             (the duration must be a multiple of [scenario] output_interval = {} s)",
+            scene.file.display(),
+            c.scenario.output_interval
+        )
+    })?;
+    Ok(c)
+}
+
+/// A progress indicator on stderr, only on a terminal and without `--quiet`.
+pub fn progress_bar(len: Option<u64>, quiet: bool, what: &str) -> indicatif::ProgressBar {
+    use std::io::IsTerminal;
+    if quiet || !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = match len {
+        Some(n) => {
+            let b = indicatif::ProgressBar::new(n);
+            b.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {msg} ({eta} left)",
+                )
+                .expect("valid template"),
+            );
+            b
+        }
+        None => {
+            let b = indicatif::ProgressBar::new_spinner();
+            b.set_style(
+                indicatif::ProgressStyle::with_template("{spinner} [{elapsed_precise}] {msg}")
+                    .expect("valid template"),
+            );
+            b
+        }
+    };
+    bar.set_message(what.to_string());
+    bar.enable_steady_tick(std::time::Duration::from_millis(120));
+    bar
+}
+
+/// The summary of one run with the keys of issue 6 (plus the strategy counts and errors).
+pub fn summary_json(r: &RunResult) -> serde_json::Value {
+    let mut v = serde_json::to_value(&r.summary).unwrap_or(serde_json::Value::Null);
+    if let serde_json::Value::Object(m) = &mut v {
+        m.insert("wall_time_s".into(), serde_json::json!(r.wall_time_s));
+        m.insert("samples".into(), serde_json::json!(r.samples.len()));
+    }
+    v
+}
+
+/// Writes the time series of a run: `t, V, V/V(0), u…, joint angles (deg)…, tip xyz, q…`.
+pub fn write_timeseries(r: &RunResult, path: &Path) -> Result<()> {
+    let mut f = std::io::BufWriter::new(
+        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?,
+    );
+    let mut cols = vec!["t".to_string(), "v_state".into(), "v_ratio".into()];
+    cols.extend(r.input_names.iter().map(|n| format!("u:{n}")));
+    cols.extend(r.joint_names.iter().map(|n| format!("angle_deg:{n}")));
+    cols.extend(["tip.x", "tip.y", "tip.z"].map(String::from));
+    let nq = r.records.first().map_or(0, |x| x.q.len());
+    cols.extend((0..nq).map(|i| format!("q{i}")));
+    writeln!(f, "{}", cols.join(","))?;
+    let v0 = r.records.first().map_or(1.0, |x| x.v_state);
+    for rec in &r.records {
+        let mut row = vec![rec.t, rec.v_state, rec.v_state / v0];
+        row.extend(&rec.u);
+        row.extend(rec.joint_angles.iter().map(|a| a.to_degrees()));
+        row.extend(rec.tip);
+        row.extend(&rec.q);
+        writeln!(f, "{}", row.iter().map(|v| format!("{v:.10e}")).collect::<Vec<_>>().join(","))?;
+    }
+    f.flush()?;
+    Ok(())
+}
+
+/// What `flexmpc mpc` wrote.
+pub struct MpcOutput {
+    /// The run.
+    pub result: RunResult,
+    /// The setup after overrides.
+    pub control: Control,
+    /// `timeseries.csv`.
+    pub csv: PathBuf,
+    /// `samples.json` (per-sample solver log).
+    pub samples: PathBuf,
+    /// `summary.json`.
+    pub summary: PathBuf,
+    /// `index.html`.
+    pub report: PathBuf,
+}
+
+/// One closed loop of `scene` into `out`: `timeseries.csv`, `samples.json`,
+/// `snapshots.json`, `summary.json` and the report `index.html` with its figures.
+pub fn run_mpc(scene: &Scene, overrides: &Overrides, out: &Path, quiet: bool) -> Result<MpcOutput> {
+    let control = control_of(scene, overrides)?;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let bar = progress_bar(None, quiet, "modes and reduced model");
+    let setup = Setup::new(&control.scenario)
+        .with_context(|| format!("setting up the controller of {}", scene.file.display()))?;
+    bar.set_message(format!(
+        "{} closed loop, ω0 = {}, {:.2} s of motion ({} plant)",
+        control.controller.kind.name(),
+        control.omega0,
+        control.scenario.duration,
+        control.plant.name()
+    ));
+    let result = mpc::run(&setup, control.omega0, &control.controller, control.plant)
+        .with_context(|| format!("closed loop of {}", scene.file.display()))?;
+    bar.set_message("report");
+    let csv = out.join("timeseries.csv");
+    write_timeseries(&result, &csv)?;
+    let samples = out.join("samples.json");
+    std::fs::write(&samples, serde_json::to_string_pretty(&result.samples)?)?;
+    std::fs::write(out.join("snapshots.json"), serde_json::to_string(&result.snapshots)?)?;
+    let summary = out.join("summary.json");
+    std::fs::write(&summary, serde_json::to_string_pretty(&summary_json(&result))?)?;
+    let report = crate::report::write(scene, &control, &result, out)?;
+    bar.finish_and_clear();
+    Ok(MpcOutput { result, control, csv, samples, summary, report })
+}
+
+/// One run of a sweep.
+pub struct SweepRun {
+    /// Controller.
+    pub controller: ControllerKind,
+    /// Disturbance.
+    pub omega0: f64,
+    /// The run, or why it could not run.
+    pub result: std::result::Result<RunResult, String>,
+}
+
+/// What `flexmpc sweep` wrote.
+pub struct SweepOutput {
+    /// Runs, controllers outer, ω0 inner (the order of the scene / command line).
+    pub runs: Vec<SweepRun>,
+    /// `sweep.csv`.
+    pub csv: PathBuf,
+    /// `sweep.json`.
+    pub json: PathBuf,
+    /// `cost.svg` (Fig. 6 style).
+    pub plot: PathBuf,
+}
+
+/// Parses `--omega0`: a list `0.5,1,2` or a range `start:stop:step` (stop included).
+pub fn parse_omegas(text: &str) -> Result<Vec<f64>> {
+    let num = |s: &str| -> Result<f64> {
+        let v: f64 =
+            s.trim().parse().with_context(|| format!("--omega0: `{s}` is not a number"))?;
+        if !v.is_finite() {
+            bail!("--omega0: `{s}` is not finite");
+        }
+        Ok(v)
+    };
+    let parts: Vec<&str> = text.split(':').collect();
+    match parts.len() {
+        1 => text.split(',').map(num).collect(),
+        3 => {
+            let (a, b, h) = (num(parts[0])?, num(parts[1])?, num(parts[2])?);
+            if h <= 0.0 || b < a {
+                bail!("--omega0 {text}: a range is start:stop:step with step > 0, stop ≥ start");
+            }
+            let n = ((b - a) / h + 1e-9).floor() as usize;
+            if n > 10_000 {
+                bail!("--omega0 {text}: more than 10000 values");
+            }
+            // a + k h, rounded to 12 digits so 0.1 steps print as 0.3, not 0.30000000000000004
+            Ok((0..=n).map(|k| ((a + k as f64 * h) * 1e12).round() / 1e12).collect())
+        }
+        _ => bail!("--omega0 `{text}`: give a list `0.5,1,2` or a range `start:stop:step`"),
+    }
+}
+
+/// Every `omegas` × `kinds` closed loop of `scene`, in parallel (rayon's global pool), into
+/// `out`: `sweep.csv`, `sweep.json`, `cost.svg` and one `runs/<controller>-w<ω0>.csv` each.
+pub fn run_sweep(
+    scene: &Scene,
+    overrides: &Overrides,
+    omegas: &[f64],
+    kinds: &[ControllerKind],
+    out: &Path,
+    quiet: bool,
+) -> Result<SweepOutput> {
+    if omegas.is_empty() || kinds.is_empty() {
+        bail!("a sweep needs at least one ω0 and one controller");
+    }
+    let control = control_of(scene, overrides)?;
+    std::fs::create_dir_all(out.join("runs"))
+        .with_context(|| format!("creating {}", out.display()))?;
+    let setup = Setup::new(&control.scenario)
+        .with_context(|| format!("setting up the controller of {}", scene.file.display()))?;
+    let jobs: Vec<(ControllerKind, f64)> =
+        kinds.iter().flat_map(|&k| omegas.iter().map(move |&w| (k, w))).collect();
+    let bar = progress_bar(Some(jobs.len() as u64), quiet, "closed loops");
+    let done = AtomicUsize::new(0);
+    let runs: Vec<SweepRun> = jobs
+        .par_iter()
+        .map(|&(kind, omega0)| {
+            let mut settings = control.controller.clone();
+            settings.kind = kind;
+            let result =
+                mpc::run(&setup, omega0, &settings, control.plant).map_err(|e| e.to_string());
+            bar.set_position(done.fetch_add(1, Ordering::SeqCst) as u64 + 1);
+            SweepRun { controller: kind, omega0, result }
+        })
+        .collect();
+    bar.finish_and_clear();
+    let csv = out.join("sweep.csv");
+    let mut f = std::io::BufWriter::new(std::fs::File::create(&csv)?);
+    writeln!(
+        f,
+        "controller,plant,omega0,stabilised,v_ratio_final,max_joint_angle_deg,\
+         orientation_error_deg,max_orientation_deg,rigid_rate_ratio,relaxed_samples,\
+         fallback_samples,solve_time_median_s,solve_time_worst_s,t_end,error"
+    )?;
+    let mut summaries = Vec::new();
+    for r in &runs {
+        match &r.result {
+            Ok(res) => {
+                let s = &res.summary;
+                writeln!(
+                    f,
+                    "{},{},{},{},{:.6e},{:.4},{:.4},{:.4},{:.6e},{},{},{:.6e},{:.6e},{},{}",
+                    s.controller,
+                    s.plant,
+                    s.omega0,
+                    s.stabilised,
+                    s.v_ratio_final,
+                    s.max_joint_angle_deg,
+                    s.orientation_error_deg,
+                    s.max_orientation_deg,
+                    s.rigid_rate_ratio,
+                    s.relaxed_samples,
+                    s.fallback_samples,
+                    s.solve_time_median_s,
+                    s.solve_time_worst_s,
+                    s.t_end,
+                    s.error.as_deref().unwrap_or("").replace([',', '\n'], ";")
+                )?;
+                write_timeseries(
+                    res,
+                    &out.join("runs").join(format!("{}-w{}.csv", s.controller, s.omega0)),
+                )?;
+                summaries.push(summary_json(res));
+            }
+            Err(e) => {
+                writeln!(
+                    f,
+                    "{},{},{},false,,,,,,,,,,,{}",
+                    r.controller.name(),
+                    control.plant.name(),
+                    r.omega0,
+                    e.replace([',', '\n'], ";")
+                )?;
+                summaries.push(serde_json::json!({
+                    "omega0": r.omega0,
+                    "controller": r.controller.name(),
+                    "plant": control.plant.name(),
+                    "stabilised": false,
+                    "error": e,
+                }));
+            }
+        }
+    }
+    f.flush()?;
+    let json = out.join("sweep.json");
+    std::fs::write(&json, serde_json::to_string_pretty(&summaries)?)?;
+    let plot = out.join("cost.svg");
+    crate::plot::sweep_cost(&plot, &scene.name, &runs)?;
+    Ok(SweepOutput { runs, csv, json, plot })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn omega_lists_and_ranges() {
+        assert_eq!(parse_omegas("0.5,1,2").unwrap(), vec![0.5, 1.0, 2.0]);
+        assert_eq!(
+            parse_omegas("0.25:2.0:0.25").unwrap(),
+            vec![0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0]
+        );
+        assert_eq!(parse_omegas("0.1:0.3:0.1").unwrap(), vec![0.1, 0.2, 0.3]);
+        for bad in ["", "a", "1:0:0.5", "0:1:0", "0:1", "1,nan"] {
+            assert!(parse_omegas(bad).is_err(), "{bad} accepted");
+        }
+    }
+}

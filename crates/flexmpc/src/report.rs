@@ -1,0 +1,526 @@
+//! The offline HTML report of a closed loop: `index.html` (hand-written HTML, no external
+//! URLs) next to its SVG figures (plotters, plus one hand-written animated SVG): scene
+//! summary, mode table and mode shapes (paper Figs. 4–5), snapshots of the deformed structure
+//! (Fig. 7), the scaled cost `V(t)/V(0)` (Fig. 6), inputs (Fig. 10), joint angles, solve time
+//! per sample against `τs`, and the closed-loop summary.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use mpc::RunResult;
+use plotters::prelude::*;
+
+use crate::plot::{self, Axes, Series};
+use crate::scene::{Control, Scene};
+
+/// Escapes `&`, `<`, `>`, `"` and `'` for HTML text and attribute values.
+pub fn esc(s: &str) -> String {
+    let mut o = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '&' => o.push_str("&amp;"),
+            '<' => o.push_str("&lt;"),
+            '>' => o.push_str("&gt;"),
+            '"' => o.push_str("&quot;"),
+            '\'' => o.push_str("&#39;"),
+            c => o.push(c),
+        }
+    }
+    o
+}
+
+/// The planes in which snapshots are drawn: `(name, horizontal axis, vertical axis)`.
+fn planes(planar: bool) -> Vec<(&'static str, usize, usize)> {
+    if planar {
+        vec![("x–z", 0, 2)]
+    } else {
+        vec![("x–y", 0, 1), ("x–z", 0, 2)]
+    }
+}
+
+/// A square window `(center, half width)` around every snapshot in plane `(a, b)`.
+fn window(result: &RunResult, a: usize, b: usize) -> ((f64, f64), f64) {
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for s in &result.snapshots {
+        for beam in &s.positions {
+            for p in beam {
+                for (k, c) in [a, b].into_iter().enumerate() {
+                    lo[k] = lo[k].min(p[c]);
+                    hi[k] = hi[k].max(p[c]);
+                }
+            }
+        }
+    }
+    if !lo[0].is_finite() {
+        return ((0.0, 0.0), 1.0);
+    }
+    let w = 0.55 * (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1e-9);
+    ((0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])), w)
+}
+
+/// Colour of snapshot `k` of `n`: blue (t = 0) to red (end).
+fn time_color(k: usize, n: usize) -> RGBColor {
+    let f = if n > 1 { k as f64 / (n - 1) as f64 } else { 0.0 };
+    RGBColor((30.0 + 200.0 * f) as u8, 60, (220.0 - 190.0 * f) as u8)
+}
+
+/// Fig. 7 style: every snapshot of the deformed structure, coloured by time.
+fn snapshots_svg(result: &RunResult, planar: bool, path: &Path) -> Result<()> {
+    let pl = planes(planar);
+    let root = SVGBackend::new(path, (560 * pl.len() as u32, 560)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let areas = root.split_evenly((1, pl.len()));
+    let n = result.snapshots.len();
+    let axis = ["x", "y", "z"];
+    for ((name, a, b), area) in pl.iter().zip(areas.iter()) {
+        let ((ca, cb), w) = window(result, *a, *b);
+        let mut chart = ChartBuilder::on(area)
+            .caption(
+                format!(
+                    "snapshots every {:.2} s ({name} plane), blue → red",
+                    result.snapshots.get(1).map_or(0.0, |s| s.t)
+                ),
+                ("sans-serif", 16),
+            )
+            .margin(10)
+            .x_label_area_size(30)
+            .y_label_area_size(45)
+            .build_cartesian_2d((ca - w)..(ca + w), (cb - w)..(cb + w))?;
+        chart.configure_mesh().x_desc(axis[*a]).y_desc(axis[*b]).draw()?;
+        for (k, s) in result.snapshots.iter().enumerate() {
+            let c = time_color(k, n);
+            let width = if k == 0 || k + 1 == n { 3 } else { 1 };
+            for beam in &s.positions {
+                chart.draw_series(LineSeries::new(
+                    beam.iter().map(|p| (p[*a], p[*b])),
+                    c.stroke_width(width),
+                ))?;
+            }
+        }
+    }
+    root.present()?;
+    Ok(())
+}
+
+/// An animated SVG (SMIL, discrete frames at the snapshot times, real time, looping) of the
+/// snapshots, one view per plane.
+fn animation_svg(result: &RunResult, planar: bool, path: &Path) -> Result<()> {
+    let pl = planes(planar);
+    let size = 420.0;
+    let n = result.snapshots.len().max(1);
+    let frame = result.snapshots.get(1).map_or(0.25, |s| s.t).max(1e-3);
+    let dur = frame * n as f64;
+    let mut svg = String::new();
+    let width = size * pl.len() as f64;
+    writeln!(
+        svg,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{h}" viewBox="0 0 {width} {h}">"#,
+        h = size + 30.0
+    )?;
+    writeln!(svg, r#"<rect width="100%" height="100%" fill="white"/>"#)?;
+    let axis = ["x", "y", "z"];
+    for (v, (name, a, b)) in pl.iter().enumerate() {
+        let ((ca, cb), w) = window(result, *a, *b);
+        let ox = v as f64 * size;
+        let map = |p: &[f64; 3]| {
+            let x = ox + size * (0.5 + (p[*a] - ca) / (2.0 * w));
+            let y = size * (0.5 - (p[*b] - cb) / (2.0 * w)) + 30.0;
+            format!("{x:.1},{y:.1}")
+        };
+        writeln!(
+            svg,
+            r#"<text x="{x}" y="20" font-family="sans-serif" font-size="14">{name} plane ({} right, {} up)</text>"#,
+            axis[*a],
+            axis[*b],
+            x = ox + 10.0
+        )?;
+        // faint trace of every snapshot
+        for s in &result.snapshots {
+            for beam in &s.positions {
+                let pts: Vec<String> = beam.iter().map(map).collect();
+                writeln!(
+                    svg,
+                    r##"<polyline points="{}" fill="none" stroke="#ccc" stroke-width="1"/>"##,
+                    pts.join(" ")
+                )?;
+            }
+        }
+        let n_beams = result.snapshots.first().map_or(0, |s| s.positions.len());
+        for bi in 0..n_beams {
+            let frames: Vec<String> = result
+                .snapshots
+                .iter()
+                .map(|s| s.positions[bi].iter().map(map).collect::<Vec<_>>().join(" "))
+                .collect();
+            writeln!(
+                svg,
+                r#"<polyline points="{first}" fill="none" stroke="{color}" stroke-width="4" stroke-linecap="round"><animate attributeName="points" dur="{dur:.3}s" repeatCount="indefinite" calcMode="discrete" values="{values}"/></polyline>"#,
+                first = frames[0],
+                color = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd"][bi % 4],
+                values = frames.join(";")
+            )?;
+        }
+    }
+    // time label: one text per frame, visible during its frame
+    for (k, s) in result.snapshots.iter().enumerate() {
+        let values: Vec<&str> = (0..n).map(|j| if j == k { "1" } else { "0" }).collect();
+        writeln!(
+            svg,
+            r#"<text x="{x}" y="20" font-family="sans-serif" font-size="14" opacity="{o}">t = {t:.2} s<animate attributeName="opacity" dur="{dur:.3}s" repeatCount="indefinite" calcMode="discrete" values="{v}"/></text>"#,
+            x = width - 110.0,
+            o = if k == 0 { 1 } else { 0 },
+            t = s.t,
+            v = values.join(";")
+        )?;
+    }
+    writeln!(svg, "</svg>")?;
+    std::fs::write(path, svg).with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+fn row(html: &mut String, key: &str, value: &str) {
+    let _ = writeln!(html, "<tr><th>{}</th><td>{}</td></tr>", esc(key), esc(value));
+}
+
+fn figure(html: &mut String, src: &str, caption: &str) {
+    let _ = writeln!(
+        html,
+        r#"<figure><img src="{}" alt="{}"><figcaption>{}</figcaption></figure>"#,
+        esc(src),
+        esc(caption),
+        esc(caption)
+    );
+}
+
+/// Writes the figures and `index.html` of `result` into `out`; returns the path of
+/// `index.html`.
+pub fn write(scene: &Scene, control: &Control, result: &RunResult, out: &Path) -> Result<PathBuf> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let sc = &control.scenario;
+    let structure = &sc.structure;
+    let planar = matches!(structure.components(), intrinsic_beam::Components::Planar);
+    let t = |f: fn(&mpc::Record) -> f64| result.records.iter().map(f).collect::<Vec<f64>>();
+    let times = t(|r| r.t);
+
+    // modes (Figs. 4–5)
+    let modes = crate::modes::report(structure, scene.mode_count)
+        .and_then(|m| crate::modes::plot(&m, &out.join("modes")).map(|_| m));
+
+    // cost (Fig. 6)
+    let v0 = result.records.first().map_or(1.0, |r| r.v_state);
+    let cost: Vec<(f64, f64)> = result.records.iter().map(|r| (r.t, r.v_state / v0)).collect();
+    plot::lines(
+        &out.join("cost.svg"),
+        (900, 420),
+        &Axes {
+            title: format!("scaled cost V(t)/V(0), ω0 = {}", control.omega0),
+            x: "t (s)".into(),
+            y: "V/V(0)".into(),
+            log_y: true,
+            reference: Some((0.1, "0.1 (criterion)".into())),
+            points: false,
+        },
+        &[(control.controller.kind.name().to_uppercase(), cost)],
+    )?;
+    // inputs (Fig. 10)
+    let inputs: Vec<Series> = result
+        .input_names
+        .iter()
+        .enumerate()
+        .map(|(i, n)| {
+            let pts: Vec<(f64, f64)> = result.records.iter().map(|r| (r.t, r.u[i])).collect();
+            (n.clone(), plot::steps(&pts))
+        })
+        .collect();
+    plot::lines(
+        &out.join("inputs.svg"),
+        (900, 420),
+        &Axes {
+            title: "inputs u (held for τs)".into(),
+            x: "t (s)".into(),
+            y: "u (N, N·m)".into(),
+            ..Default::default()
+        },
+        &inputs,
+    )?;
+    // joint angles
+    let angles: Vec<Series> = result
+        .joint_names
+        .iter()
+        .enumerate()
+        .map(|(j, n)| {
+            (
+                n.clone(),
+                result.records.iter().map(|r| (r.t, r.joint_angles[j].to_degrees())).collect(),
+            )
+        })
+        .collect();
+    plot::lines(
+        &out.join("angles.svg"),
+        (900, 420),
+        &Axes {
+            title: "joint angles".into(),
+            x: "t (s)".into(),
+            y: "angle (deg)".into(),
+            ..Default::default()
+        },
+        &angles,
+    )?;
+    // solve time per sample against τs
+    let solve: Vec<(f64, f64)> = result.samples.iter().map(|s| (s.t, s.solve_time)).collect();
+    plot::lines(
+        &out.join("solve_times.svg"),
+        (900, 420),
+        &Axes {
+            title: "solve time per sample".into(),
+            x: "t (s)".into(),
+            y: "solve time (s)".into(),
+            log_y: true,
+            reference: Some((sc.mpc.sampling, format!("τs = {} s", sc.mpc.sampling))),
+            points: false,
+        },
+        &[("solve time".into(), solve)],
+    )?;
+    // snapshots (Fig. 7) and their animation
+    snapshots_svg(result, planar, &out.join("snapshots.svg"))?;
+    animation_svg(result, planar, &out.join("animation.svg"))?;
+
+    let s = &result.summary;
+    let title = format!("flexmpc: {}", scene.name);
+    let mut h = String::new();
+    let _ = writeln!(
+        h,
+        r#"<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>{}</title>
+<style>
+body {{ font-family: sans-serif; max-width: 1250px; margin: 1em auto; padding: 0 1em; color: #222; }}
+table {{ border-collapse: collapse; margin: 0.5em 0 1em; }}
+th, td {{ border: 1px solid #bbb; padding: 3px 8px; text-align: left; }}
+th {{ background: #f0f0f0; }}
+figure {{ margin: 1em 0; }} img {{ max-width: 100%; border: 1px solid #ddd; }}
+figcaption {{ color: #555; font-size: 0.9em; }}
+.ok {{ color: #161; font-weight: bold; }} .fail {{ color: #a11; font-weight: bold; }}
+</style></head><body>"#,
+        esc(&title)
+    );
+    let _ = writeln!(h, "<h1>{}</h1>\n<p>{}</p>", esc(&title), esc(scene.description.trim()));
+    let _ = writeln!(
+        h,
+        r#"<p id="figure-status">figures: script did not run</p>
+<p>Files: <a href="timeseries.csv">timeseries.csv</a>, <a href="samples.json">samples.json</a> (per-sample solver log), <a href="summary.json">summary.json</a>, <a href="snapshots.json">snapshots.json</a>.</p>"#
+    );
+
+    // closed-loop summary
+    let _ = writeln!(h, "<h2>Closed-loop summary</h2><table>");
+    let verdict = if s.stabilised {
+        r#"<span class="ok">stabilised</span>"#
+    } else {
+        r#"<span class="fail">not stabilised</span>"#
+    };
+    let _ = writeln!(
+        h,
+        "<tr><th>criterion (issue 6, at the end: rigid rate &lt; 5% of ω0, orientation within \
+         20% of its largest excursion, V/V(0) &lt; 0.1)</th><td>{verdict}</td></tr>"
+    );
+    for (k, v) in [
+        ("controller / plant", format!("{} / {}", s.controller, s.plant)),
+        ("ω0 (rad/s) × axis", format!("{} × {:?}", s.omega0, sc.omega_direction)),
+        ("V(T)/V(0)", format!("{:.4e}", s.v_ratio_final)),
+        ("largest joint angle between links (deg)", format!("{:.2}", s.max_joint_angle_deg)),
+        (
+            "orientation error at T / largest excursion (deg)",
+            format!("{:.2} / {:.2}", s.orientation_error_deg, s.max_orientation_deg),
+        ),
+        ("rigid rate at T / at 0", format!("{:.3e}", s.rigid_rate_ratio)),
+        (
+            "solve time per sample: median / worst (s)",
+            format!(
+                "{:.4} / {:.4} (τs = {} s)",
+                s.solve_time_median_s, s.solve_time_worst_s, sc.mpc.sampling
+            ),
+        ),
+        (
+            "samples: total / failed first attempts / relaxed / LMPC fallback",
+            format!(
+                "{} / {} / {} / {}",
+                result.samples.len(),
+                s.failed_first_attempts,
+                s.relaxed_samples,
+                s.fallback_samples
+            ),
+        ),
+        ("time reached (s)", format!("{}", s.t_end)),
+        ("stopped early because", s.error.clone().unwrap_or_else(|| "—".into())),
+        ("wall time of the loop, plant included (s)", format!("{:.2}", result.wall_time_s)),
+    ] {
+        row(&mut h, k, &v);
+    }
+    let _ = writeln!(h, "</table>");
+
+    // figures of the run
+    let _ = writeln!(h, "<h2>Cost</h2>");
+    figure(
+        &mut h,
+        "cost.svg",
+        "State part of the cost (34), V(t)/V(0), from the projected plant state (paper Fig. 6).",
+    );
+    let _ = writeln!(h, "<h2>Snapshots</h2>");
+    figure(&mut h, "snapshots.svg", "Deformed structure every snapshot interval, coloured from blue (t = 0) to red (end) (paper Fig. 7).");
+    figure(&mut h, "animation.svg", "Animation of the snapshots (real time, looping).");
+    let _ = writeln!(h, "<h2>Inputs and joint angles</h2>");
+    figure(&mut h, "inputs.svg", "Control inputs, each held for τs (paper Fig. 10).");
+    figure(&mut h, "angles.svg", "Joint angles (supports: the root link's orientation).");
+    let _ = writeln!(h, "<h2>Solve time per sample</h2>");
+    figure(
+        &mut h,
+        "solve_times.svg",
+        "Wall time of each sample's solve (all attempts) against the sampling time τs.",
+    );
+
+    // scene summary
+    let _ = writeln!(h, "<h2>Scene</h2><table>");
+    row(&mut h, "file", &scene.file.display().to_string());
+    row(&mut h, "components", if planar { "planar" } else { "spatial" });
+    for b in structure.beams() {
+        row(
+            &mut h,
+            &format!("beam {}", b.name),
+            &format!("{} elements, length {}", b.beam.n_elements(), b.beam.mesh().length()),
+        );
+    }
+    for j in structure.joints() {
+        row(
+            &mut h,
+            &format!("{} {}", if j.ground { "support" } else { "joint" }, j.name),
+            &format!("{} end(s), {} constraint rows", j.ends.len(), j.n_rows),
+        );
+    }
+    for i in &sc.inputs {
+        let what = match i {
+            mpc::ControlInput::JointTorque { joint, .. } => format!("torque at `{joint}`"),
+            mpc::ControlInput::Follower { beam, node, load, .. } => format!(
+                "follower load {:?} at node {node} of `{}`",
+                load,
+                structure.beams()[*beam].name
+            ),
+        };
+        row(&mut h, &format!("input {}", i.name()), &what);
+    }
+    let m = &sc.mpc;
+    let c = &control.controller;
+    for (k, v) in [
+        ("controller", c.kind.name().to_string()),
+        (
+            "solver",
+            format!(
+                "real-time iteration {}, ≤ {} SQP iterations, KKT {:.0e}, accept defects ≤ {:.0e}, LM {}, retry α {} (LM {}), LMPC fallback {}",
+                c.real_time_iteration,
+                c.max_iterations,
+                c.kkt_tolerance,
+                c.accept_violation,
+                c.levenberg_marquardt,
+                c.retry_relaxation.map_or("off".to_string(), |a| a.to_string()),
+                c.retry_levenberg_marquardt,
+                c.fallback_to_lmpc
+            ),
+        ),
+        ("integrator", format!("{:?}, {} substeps per interval", c.integrator.kind, c.integrator.substeps)),
+        (
+            "weights (34)–(36)",
+            format!(
+                "kx1 = {}, kx2 = {}, kΔξ = {}, ku = {}, Kξ rigid = {}, Kξ elastic = {}, |u| ≤ {}{}",
+                m.kx1,
+                m.kx2,
+                m.k_dxi,
+                m.ku,
+                m.k_xi_rigid,
+                m.k_xi_elastic,
+                m.u_max,
+                if *m == mpc::MpcSettings::default() { " (the paper's)" } else { " (NOT the paper's)" }
+            ),
+        ),
+        ("timing", format!("τp = {} s, τs = {} s, Nc = {}, duration {} s, plant dt = {} s", m.horizon, m.sampling, m.intervals, sc.duration, sc.plant.dt)),
+        ("controller modes", format!("{:?}", sc.selection)),
+    ] {
+        row(&mut h, k, &v);
+    }
+    let _ = writeln!(h, "</table>");
+
+    // modes
+    let _ = writeln!(h, "<h2>Modes</h2>");
+    match &modes {
+        Ok(m) => {
+            let _ = writeln!(
+                h,
+                "<p>Constrained modes of the structure at its reference configuration (the first {}, rigid included).</p>\n<table><tr><th>mode</th><th>ω (rad/s)</th><th>f (Hz)</th><th>kind</th></tr>",
+                m.frequencies_rad_s.len()
+            );
+            for (i, (w, l)) in m.frequencies_rad_s.iter().zip(&m.labels).enumerate() {
+                let _ = writeln!(
+                    h,
+                    "<tr><td>{}</td><td>{:.6}</td><td>{:.5}</td><td>{}</td></tr>",
+                    i + 1,
+                    w,
+                    w / std::f64::consts::TAU,
+                    esc(l)
+                );
+            }
+            let _ = writeln!(h, "</table>");
+            figure(&mut h, "modes/shapes.svg", "Elastic mode shapes: translational velocity on the reference configuration (paper Fig. 5).");
+            figure(
+                &mut h,
+                "modes/components.svg",
+                "Velocity components of the elastic modes along the beams (paper Fig. 4).",
+            );
+        }
+        Err(e) => {
+            let _ = writeln!(
+                h,
+                "<p class=\"fail\">modes could not be computed: {}</p>",
+                esc(&e.to_string())
+            );
+        }
+    }
+    let _ = writeln!(
+        h,
+        "<p>{} records from t = {} to {} s. Written by flexmpc {}.</p>",
+        times.len(),
+        times.first().copied().unwrap_or(0.0),
+        times.last().copied().unwrap_or(0.0),
+        env!("CARGO_PKG_VERSION")
+    );
+    let _ = writeln!(
+        h,
+        r#"<script>
+window.addEventListener('load', function () {{
+  var imgs = document.querySelectorAll('img');
+  var ok = 0;
+  for (var i = 0; i < imgs.length; i++) {{
+    var loaded = imgs[i].complete && imgs[i].naturalWidth > 0;
+    imgs[i].setAttribute('data-loaded', loaded ? 'yes' : 'no');
+    if (loaded) ok++;
+  }}
+  var s = document.getElementById('figure-status');
+  s.textContent = 'figures: ' + ok + ' of ' + imgs.length + ' loaded';
+  s.setAttribute('data-loaded', String(ok));
+  s.setAttribute('data-total', String(imgs.length));
+}});
+</script>
+</body></html>"#
+    );
+    let path = out.join("index.html");
+    std::fs::write(&path, h).with_context(|| format!("writing {}", path.display()))?;
+    Ok(path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::esc;
+
+    #[test]
+    fn escaping() {
+        assert_eq!(esc(r#"<a href="x">&'"#), "&lt;a href=&quot;x&quot;&gt;&amp;&#39;");
+        assert_eq!(esc("ω0 = 1"), "ω0 = 1");
+    }
+}
