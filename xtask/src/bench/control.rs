@@ -48,7 +48,7 @@ fn closed_loop_cost(r: &RunResult, ku: f64) -> (f64, f64) {
 pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
     let quick = ctx.quick;
     let elements = 50;
-    let omegas: &[f64] = &[0.5, 1.5];
+    let omegas: &[f64] = if quick { &[0.5, 1.5] } else { &[0.5, 1.0, 1.5] };
     let configs = configs(quick);
     ctx.plan((1 + omegas.len() * configs.len()) as u64);
     ctx.progress(&format!("(d) setup of the paper's 2D scenario, 2×{elements} elements"));

@@ -46,20 +46,34 @@ pub(crate) struct Chart {
     pub y_label: String,
     /// Series.
     pub series: Vec<Series>,
-    /// Legend in the lower left corner instead of the upper right one.
-    pub legend_lower_left: bool,
+    /// Where the legend goes.
+    pub legend: Legend,
+}
+
+/// Legend placement (inside the plot area).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) enum Legend {
+    /// Upper right corner.
+    #[default]
+    UpperRight,
+    /// Lower left corner.
+    LowerLeft,
+    /// Middle of the right edge.
+    MiddleRight,
 }
 
 fn ok(p: &(f64, f64)) -> bool {
     p.0.is_finite() && p.1.is_finite() && p.0 > 0.0 && p.1 > 0.0
 }
 
-/// A decade-padded log range around `lo..hi`.
+/// A padded log range around `lo..hi`, at least 1.3 decades wide (so that at least one
+/// power of ten, and usually two, carry a tick label).
 fn log_range(lo: f64, hi: f64) -> (f64, f64) {
     let (mut a, mut b) = (lo.log10(), hi.log10());
-    if b - a < 0.5 {
-        a -= 0.25;
-        b += 0.25;
+    if b - a < 1.3 {
+        let widen = 0.5 * (1.3 - (b - a));
+        a -= widen;
+        b += widen;
     }
     let pad = 0.06 * (b - a);
     (10f64.powf(a - pad), 10f64.powf(b + pad))
@@ -88,7 +102,7 @@ impl Chart {
             x_label: x_label.into(),
             y_label: y_label.into(),
             series: Vec::new(),
-            legend_lower_left: false,
+            legend: Legend::UpperRight,
         }
     }
 
@@ -198,10 +212,10 @@ impl Chart {
         }
         chart
             .configure_series_labels()
-            .position(if self.legend_lower_left {
-                SeriesLabelPosition::LowerLeft
-            } else {
-                SeriesLabelPosition::UpperRight
+            .position(match self.legend {
+                Legend::UpperRight => SeriesLabelPosition::UpperRight,
+                Legend::LowerLeft => SeriesLabelPosition::LowerLeft,
+                Legend::MiddleRight => SeriesLabelPosition::MiddleRight,
             })
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK)

@@ -5,7 +5,7 @@
 //! shooting integrators of `ocp-transcription` (implicit midpoint, RK4, Lawson RK4 on `W`),
 //! each from coarse to fine steps against a tight reference of the same model.
 
-use super::plot::{Chart, Series};
+use super::plot::{Chart, Legend, Series};
 use super::report::{Fmt, Study, Table};
 use super::{orders, timed, Ctx};
 use anyhow::Result;
@@ -192,7 +192,7 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
         "run time (s)",
         "tip error / tip excursion",
     );
-    c_time.legend_lower_left = true;
+    c_time.legend = Legend::LowerLeft;
     let mut c_dt = Chart::new(
         "error-dt",
         "(c) Time step: tip error against dt (observed order in the legend)",
