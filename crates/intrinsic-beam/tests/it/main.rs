@@ -418,8 +418,7 @@ fn run_with(sample: samples::Sample, settings: NewtonSettings, steps: usize) -> 
     (sim.state().to_vec(), c.newton_iterations as f64 / c.steps as f64)
 }
 
-/// The block-tridiagonal solver (with one Jacobian refresh per step) and the sparse LU (with
-/// the factorisation reused) converge to the same steps: the release (stiff shear/rotary mode
+/// The block-tridiagonal solver (with one Jacobian refresh per step) and the sparse LU (with the factorisation reused) converge to the same steps: the release (stiff shear/rotary mode
 /// flipping every step), planar and spatial. The block path needs 3 Newton iterations per
 /// step where simplified Newton needs 7–9.
 #[test]
