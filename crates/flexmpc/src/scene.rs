@@ -355,8 +355,8 @@ pub struct ControllerSpec {
 }
 
 /// `[scenario]`: one closed-loop stabilisation run (paper §5.2–5.3) of `flexmpc mpc`.
-/// The structure and its control inputs (`control = true` loads and torques) are the
-/// scene's; the plant's time step is `[run] dt`. Defaults are the paper's.
+/// The structure and its control inputs (`control = true` loads and torques, in the order
+/// they appear in the file: the order of `u`) are the scene's; the plant's time step is `[run] dt`. Defaults are the paper's.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ScenarioSpec {
@@ -616,7 +616,11 @@ pub fn parse_str(file: &Path, text: &str) -> Result<SceneSpec, SceneError> {
         let line = e.span().map(|s| ctx.line(s.start));
         // toml's message names the field (e.g. "missing field `dt`", "unknown field `lenght`").
         let message = e.message().trim().to_string();
+        // "invalid type/value/length: … `-4` …" quote the value, not the field: take the key
+        // at the span for those.
+        let quotes_field = !message.starts_with("invalid");
         let field = field_from_message(&message)
+            .filter(|_| quotes_field)
             .map(|f| match e.span().and_then(|s| table_at(text, s.start)) {
                 Some(t) if !message.contains("missing") || !t.is_empty() => format!("{t}.{f}"),
                 _ => f,
@@ -1166,12 +1170,15 @@ fn build(file: &Path, text: &str, spec: SceneSpec) -> Result<Scene, SceneError> 
                      e.g. force = [1.0, 0.0, 0.0]",
                 );
             }
-            controls.push(mpc::ControlInput::Follower {
-                name: name.clone(),
-                beam: b,
-                node,
-                load: [value[0], value[1], value[2], value[3], value[4], value[5]],
-            });
+            controls.push((
+                span.start,
+                mpc::ControlInput::Follower {
+                    name: name.clone(),
+                    beam: b,
+                    node,
+                    load: [value[0], value[1], value[2], value[3], value[4], value[5]],
+                },
+            ));
             value = Vector6::zeros();
         } else if spec.scenario.is_some() {
             return ctx.err(
@@ -1212,11 +1219,14 @@ fn build(file: &Path, text: &str, spec: SceneSpec) -> Result<Scene, SceneError> 
                 );
             }
             value = 0.0;
-            controls.push(mpc::ControlInput::JointTorque {
-                name: format!("torque:{}", ts.joint),
-                joint: ts.joint.clone(),
-                axis: ts.axis,
-            });
+            controls.push((
+                span.start,
+                mpc::ControlInput::JointTorque {
+                    name: format!("torque:{}", ts.joint),
+                    joint: ts.joint.clone(),
+                    axis: ts.axis,
+                },
+            ));
         } else if spec.scenario.is_some() {
             return ctx.err(
                 Some(span),
@@ -1285,6 +1295,9 @@ fn build(file: &Path, text: &str, spec: SceneSpec) -> Result<Scene, SceneError> 
     let name =
         file.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "scene".into());
     let (mode_count, mode_angles) = modes_of(&ctx, &spec)?;
+    // control inputs in the order they appear in the file
+    controls.sort_by_key(|(at, _)| *at);
+    let controls = controls.into_iter().map(|(_, c)| c).collect();
     let control = control_of(&ctx, &spec, &plant, controls, &name)?;
     Ok(Scene {
         file: file.to_path_buf(),
@@ -1982,6 +1995,43 @@ duration = 0.01
             n += 1;
         }
         assert!(n >= 5, "found {n} scenes");
+    }
+
+    /// The shipped MPC scenes build the same closed loops as the mpc crate's presets
+    /// (`Scenario::paper_2d(50)`, `paper_3d(50)`): structure size, inputs (up to their names),
+    /// mode set, disturbance axis, root, timing and weights.
+    #[test]
+    fn shipped_mpc_scenes_match_the_mpc_presets() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes");
+        for (file, preset) in [
+            ("paper-2d-mpc.toml", mpc::Scenario::paper_2d(50).unwrap()),
+            ("paper-3d-mpc.toml", mpc::Scenario::paper_3d(50).unwrap()),
+        ] {
+            let s = load(&dir.join(file)).unwrap_or_else(|e| panic!("{e}"));
+            let c = s.control.expect("[scenario]");
+            let sc = &c.scenario;
+            assert_eq!(sc.structure.dim(), preset.structure.dim(), "{file}");
+            assert_eq!(sc.structure.joints().len(), preset.structure.joints().len());
+            let strip = |i: &mpc::ControlInput| match i {
+                mpc::ControlInput::JointTorque { joint, axis, .. } => format!("T {joint} {axis:?}"),
+                mpc::ControlInput::Follower { beam, node, load, .. } => {
+                    format!("F {beam} {node} {load:?}")
+                }
+            };
+            let a: Vec<String> = sc.inputs.iter().map(strip).collect();
+            let b: Vec<String> = preset.inputs.iter().map(strip).collect();
+            assert_eq!(a, b, "{file}");
+            assert_eq!(format!("{:?}", sc.selection), format!("{:?}", preset.selection));
+            assert_eq!(sc.omega_direction, preset.omega_direction);
+            assert_eq!((sc.root.as_str(), sc.center), (preset.root.as_str(), preset.center));
+            assert_eq!(
+                (sc.duration, sc.output_interval, sc.snapshot_interval, sc.rom_plant_substeps),
+                (preset.duration, preset.output_interval, preset.snapshot_interval, 16)
+            );
+            assert_eq!(sc.plant.dt, preset.plant.dt);
+            assert_eq!(sc.mpc, preset.mpc);
+            assert_eq!((c.plant, c.omega0), (mpc::PlantKind::Fe, 1.0));
+        }
     }
 
     /// The built-in default scene is the shipped paper 2D NMPC scene, with paper defaults.

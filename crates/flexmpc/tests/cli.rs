@@ -65,3 +65,172 @@ fn angle_without_joint_is_a_clear_error() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("scenes/cantilever.toml") && err.contains("beams.attach"), "{err}");
 }
+
+/// The shipped 2D NMPC scene with 8 elements per link instead of 50 (a fast closed loop:
+/// the same inputs, mode set, weights and timing), written to a fresh folder.
+fn small_2d_scene(tag: &str) -> (PathBuf, PathBuf) {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let text = std::fs::read_to_string(root.join("scenes/paper-2d-mpc.toml")).unwrap();
+    assert_eq!(text.matches("elements = 50").count(), 2);
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("cli-{tag}"));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = dir.join("small-2d.toml");
+    std::fs::write(&scene, text.replace("elements = 50", "elements = 8")).unwrap();
+    (scene, dir.join("out"))
+}
+
+const SUMMARY_KEYS: [&str; 10] = [
+    "omega0",
+    "controller",
+    "plant",
+    "v_ratio_final",
+    "max_joint_angle_deg",
+    "orientation_error_deg",
+    "rigid_rate_ratio",
+    "stabilised",
+    "solve_time_worst_s",
+    "solve_time_median_s",
+];
+
+fn assert_summary_shape(v: &serde_json::Value) {
+    for k in SUMMARY_KEYS {
+        assert!(v.get(k).is_some(), "summary lacks `{k}`: {v}");
+    }
+    for k in ["v_ratio_final", "max_joint_angle_deg", "rigid_rate_ratio", "solve_time_worst_s"] {
+        let x = v[k].as_f64().unwrap_or_else(|| panic!("`{k}` is not a number: {v}"));
+        assert!(x.is_finite() && x >= 0.0, "`{k}` = {x}");
+    }
+    assert!(v["stabilised"].is_boolean());
+}
+
+/// `flexmpc mpc` on a short loop: the issue-6 JSON summary on stdout (and only that), the
+/// CSV time series (a row every 0.05 s), the per-sample solver log (one entry per τs) and the
+/// report folder.
+#[test]
+fn mpc_short_run_writes_csv_solver_log_and_report() {
+    let (scene, out) = small_2d_scene("mpc");
+    let o = flexmpc()
+        .args(["--json", "mpc"])
+        .arg(&scene)
+        .args(["--duration", "1", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "stderr: {}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("stdout is only JSON");
+    assert_summary_shape(&v);
+    assert_eq!(v["controller"], "nmpc");
+    assert_eq!(v["plant"], "fe");
+    assert_eq!(v["omega0"].as_f64(), Some(1.0));
+    // a rotating structure: the joints move, and the report says how much
+    assert!(v["max_joint_angle_deg"].as_f64().unwrap() > 1.0, "{v}");
+    let csv = std::fs::read_to_string(out.join("timeseries.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines.len(), 1 + 21, "header + t = 0, 0.05, …, 1.0");
+    assert!(lines[0].starts_with("t,v_state,v_ratio,u:torque:root,u:tip-axial,u:tip-transverse"));
+    let samples: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("samples.json")).unwrap()).unwrap();
+    let samples = samples.as_array().unwrap();
+    assert_eq!(samples.len(), 5, "one solve per τs = 0.2 s over 1 s");
+    for s in samples {
+        for k in ["t", "status", "strategy", "iterations", "solve_time", "u"] {
+            assert!(s.get(k).is_some(), "sample lacks `{k}`: {s}");
+        }
+        assert!(s["u"].as_array().unwrap().iter().all(|u| u.as_f64().unwrap().abs() <= 5.0));
+    }
+    for f in ["index.html", "cost.svg", "inputs.svg", "snapshots.svg", "summary.json"] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+}
+
+/// `flexmpc sweep` with two ω0 in parallel (`--threads 2`): results in input order, one CSV
+/// row each, the Fig. 6-style plot; a larger disturbance bends the elbow more.
+#[test]
+fn sweep_two_omegas_in_parallel() {
+    let (scene, out) = small_2d_scene("sweep");
+    let o = flexmpc()
+        .args(["--json", "--threads", "2", "sweep"])
+        .arg(&scene)
+        .args(["--omega0", "0.25,0.75", "--controller", "lmpc", "--duration", "1", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "stderr: {}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("stdout is only JSON");
+    let runs = v.as_array().expect("an array of runs");
+    assert_eq!(runs.len(), 2);
+    for r in runs {
+        assert_summary_shape(r);
+        assert_eq!(r["controller"], "lmpc");
+    }
+    assert_eq!(runs[0]["omega0"].as_f64(), Some(0.25));
+    assert_eq!(runs[1]["omega0"].as_f64(), Some(0.75));
+    let j = |i: usize| runs[i]["max_joint_angle_deg"].as_f64().unwrap();
+    assert!(j(1) > j(0), "elbow {} (ω0 = 0.75) vs {} (ω0 = 0.25)", j(1), j(0));
+    let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 3);
+    assert!(out.join("cost.svg").exists() && out.join("runs/lmpc-w0.25.csv").exists());
+}
+
+/// `--quiet`: nothing on stdout or stderr for a successful run.
+#[test]
+fn quiet_prints_nothing() {
+    let (scene, out) = small_2d_scene("quiet");
+    let o = flexmpc()
+        .args(["--quiet", "mpc"])
+        .arg(&scene)
+        .args(["--duration", "0.4", "--controller", "lmpc", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "stderr: {}", String::from_utf8_lossy(&o.stderr));
+    assert!(o.stdout.is_empty(), "stdout: {}", String::from_utf8_lossy(&o.stdout));
+    assert!(o.stderr.is_empty(), "stderr: {}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.join("index.html").exists());
+    let o = flexmpc().args(["check", "--quiet"]).arg(&scene).output().unwrap();
+    assert!(o.status.success() && o.stdout.is_empty() && o.stderr.is_empty());
+}
+
+/// `check --json` describes the scene, its control inputs included.
+#[test]
+fn check_json_shape() {
+    let o = flexmpc().args(["check", "--json", "scenes/paper-3d-mpc.toml"]).output().unwrap();
+    assert!(o.status.success(), "stderr: {}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["ok"], true);
+    assert_eq!(v["beams"].as_u64(), Some(2));
+    assert_eq!(v["controlled"], true);
+    assert_eq!(v["control_inputs"].as_u64(), Some(5));
+}
+
+/// `mpc` on a scene without `[scenario]` says what is missing.
+#[test]
+fn mpc_without_scenario_is_a_clear_error() {
+    let o = flexmpc().args(["mpc", "scenes/cantilever.toml"]).output().unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("scenes/cantilever.toml") && err.contains("[scenario]"), "{err}");
+}
+
+/// `[modes] angles = [0, 45, 90]`: `flexmpc modes` computes all three (paper Figs. 4–5): pure
+/// axial and bending modes at 0°, mixed ones at 45°.
+#[test]
+fn modes_at_the_scene_angles() {
+    let dir = std::env::temp_dir().join("flexmpc-modes-angles");
+    let o = flexmpc()
+        .args(["modes", "--json", "scenes/paper-2d-modes.toml", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "stderr: {}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let a = v["angles"].as_array().unwrap();
+    assert_eq!(a.len(), 3);
+    let angles: Vec<f64> = a.iter().map(|x| x["angle_deg"].as_f64().unwrap()).collect();
+    assert_eq!(angles, [0.0, 45.0, 90.0]);
+    assert!(!labels(&a[0]).iter().any(|l| l == "mixed"), "{:?}", labels(&a[0]));
+    assert!(labels(&a[1]).iter().any(|l| l == "mixed"), "{:?}", labels(&a[1]));
+    assert_eq!(labels(&a[0]).len(), 7, "[modes] count = 7");
+    assert!(dir.join("angle-45/shapes.svg").exists());
+}
