@@ -1,4 +1,5 @@
-//! Newton iterations, factorisations and time per implicit-midpoint step (minimum over 40 batches of 20 steps) of the 100-element
+//! Newton iterations, factorisations and time per implicit-midpoint step (minimum over 40 batches of 20 steps, and on-CPU time per
+//! step from `/proc/thread-self/schedstat`) of the 100-element
 //! bench cantilevers (planar and spatial, release and swing), for given Newton settings:
 //! `cargo run --release -p intrinsic-beam --example step_cost -- [tolerance] [contraction_limit]
 //! [extrapolate 0/1] [reuse 0/1] [sparse LU 0/1] [3/6: one component set only, 0 both]
@@ -51,6 +52,7 @@ fn main() {
                 sim.step(1e-3).expect("step");
             }
             let c0 = sim.counters();
+            let cpu0 = thread_cpu_ns();
             // minimum over batches of 20 steps: robust against preemption on a loaded machine
             let (batches, per_batch) = (40, 20);
             let mut us = f64::INFINITY;
@@ -62,6 +64,9 @@ fn main() {
                 us = us.min(t.elapsed().as_secs_f64() / per_batch as f64 * 1e6);
             }
             let steps = batches * per_batch;
+            // CPU time of this thread per step (excludes time preempted by other processes)
+            let cpu_us =
+                thread_cpu_ns().zip(cpu0).map(|(b, a)| (b - a) as f64 / steps as f64 / 1e3);
             let c1 = sim.counters();
             let its = (c1.newton_iterations - c0.newton_iterations) as f64 / steps as f64;
             let fac = (c1.factorizations - c0.factorizations) as f64 / steps as f64;
@@ -84,9 +89,10 @@ fn main() {
                 res_us = res_us.min(t.elapsed().as_secs_f64() / 50.0 * 1e6);
             }
             println!(
-                "  {name} {comp:?}: {} ({} fallbacks), residual {res_us:.1} µs",
+                "  {name} {comp:?}: {} ({} fallbacks), residual {res_us:.1} µs, CPU time {} µs/step",
                 sim.linear_solver_name(),
-                c1.sparse_fallbacks
+                c1.sparse_fallbacks,
+                cpu_us.map_or("n/a".to_string(), |v| format!("{v:.0}"))
             );
             row.push((its, fac, us));
         }
@@ -101,4 +107,10 @@ fn main() {
             row[1].2 / row[0].2
         );
     }
+}
+
+/// On-CPU time of the calling thread in ns (`/proc/thread-self/schedstat`, Linux), if available.
+fn thread_cpu_ns() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
+    text.split_whitespace().next()?.parse().ok()
 }
