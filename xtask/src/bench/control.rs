@@ -95,8 +95,12 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
     );
     let mut notes = Vec::new();
     for &omega0 in omegas {
-        let mut sc = Series { label: format!("ω0 = {omega0} rad/s"), ..Series::default() };
+        // per ω0: the SQP iteration limits as one connected series, LMPC and RTI as markers
+        let mut sc = Series::line(format!("ω0 = {omega0} rad/s: SQP (labels: iteration limit)"));
         let mut sf = sc.clone();
+        let mut mc =
+            Series { label: format!("ω0 = {omega0} rad/s: LMPC, RTI"), ..Series::default() };
+        let mut mf = mc.clone();
         let mut rows = Vec::new();
         for (name, c) in &configs {
             ctx.progress(&format!("(d) ω0 = {omega0}: {name}"));
@@ -123,15 +127,20 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
                 if s.stabilised { "yes" } else { "no" }.into(),
                 r.wall_time_s.into(),
             ]);
-            for (series, y) in [(&mut sc, j), (&mut sf, s.v_ratio_final)] {
-                series.add(med, y, name.clone());
+            let (series, label) = match name.strip_prefix("NMPC SQP ") {
+                Some(limit) => ([&mut sc, &mut sf], limit.trim_end_matches(" it.").to_string()),
+                None => ([&mut mc, &mut mf], name.trim_start_matches("NMPC ").to_string()),
+            };
+            let [a, b] = series;
+            for (series, y) in [(a, j), (b, s.v_ratio_final)] {
+                series.add(med, y, label.clone());
                 series.whisker_to.push(s.solve_time_worst_s);
             }
             rows.push((name.clone(), med, s.solve_time_worst_s, j, s.v_ratio_final));
             ctx.tick();
         }
-        c_cost.series.push(sc);
-        c_final.series.push(sf);
+        c_cost.series.extend([sc, mc]);
+        c_final.series.extend([sf, mf]);
         let best = rows.iter().min_by(|a, b| a.3.total_cmp(&b.3));
         let fastest = rows.iter().min_by(|a, b| a.1.total_cmp(&b.1));
         if let (Some(b), Some(f)) = (best, fastest) {

@@ -206,7 +206,7 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
         "ROM run time (s): implicit midpoint dt = 2 ms, Lawson RK4 dt = 3.1 ms",
         "max error over time, relative",
     );
-    chart.legend = Legend::MiddleRight;
+    chart.legend = Legend::UpperLeft;
     let mut notes = Vec::new();
     for &omega0 in &omegas {
         ctx.progress(&format!("(b) FE plant, ω0 = {omega0}"));

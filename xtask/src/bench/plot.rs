@@ -58,20 +58,20 @@ pub(crate) enum Legend {
     UpperRight,
     /// Lower left corner.
     LowerLeft,
-    /// Middle of the right edge.
-    MiddleRight,
+    /// Upper left corner.
+    UpperLeft,
 }
 
 fn ok(p: &(f64, f64)) -> bool {
     p.0.is_finite() && p.1.is_finite() && p.0 > 0.0 && p.1 > 0.0
 }
 
-/// A padded log range around `lo..hi`, at least 1.3 decades wide (so that at least one
-/// power of ten, and usually two, carry a tick label).
+/// A padded log range around `lo..hi`, at least one decade wide (so that a power of ten
+/// carries a tick label).
 fn log_range(lo: f64, hi: f64) -> (f64, f64) {
     let (mut a, mut b) = (lo.log10(), hi.log10());
-    if b - a < 1.3 {
-        let widen = 0.5 * (1.3 - (b - a));
+    if b - a < 1.0 {
+        let widen = 0.5 * (1.0 - (b - a));
         a -= widen;
         b += widen;
     }
@@ -215,7 +215,7 @@ impl Chart {
             .position(match self.legend {
                 Legend::UpperRight => SeriesLabelPosition::UpperRight,
                 Legend::LowerLeft => SeriesLabelPosition::LowerLeft,
-                Legend::MiddleRight => SeriesLabelPosition::MiddleRight,
+                Legend::UpperLeft => SeriesLabelPosition::UpperLeft,
             })
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK)
