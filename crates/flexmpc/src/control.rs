@@ -325,6 +325,51 @@ pub fn run_sweep(
     Ok(SweepOutput { runs, csv, json, plot })
 }
 
+/// `flexmpc ocp`: solves the first sample's optimal control problem alone (from the projected
+/// initial state of a run with the scene's disturbance) and returns its optimal cost, control
+/// sequence, iterations and solve time as JSON; with `export`, also writes the whole problem
+/// (modal model export plus `ocp.json`: weights, references, bounds, horizon, `Nc`,
+/// integrator, initial state) so that another solver can solve exactly the same problem.
+pub fn first_sample(
+    scene: &Scene,
+    overrides: &Overrides,
+    export: Option<&Path>,
+) -> Result<serde_json::Value> {
+    let control = control_of(scene, overrides)?;
+    let setup = Setup::new(&control.scenario)
+        .with_context(|| format!("setting up the controller of {}", scene.file.display()))?;
+    let problem = match export {
+        Some(dir) => {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+            mpc::export_first_sample(&setup, control.omega0, &control.controller, dir)?
+        }
+        None => mpc::first_sample_problem(&setup, control.omega0, &control.controller)?,
+    };
+    let mut ctrl = mpc::Controller::new(
+        mpc::RomDynamics::new(&setup.rom)?,
+        &setup.weights,
+        &control.scenario.mpc,
+        &control.controller,
+    )?;
+    let report = ctrl.step(0.0, &problem.x0)?;
+    let (_, controls) = ctrl.plan();
+    let controls: Vec<Vec<f64>> = controls.iter().map(|u| u.iter().copied().collect()).collect();
+    Ok(serde_json::json!({
+        "omega0": control.omega0,
+        "controller": control.controller.kind.name(),
+        "cost": report.cost,
+        "status": report.status,
+        "strategy": report.strategy,
+        "iterations": report.iterations,
+        "solve_time_s": report.solve_time,
+        "kkt": report.kkt,
+        "inputs": problem.inputs,
+        "controls": controls,
+        "n_state": problem.x0.len(),
+        "export": export,
+    }))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -7,7 +7,8 @@
 //!   line and field ([`scene::SceneError`]).
 //! - [`run`]: time simulation of a scene with CSV output.
 //! - [`modes`]: constrained linear modes of a scene's structure, with tables and plots.
-//! - [`control`]: closed loops (`flexmpc mpc`) and sweeps over ω0 (`flexmpc sweep`) of a
+//! - [`control`]: closed loops (`flexmpc mpc`), sweeps over ω0 (`flexmpc sweep`) and the
+//!   first sample's optimal control problem (`flexmpc ocp`) of a
 //!   scene's `[scenario]` with the `mpc` crate, written as CSV/JSON.
 //! - [`report`]: the offline HTML report (`index.html` + SVG figures) of a closed loop.
 //! - [`plot`]: SVG plots (plotters).

@@ -5,6 +5,7 @@
 //! (`scenes/paper-2d-mpc.toml`), and writes its report to `out/paper-2d-mpc/index.html`.
 //! `flexmpc mpc <scene.toml>` runs one closed loop (CSV, per-sample solver log, report),
 //! `flexmpc sweep <scene.toml>` runs ω0 × controllers in parallel (table, Fig. 6-style plot),
+//! `flexmpc ocp <scene.toml>` solves (and `--export`s) the first sample's problem alone,
 //! `flexmpc simulate <scene.toml>` runs the uncontrolled FE plant, `flexmpc modes` lists and
 //! plots the constrained modes, `flexmpc check` validates a scene. Global flags: `--quiet`
 //! (no progress, no extra prints), `--json` (machine-readable summary on stdout),
@@ -92,6 +93,21 @@ enum Command {
         /// Output folder (default `out/<scene name>`).
         #[arg(long)]
         out: Option<PathBuf>,
+    },
+    /// The first sample's optimal control problem alone: optimal cost, controls, iterations,
+    /// solve time; `--export DIR` also writes the whole problem for other solvers.
+    Ocp {
+        /// Scene file (TOML) with `[scenario]`.
+        scene: PathBuf,
+        /// Controller (default: `[controller] kind`).
+        #[arg(long, value_parser = ["nmpc", "lmpc"])]
+        controller: Option<String>,
+        /// Disturbance ω0 (rad/s; default: `[scenario] omega0`).
+        #[arg(long, allow_hyphen_values = true)]
+        omega0: Option<f64>,
+        /// Write the modal model and `ocp.json` of the problem to this folder.
+        #[arg(long)]
+        export: Option<PathBuf>,
     },
     /// Closed loops for several ω0 and controllers in parallel: table and Fig. 6-style plot.
     Sweep {
@@ -348,6 +364,38 @@ fn main() -> Result<()> {
             let out = out.clone().unwrap_or_else(|| default_out(scene));
             let o = control::run_mpc(&s, &ov, &out, cli.quiet)?;
             print_mpc(&o, &cli)?;
+        }
+        Some(Command::Ocp { scene, controller, omega0, export }) => {
+            let s = scene::load(scene)?;
+            let ov = Overrides {
+                controller: kind_of(controller.as_deref())?,
+                omega0: *omega0,
+                ..Default::default()
+            };
+            let v = control::first_sample(&s, &ov, export.as_deref())?;
+            if cli.json {
+                println!("{}", serde_json::to_string_pretty(&v)?);
+            } else if !cli.quiet {
+                println!(
+                    "{} first sample, ω0 = {}: cost {:.6e}, {} iterations, {:.3} s, status {} ({})",
+                    v["controller"].as_str().unwrap_or("?").to_uppercase(),
+                    v["omega0"],
+                    v["cost"].as_f64().unwrap_or(f64::NAN),
+                    v["iterations"],
+                    v["solve_time_s"].as_f64().unwrap_or(f64::NAN),
+                    v["status"].as_str().unwrap_or("?"),
+                    v["strategy"].as_str().unwrap_or("?")
+                );
+                if let Some(c) = v["controls"].as_array() {
+                    println!("u over the horizon ({} intervals, inputs {}):", c.len(), v["inputs"]);
+                    for (k, u) in c.iter().enumerate() {
+                        println!("{k:>4} {u}");
+                    }
+                }
+                if let Some(d) = export {
+                    println!("exported the problem to {}", d.display());
+                }
+            }
         }
         Some(Command::Sweep { scene, omega0, controller, plant, duration, out }) => {
             let s = scene::load(scene)?;

@@ -234,3 +234,33 @@ fn modes_at_the_scene_angles() {
     assert_eq!(labels(&a[0]).len(), 7, "[modes] count = 7");
     assert!(dir.join("angle-45/shapes.svg").exists());
 }
+
+/// `flexmpc ocp --json --export`: the first sample's problem alone — Nc controls within the
+/// bounds, a finite positive cost — and its export (ocp.json with the same initial state size).
+#[test]
+fn ocp_first_sample_and_export() {
+    let (scene, out) = small_2d_scene("ocp");
+    let o = flexmpc()
+        .args(["--json", "ocp"])
+        .arg(&scene)
+        .args(["--controller", "lmpc", "--omega0", "0.5", "--export"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "stderr: {}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["controller"], "lmpc");
+    let cost = v["cost"].as_f64().unwrap();
+    assert!(cost.is_finite() && cost > 0.0, "{v}");
+    let controls = v["controls"].as_array().unwrap();
+    assert_eq!(controls.len(), 24, "Nc = 24");
+    for u in controls {
+        let u = u.as_array().unwrap();
+        assert_eq!(u.len(), 3);
+        assert!(u.iter().all(|x| x.as_f64().unwrap().abs() <= 5.0 + 1e-9));
+    }
+    let ocp: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("ocp.json")).unwrap()).unwrap();
+    assert_eq!(ocp["x0"].as_array().unwrap().len() as u64, v["n_state"].as_u64().unwrap());
+    assert_eq!(ocp["omega0"].as_f64(), Some(0.5));
+}
