@@ -500,7 +500,7 @@ fn main() -> Result<()> {
             print_mpc(&o, &cli)?;
             if chatty(&cli) {
                 println!(
-                    "open {} in a browser; `flexmpc --help` lists the commands (mpc, sweep, \
+                    "open {} in a browser; `flexmpc --help` lists the commands (mpc, sweep, ocp, \
                      simulate, modes, check)",
                     o.report.display()
                 );
