@@ -12,6 +12,7 @@ pub mod modal;
 pub mod mpc;
 pub mod multibody;
 pub mod ocp;
+pub mod stress;
 
 use std::time::Instant;
 
@@ -100,6 +101,7 @@ pub fn all_cases() -> Vec<Case> {
     cases.extend(modal::cases());
     cases.extend(ocp::cases());
     cases.extend(mpc::cases());
+    cases.extend(stress::cases());
     cases
 }
 

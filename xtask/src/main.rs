@@ -4,6 +4,8 @@
 //! every verification case runs optimised.
 
 mod bench;
+mod fuzz;
+mod stress;
 
 use anyhow::{bail, Result};
 use flexmpc_verification::{all_cases, run_case, Row, Tier};
@@ -27,6 +29,8 @@ fn main() -> Result<()> {
     match args.first().map(String::as_str) {
         Some("verify") => verify(&args[1..]),
         Some("bench") => bench::main(&args[1..]),
+        Some("stress") => stress::main(&args[1..]),
+        Some("fuzz") => fuzz::main(&args[1..]),
         Some("-h") | Some("--help") | Some("help") | None => {
             println!("{USAGE}");
             Ok(())
