@@ -810,10 +810,101 @@ fn cases() -> Vec<Case> {
     ]
 }
 
+/// Malformed closed-loop sections, as edits of the fixture `mpc-lowest.toml`.
+fn mpc_cases() -> Vec<Case> {
+    vec![
+        case(
+            "load that is not a control input in a closed-loop scene",
+            "force = [0.0, 0.0, 1.0]\ncontrol = true",
+            "force = [0.0, 0.0, 1.0]",
+            "[[loads]]",
+            "loads[0].control",
+            "control = true",
+        ),
+        case(
+            "control load in the dead frame",
+            "frame = \"follower\"",
+            "frame = \"dead\"",
+            "frame = \"dead\"",
+            "loads[0].frame",
+            "follower",
+        ),
+        case(
+            "control torque with a value other than 1",
+            "value = 1.0",
+            "value = 0.5",
+            "value = 0.5",
+            "torques[0].value",
+            "must be 1",
+        ),
+        case(
+            "two mode selections",
+            "lowest = 5",
+            "lowest = 5\nindices = [0, 1]",
+            "[modes]",
+            "modes",
+            "only one of",
+        ),
+        case(
+            "zero lowest modes",
+            "lowest = 5",
+            "lowest = 0",
+            "lowest = 0",
+            "modes.lowest",
+            "at least 1",
+        ),
+        case(
+            "unknown controller kind",
+            "[scenario]",
+            "[controller]\nkind = \"pid\"\n\n[scenario]",
+            "kind = \"pid\"",
+            "controller.kind",
+            "nmpc",
+        ),
+        case(
+            "unknown plant",
+            "plant = \"rom\"",
+            "plant = \"exact\"",
+            "plant = \"exact\"",
+            "scenario.plant",
+            "fe",
+        ),
+        case(
+            "scenario without axis",
+            "axis = [0.0, 1.0, 0.0]\nduration",
+            "duration",
+            "[scenario]",
+            "scenario.axis",
+            "missing field",
+        ),
+        case(
+            "empty sweep",
+            "omega0 = [0.5, 1.0]",
+            "omega0 = []",
+            "omega0 = []",
+            "sweep.omega0",
+            "at least one",
+        ),
+        case(
+            "unknown weight",
+            "[scenario]",
+            "[controller.weights]\nkx3 = 1.0\n\n[scenario]",
+            "kx3",
+            "controller.weights.kx3",
+            "expected one of",
+        ),
+    ]
+}
+
 /// Runs one malformed case through `scene::load` on a real file and returns the error.
 fn malformed_error(c: &Case, dir: &Path) -> (PathBuf, usize, scene::SceneError) {
-    assert!(BASE.contains(c.from), "{}: the base scene lacks {:?}", c.name, c.from);
-    let text = BASE.replacen(c.from, c.to, 1);
+    malformed_error_in(BASE, c, dir)
+}
+
+/// As [`malformed_error`], editing `base` instead of [`BASE`].
+fn malformed_error_in(base: &str, c: &Case, dir: &Path) -> (PathBuf, usize, scene::SceneError) {
+    assert!(base.contains(c.from), "{}: the base scene lacks {:?}", c.name, c.from);
+    let text = base.replacen(c.from, c.to, 1);
     let file: String =
         c.name.chars().map(|ch| if ch.is_ascii_alphanumeric() { ch } else { '-' }).collect();
     let path = dir.join(format!("{file}.toml"));
@@ -834,11 +925,15 @@ fn malformed_error(c: &Case, dir: &Path) -> (PathBuf, usize, scene::SceneError) 
 fn malformed_scenes_name_file_line_field_and_what_is_allowed() {
     let dir = scratch("malformed");
     let cases = cases();
-    assert!(cases.len() >= 25, "only {} cases", cases.len());
+    let mpc_base = std::fs::read_to_string(manifest_dir().join("tests/fixtures/mpc-lowest.toml"))
+        .expect("the closed-loop fixture");
+    let mpc_cases = mpc_cases();
+    assert!(cases.len() + mpc_cases.len() >= 25, "only {} cases", cases.len());
     assert!(scene::load_str(Path::new("base.toml"), BASE).is_ok(), "the base scene loads");
     let mut failures = Vec::new();
-    for c in &cases {
-        let (path, line, e) = malformed_error(c, &dir);
+    let all = cases.iter().map(|c| (BASE, c)).chain(mpc_cases.iter().map(|c| (&*mpc_base, c)));
+    for (base, c) in all {
+        let (path, line, e) = malformed_error_in(base, c, &dir);
         let msg = e.to_string();
         let mut problems = Vec::new();
         if e.file != path || !msg.starts_with(&format!("{}:", path.display())) {
