@@ -94,12 +94,16 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
         "V(7.5) / V(0)",
     );
     let mut notes = Vec::new();
-    for &omega0 in omegas {
+    for (w, &omega0) in omegas.iter().enumerate() {
         // per ω0: the SQP iteration limits as one connected series, LMPC and RTI as markers
         let mut sc = Series::line(format!("ω0 = {omega0} rad/s: SQP (labels: iteration limit)"));
+        sc.color = Some(w);
         let mut sf = sc.clone();
-        let mut mc =
-            Series { label: format!("ω0 = {omega0} rad/s: LMPC, RTI"), ..Series::default() };
+        let mut mc = Series {
+            label: format!("ω0 = {omega0} rad/s: LMPC, RTI"),
+            color: Some(w),
+            ..Series::default()
+        };
         let mut mf = mc.clone();
         let mut rows = Vec::new();
         for (name, c) in &configs {

@@ -18,6 +18,8 @@ pub(crate) struct Series {
     pub whisker_to: Vec<f64>,
     /// Draw the connecting line (false: markers only).
     pub line: bool,
+    /// Palette index (default: the series' position), to share a colour between series.
+    pub color: Option<usize>,
 }
 
 impl Series {
@@ -159,7 +161,7 @@ impl Chart {
             BLACK,
         ];
         for (k, s) in self.series.iter().enumerate() {
-            let color = palette[k % palette.len()];
+            let color = palette[s.color.unwrap_or(k) % palette.len()];
             let good: Vec<usize> = (0..s.points.len()).filter(|&i| ok(&s.points[i])).collect();
             if good.is_empty() {
                 continue;
