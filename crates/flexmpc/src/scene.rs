@@ -1975,6 +1975,135 @@ duration = 0.01
         );
     }
 
+    /// The closed-loop sections: each malformed value names its file, line and field.
+    #[test]
+    fn malformed_control_sections_name_file_line_and_field() {
+        let base = format!(
+            "{}{}",
+            BASE.replace("force = [0.0, 0.0, 0.1]", "force = [0.0, 0.0, 1.0]\ncontrol = true"),
+            r#"
+[modes]
+selection = "paper-2d"
+
+[controller]
+kind = "nmpc"
+substeps = 16
+
+[controller.weights]
+ku = 0.1
+
+[scenario]
+axis = [0.0, 1.0, 0.0]
+plant = "fe"
+sampling = 0.2
+duration = 1.0
+
+[sweep]
+omega0 = [0.5, 1.0]
+controllers = ["nmpc"]
+"#
+        );
+        let ok = load_str(Path::new("ok.toml"), &base).unwrap_or_else(|e| panic!("{e}"));
+        let c = ok.control.expect("[scenario]");
+        assert_eq!(c.sweep_omegas, [0.5, 1.0]);
+        assert_eq!(c.scenario.inputs.len(), 1);
+        let check = |from: &str, to: &str, at: &str, field: &str, allowed: &str| {
+            assert!(base.contains(from), "base lacks {from}");
+            let text = base.replacen(from, to, 1);
+            let msg = match load_str(Path::new("bad.toml"), &text) {
+                Ok(_) => panic!("`{to}` was accepted"),
+                Err(e) => e.to_string(),
+            };
+            let line = line_of(&text, at);
+            assert!(msg.starts_with(&format!("bad.toml:{line}:")), "line {line} in: {msg}");
+            assert!(msg.contains(field), "field `{field}` in: {msg}");
+            assert!(msg.contains(allowed), "`{allowed}` in: {msg}");
+        };
+        check(
+            "kind = \"nmpc\"",
+            "kind = \"pid\"",
+            "kind = \"pid\"",
+            "controller.kind",
+            "nmpc, lmpc",
+        );
+        check(
+            "plant = \"fe\"",
+            "plant = \"beam\"",
+            "plant = \"beam\"",
+            "scenario.plant",
+            "fe, rom",
+        );
+        check("ku = 0.1", "ku = -1.0", "ku = -1.0", "controller.weights.ku", "> 0");
+        check("substeps = 16", "substeps = 0", "substeps = 0", "controller.substeps", "at least 1");
+        check(
+            "sampling = 0.2",
+            "sampling = 0.33",
+            "sampling = 0.33",
+            "scenario.sampling",
+            "multiple",
+        );
+        check(
+            "duration = 1.0",
+            "duration = 1.01",
+            "duration = 1.01",
+            "scenario.duration",
+            "multiple",
+        );
+        check("sampling = 0.2", "sampling = 7.0", "sampling = 7.0", "scenario.sampling", "horizon");
+        check(
+            "axis = [0.0, 1.0, 0.0]\nplant",
+            "axis = [0.0, 0.0, 0.0]\nplant",
+            "axis = [0.0, 0.0, 0.0]",
+            "scenario.axis",
+            "non-zero",
+        );
+        check(
+            "controllers = [\"nmpc\"]",
+            "controllers = [\"lqr\"]",
+            "controllers",
+            "sweep.controllers",
+            "nmpc, lmpc",
+        );
+        check("omega0 = [0.5, 1.0]", "omega0 = []", "omega0 = []", "sweep.omega0", "at least one");
+        check(
+            "selection = \"paper-2d\"",
+            "selection = \"paper-2d\"\nlowest = 4",
+            "selection = ",
+            "modes.selection",
+            "only one",
+        );
+        check(
+            "selection = \"paper-2d\"",
+            "selection = \"paper-9d\"",
+            "selection",
+            "modes.selection",
+            "paper-2d, paper-3d",
+        );
+        check(
+            "frame = \"follower\"",
+            "frame = \"dead\"",
+            "frame = \"dead\"",
+            "loads[0].frame",
+            "follower",
+        );
+        check(
+            "force = [0.0, 0.0, 1.0]\ncontrol = true",
+            "force = [0.0, 0.0, 1.0]",
+            "[[loads]]",
+            "loads[0].control",
+            "control = true",
+        );
+        check("axis = [0.0, 1.0, 0.0]\nplant", "plant", "[scenario]", "axis", "missing");
+        check(
+            "[scenario]",
+            "[scenario]\nroot = \"hip\"",
+            "root = \"hip\"",
+            "scenario.root",
+            "supports: root",
+        );
+        check("[scenario]", "[scenario]\nspeed = 1.0", "speed", "speed", "unknown field");
+    }
+
     /// Every shipped scene builds and takes a few steps (the full runs are in CI via the CLI).
     #[test]
     fn shipped_scenes_load_and_step() {
