@@ -35,8 +35,11 @@
 //!   strains.
 //! * [`problem`] — single-beam problems: [`problem::EndCondition`] (free, applied end load,
 //!   clamped, pinned, prescribed motion, mixed) and [`problem::ImplicitMidpoint`] (Newton on the
-//!   sparse step system, faer sparse LU with the symbolic factorisation reused, simplified
-//!   Newton with Jacobian reuse, counters).
+//!   step system with the factorisation reused and refreshed once per step, counters).
+//! * [`step_system`] — the step system's linear solver: unknowns interleaved along the beam,
+//!   block-tridiagonal with `k×k` blocks, solved by the block LU of
+//!   [`block_tridiagonal::BlockTridiagonal`] (blocks written directly on `k`-vectors); faer's
+//!   sparse LU ([`sparse::SparseLuSystem`]) for flux damping or singular blocks.
 //! * [`rk4::ExplicitRk4`] — explicit RK4 for cross-checks when the problem is an ODE.
 //! * [`modes`] — linear modes of a single beam (second-order reduction, faer dense eigen) and
 //!   closed-form beam frequencies.

@@ -298,6 +298,56 @@ pub fn planar_vs_spatial(n_elements: usize, dt: f64, steps: usize) -> Result<(f6
     Ok((dx, dr))
 }
 
+/// Result of [`block_vs_sparse`].
+#[derive(Clone, Debug)]
+pub struct SolverStudy {
+    /// `max |x_default − x_reference| / max(1, ‖x_reference‖∞)` over the run.
+    pub max_relative_difference: f64,
+    /// Newton iterations per step with the default settings (block-tridiagonal path).
+    pub iterations_default: f64,
+    /// Newton iterations per step of the reference (faer sparse LU, tolerance 1e-14).
+    pub iterations_reference: f64,
+    /// Name of the default run's linear solver at the end.
+    pub solver: &'static str,
+}
+
+/// The released cantilever with the default settings (block-tridiagonal solver, one refresh
+/// per step) against a reference converged to 1e-14 with faer's sparse LU, over `steps` steps.
+pub fn block_vs_sparse(
+    components: Components,
+    n_elements: usize,
+    dt: f64,
+    steps: usize,
+) -> Result<SolverStudy> {
+    let sample = samples::cantilever_release(components, n_elements)?;
+    let reference_settings = NewtonSettings {
+        linear_solver: crate::step_system::LinearSolver::SparseLu,
+        tolerance: 1e-14,
+        ..NewtonSettings::default()
+    };
+    let mut default = simulate(sample.clone(), NewtonSettings::default())?;
+    let mut reference = simulate(sample, reference_settings)?;
+    let mut diff: f64 = 0.0;
+    for _ in 0..steps {
+        default.step(dt)?;
+        reference.step(dt)?;
+        let scale = reference.state().iter().fold(1.0f64, |m, v| m.max(v.abs()));
+        let d = default
+            .state()
+            .iter()
+            .zip(reference.state())
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        diff = diff.max(d / scale);
+    }
+    let per_step = |c: Counters| c.newton_iterations as f64 / c.steps.max(1) as f64;
+    Ok(SolverStudy {
+        max_relative_difference: diff,
+        iterations_default: per_step(default.counters()),
+        iterations_reference: per_step(reference.counters()),
+        solver: default.linear_solver_name(),
+    })
+}
+
 /// Difference (max norm of the beam vector, end values excluded) between implicit midpoint with
 /// step `dt` and RK4 with step `dt_rk4` after `t_end` of the swing with the
 /// [`samples::soft_section`].
