@@ -1160,12 +1160,15 @@ pub mod scene_fuzz {
     use super::panic_message;
 
     /// The shipped scenes (`scenes/*.toml`), the seeds of the mutations.
-    pub const SHIPPED: [(&str, &str); 5] = [
+    pub const SHIPPED: [(&str, &str); 8] = [
         ("ball-joint-3.toml", include_str!("../../scenes/ball-joint-3.toml")),
         ("cantilever.toml", include_str!("../../scenes/cantilever.toml")),
         ("l-frame.toml", include_str!("../../scenes/l-frame.toml")),
         ("paper-2d.toml", include_str!("../../scenes/paper-2d.toml")),
+        ("paper-2d-modes.toml", include_str!("../../scenes/paper-2d-modes.toml")),
+        ("paper-2d-mpc.toml", include_str!("../../scenes/paper-2d-mpc.toml")),
         ("paper-3d.toml", include_str!("../../scenes/paper-3d.toml")),
+        ("paper-3d-mpc.toml", include_str!("../../scenes/paper-3d-mpc.toml")),
     ];
 
     /// Largest total element count a fuzz case may load. The scene loader itself has **no**
