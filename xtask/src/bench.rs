@@ -25,7 +25,8 @@ pub(crate) const USAGE: &str = "\
 usage: cargo xtask bench [--quick] [--publish] [WHICH ...]
 
   WHICH      any of: mesh (a), modes (b), timestep (c), control (d); default: all four
-  --quick    a coarse subset (about 2-3 minutes in all); the full run takes 10-20 minutes
+  --quick    a coarse subset (under 1 minute on 2 loaded cores); the full run takes about 5
+             minutes there
   --publish  also copy the tables (markdown) and plots (SVG) to docs/perf/
 
 Writes target/bench/<study>.{md,csv,json,svg} and target/bench/summary.md.
@@ -279,5 +280,6 @@ pub fn main(args: &[String]) -> Result<()> {
 
 /// The repository root (parent of `xtask/`).
 pub(crate) fn repo_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+    let manifest = Path::new(env!("CARGO_MANIFEST_DIR"));
+    manifest.parent().map_or_else(|| manifest.join(".."), Path::to_path_buf)
 }
