@@ -22,7 +22,10 @@ usage: cargo xtask verify [FILTER] [--quick | --full] [--json]
   --write-docs  also write the report to docs/verification.md (command, date, machine, run time)
 
 Reports are also written to target/verify/report.md and target/verify/report.json.
-The exit code is non-zero if any case fails.";
+The exit code is non-zero if any case fails.
+
+Also: cargo xtask stress [FILTER] [--quick], cargo xtask fuzz [--cases N] [--seed S] [--show I]
+(docs/stress.md); each takes --help.";
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
