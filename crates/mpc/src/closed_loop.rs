@@ -7,6 +7,7 @@ use crate::dynamics::RomDynamics;
 use crate::error::{invalid, Result};
 use crate::plant::{relative_angle, PlantKind, SimPlant};
 use crate::scenario::{ratio, Setup};
+use crate::weights::ControlGrid;
 use nalgebra::{Vector3, Vector4};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -109,6 +110,20 @@ impl RunResult {
             s.solve_time = 0.0;
         }
         r
+    }
+}
+
+/// A plan in force: the start time of its first control interval and its controls.
+struct Plan {
+    start: f64,
+    pieces: Vec<Vec<f64>>,
+}
+
+impl Plan {
+    /// The control of the piece that covers time `t` (clamped to the plan).
+    fn piece(&self, t: f64, dt: f64) -> &[f64] {
+        let k = ((t - self.start) / dt + 1e-9).floor().max(0.0) as usize;
+        &self.pieces[k.min(self.pieces.len() - 1)]
     }
 }
 
@@ -216,6 +231,12 @@ pub fn run(
         Controller::new(RomDynamics::new(&setup.rom)?, &setup.weights, &sc.mpc, controller)?;
     let nu = sc.inputs.len();
     let mut u = vec![0.0; nu];
+    let anchored = sc.mpc.control_grid == ControlGrid::Absolute;
+    let dt_plan = ctrl.interval();
+    // the plan in force (start time, pieces) and the one before it (still in force until the
+    // new plan's start when that lies after the sample)
+    let mut plan: Option<Plan> = None;
+    let mut previous: Option<Plan> = None;
     let mut records = Vec::with_capacity(n_out + 1);
     let mut samples = Vec::new();
     let mut snapshots = Vec::new();
@@ -227,9 +248,30 @@ pub fn run(
             snapshots.push(Snapshot { t, positions: p });
         }
         if k < n_out && k % per_sample == 0 {
-            let rep = ctrl.step(t, &obs.q)?;
-            u.copy_from_slice(&rep.u);
+            let rep = match (&plan, anchored) {
+                (Some(p), true) => {
+                    // next time on the absolute grid kΔt (t itself when on it)
+                    let g = ((t / dt_plan - 1e-9).ceil() * dt_plan).max(t);
+                    let x = ctrl.predict(&obs.q, p.piece(t, dt_plan), g - t)?;
+                    ctrl.step_from(t, g, &x)?
+                }
+                _ => ctrl.step(t, &obs.q)?,
+            };
+            let mut pieces: Vec<Vec<f64>> =
+                ctrl.plan().1.iter().map(|c| c.iter().copied().collect()).collect();
+            if let Some(first) = pieces.first_mut() {
+                first.copy_from_slice(&rep.u);
+            }
+            previous = plan.take();
+            plan = Some(Plan { start: rep.plan_start, pieces });
             samples.push(rep);
+        }
+        if let Some(p) = &plan {
+            let active = match &previous {
+                Some(q) if t < p.start - 1e-9 => q,
+                _ => p,
+            };
+            u.copy_from_slice(active.piece(t, dt_plan));
         }
         let v_state = setup.weights.state_cost(&obs.q);
         records.push(Record {
@@ -258,6 +300,51 @@ pub fn run(
         snapshots,
         wall_time_s: start.elapsed().as_secs_f64(),
     })
+}
+
+/// Runs the plant open loop from the scenario's initial state at `omega0` with the given
+/// control per output interval (`inputs[k]` held on `[k, k+1)·output_interval`; the run
+/// lasts `inputs.len()` intervals) and records it like [`run`] does (for model validation:
+/// replay one input history on the FE plant and on the modal model and compare).
+pub fn open_loop(
+    setup: &Setup,
+    omega0: f64,
+    inputs: &[Vec<f64>],
+    plant_kind: PlantKind,
+) -> Result<Vec<Record>> {
+    if !omega0.is_finite() {
+        return Err(invalid("omega0", omega0, "must be finite"));
+    }
+    let sc = &setup.scenario;
+    let nu = sc.inputs.len();
+    if let Some((k, u)) = inputs.iter().enumerate().find(|(_, u)| u.len() != nu) {
+        return Err(invalid(format!("inputs[{k}] length"), u.len(), format!("must be {nu}")));
+    }
+    let steps = ratio("plant.dt per output_interval", sc.output_interval, sc.plant.dt)?;
+    let omega = Vector3::from_column_slice(&sc.omega_direction) * omega0;
+    let x0 = sc.structure.rigid_rotation_state(omega, Vector3::from_column_slice(&sc.center));
+    let mut plant = SimPlant::fe(&sc.structure, sc.plant, steps, &sc.inputs, &x0)?;
+    if plant_kind == PlantKind::Rom {
+        let (obs, _) = observe(setup, &plant, false)?;
+        plant = SimPlant::rom(&setup.rom, obs.q, sc.output_interval, sc.rom_plant_substeps)?;
+    }
+    let mut records = Vec::with_capacity(inputs.len() + 1);
+    for k in 0..=inputs.len() {
+        let (obs, _) = observe(setup, &plant, false)?;
+        let u = inputs.get(k).cloned().unwrap_or_else(|| vec![0.0; nu]);
+        records.push(Record {
+            t: k as f64 * sc.output_interval,
+            v_state: setup.weights.state_cost(&obs.q),
+            u: u.clone(),
+            joint_angles: obs.joint_angles,
+            tip: obs.tip,
+            q: obs.q,
+        });
+        if k < inputs.len() {
+            plant.advance(&u)?;
+        }
+    }
+    Ok(records)
 }
 
 fn summarise(

@@ -4,10 +4,10 @@
 use crate::dynamics::RomDynamics;
 use crate::error::{invalid, Result};
 use crate::weights::{MpcSettings, Weights};
-use nalgebra::DVector;
+use nalgebra::{DMatrix, DVector};
 use ocp_transcription::{
-    Globalisation, HessianApproximation, IntegratorKind, IntegratorSettings, Ocp, QpForm, SqpMode,
-    SqpSettings, SqpSolver, SqpStatus,
+    Dynamics, Globalisation, HessianApproximation, Integrator, IntegratorKind, IntegratorSettings,
+    LinearPart, Ocp, QpForm, SqpMode, SqpSettings, SqpSolver, SqpStatus,
 };
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
@@ -166,6 +166,9 @@ pub struct SampleReport {
     pub kkt: f64,
     /// Applied control `u_0`.
     pub u: Vec<f64>,
+    /// Time at which the plan starts (its first control takes over): the sample time, or
+    /// with [`crate::ControlGrid::Absolute`] the next grid time `kΔt ≥ t` (s).
+    pub plan_start: f64,
 }
 
 /// A receding-horizon controller on the augmented modal model.
@@ -176,6 +179,52 @@ pub struct Controller {
     relaxed: Option<SqpSolver<RomDynamics>>,
     lmpc: SqpSolver<RomDynamics>,
     samples: usize,
+    /// Start time of the last plan (for the warm-start shift).
+    last_start: Option<f64>,
+    /// The model used to predict a measured state to the plan's start: the nonlinear model
+    /// (NMPC) or its linearisation at the reference (LMPC).
+    predictor: Predictor,
+}
+
+/// State predictor of a controller (see [`Controller::predict`]).
+#[derive(Clone, Debug)]
+enum Predictor {
+    Nonlinear(RomDynamics),
+    Linear(Linearised),
+}
+
+/// `ẋ = A (x − x_r) + B u`: the model linearised at `(x_r, 0)` (an equilibrium).
+#[derive(Clone, Debug)]
+struct Linearised {
+    a: DMatrix<f64>,
+    b: DMatrix<f64>,
+    x_ref: DVector<f64>,
+}
+
+impl Dynamics for Linearised {
+    fn nx(&self) -> usize {
+        self.a.nrows()
+    }
+    fn nu(&self) -> usize {
+        self.b.ncols()
+    }
+    fn rhs(&self, x: &[f64], u: &[f64], xdot: &mut [f64]) {
+        let n = self.a.nrows();
+        for (i, xd) in xdot.iter_mut().enumerate().take(n) {
+            let mut v = 0.0;
+            for j in 0..n {
+                v += self.a[(i, j)] * (x[j] - self.x_ref[j]);
+            }
+            for (c, uc) in u.iter().enumerate() {
+                v += self.b[(i, c)] * uc;
+            }
+            *xd = v;
+        }
+    }
+    fn jacobians(&self, _x: &[f64], _u: &[f64], fx: &mut DMatrix<f64>, fu: &mut DMatrix<f64>) {
+        fx.copy_from(&self.a);
+        fu.copy_from(&self.b);
+    }
 }
 
 impl std::fmt::Debug for Controller {
@@ -224,6 +273,16 @@ impl Controller {
             ..base.clone()
         };
         let lmpc = SqpSolver::new(model.clone(), ocp.clone(), lq)?;
+        let predictor = match settings.kind {
+            ControllerKind::Nmpc => Predictor::Nonlinear(model.clone()),
+            ControllerKind::Lmpc => {
+                let x_ref = weights.x_ref.clone();
+                let mut a = DMatrix::zeros(nx, nx);
+                let mut b = DMatrix::zeros(nx, nu);
+                model.jacobians(x_ref.as_slice(), &vec![0.0; nu], &mut a, &mut b);
+                Predictor::Linear(Linearised { a, b, x_ref })
+            }
+        };
         let (nmpc, relaxed) = match settings.kind {
             ControllerKind::Lmpc => (None, None),
             ControllerKind::Nmpc => {
@@ -255,7 +314,53 @@ impl Controller {
                 (Some(SqpSolver::new(model, ocp, s)?), relaxed)
             }
         };
-        Ok(Self { settings: settings.clone(), mpc: mpc.clone(), nmpc, relaxed, lmpc, samples: 0 })
+        Ok(Self {
+            settings: settings.clone(),
+            mpc: mpc.clone(),
+            nmpc,
+            relaxed,
+            lmpc,
+            samples: 0,
+            last_start: None,
+            predictor,
+        })
+    }
+
+    /// Length of the plan's control intervals `Δt = τp / Nc` (s).
+    pub fn interval(&self) -> f64 {
+        self.mpc.horizon / self.mpc.intervals as f64
+    }
+
+    /// Predicts the modal state `x` forward by `duration` (s, ≥ 0) under the constant control
+    /// `u`, with the controller's own model (NMPC: the nonlinear model (29); LMPC: its
+    /// linearisation at the reference) and its integrator (substeps scaled to `duration`).
+    pub fn predict(&self, x: &[f64], u: &[f64], duration: f64) -> Result<Vec<f64>> {
+        if !(duration.is_finite() && duration >= 0.0) {
+            return Err(invalid("prediction duration", duration, "must be finite and ≥ 0"));
+        }
+        let mut out = x.to_vec();
+        if duration == 0.0 {
+            return Ok(out);
+        }
+        let base = &self.settings.integrator;
+        let substeps = ((base.substeps as f64 * duration / self.interval()).ceil() as usize).max(1);
+        let settings = IntegratorSettings { substeps, ..base.clone() };
+        match &self.predictor {
+            Predictor::Nonlinear(m) => {
+                let mut it = Integrator::new(m, &settings, duration)?;
+                it.integrate(m, x, u, &mut out)?;
+            }
+            Predictor::Linear(m) => {
+                let settings =
+                    IntegratorSettings { linear_part: LinearPart::Matrix(m.a.clone()), ..settings };
+                let mut it = Integrator::new(m, &settings, duration)?;
+                it.integrate(m, x, u, &mut out)?;
+            }
+        }
+        if let Some(i) = out.iter().position(|v| !v.is_finite()) {
+            return Err(invalid("predicted state", format!("entry {i} non-finite"), "diverged"));
+        }
+        Ok(out)
     }
 
     /// The settings.
@@ -271,10 +376,10 @@ impl Controller {
         }
     }
 
-    /// Solves the linear MPC's QP from `x0` (warm start from its shifted plan).
-    fn solve_lmpc(&mut self, x0: &[f64]) -> Result<ocp_transcription::SqpStats> {
+    /// Solves the linear MPC's QP from `x0` (warm start from its plan shifted by `shift`).
+    fn solve_lmpc(&mut self, x0: &[f64], shift: f64) -> Result<ocp_transcription::SqpStats> {
         if self.samples > 0 {
-            self.lmpc.shift_time(self.mpc.sampling)?;
+            self.lmpc.shift_time(shift)?;
         }
         Ok(self.lmpc.solve(x0)?)
     }
@@ -289,10 +394,25 @@ impl Controller {
     /// One sample: solves the OCP from the modal state `x0` at time `t` and returns the
     /// control to hold for `τs`, with the report of what was done.
     pub fn step(&mut self, t: f64, x0: &[f64]) -> Result<SampleReport> {
-        let start = Instant::now();
+        self.step_from(t, t, x0)
+    }
+
+    /// One sample taken at time `t` whose plan starts at `start ≥ t` from the (predicted)
+    /// modal state `x0` there (see [`crate::ControlGrid::Absolute`]); the warm start is the
+    /// previous plan shifted by the difference of the plans' start times.
+    pub fn step_from(&mut self, t: f64, start: f64, x0: &[f64]) -> Result<SampleReport> {
+        if !(start.is_finite() && t.is_finite() && start >= t) {
+            return Err(invalid("plan start", start, format!("must be finite and ≥ t = {t}")));
+        }
+        let shift = match self.last_start {
+            Some(s) => (start - s).max(0.0),
+            None => 0.0,
+        };
+        self.last_start = Some(start);
+        let clock = Instant::now();
         let report = match self.settings.kind {
             ControllerKind::Lmpc => {
-                let st = self.solve_lmpc(x0)?;
+                let st = self.solve_lmpc(x0, shift)?;
                 SampleReport {
                     t,
                     status: status_name(st.status),
@@ -303,23 +423,24 @@ impl Controller {
                     cost: st.cost,
                     kkt: st.kkt,
                     u: self.lmpc.first_control().iter().copied().collect(),
+                    plan_start: start,
                 }
             }
-            ControllerKind::Nmpc => self.step_nmpc(t, x0)?,
+            ControllerKind::Nmpc => self.step_nmpc(t, start, x0, shift)?,
         };
         self.samples += 1;
-        Ok(SampleReport { solve_time: start.elapsed().as_secs_f64(), ..report })
+        Ok(SampleReport { solve_time: clock.elapsed().as_secs_f64(), ..report })
     }
 
-    fn step_nmpc(&mut self, t: f64, x0: &[f64]) -> Result<SampleReport> {
+    fn step_nmpc(&mut self, t: f64, start: f64, x0: &[f64], shift: f64) -> Result<SampleReport> {
         let mut lmpc_done = false;
         if self.samples == 0 {
             // first sample: initial guess from the linear MPC plan
-            self.solve_lmpc(x0)?;
+            self.solve_lmpc(x0, shift)?;
             lmpc_done = true;
             self.nmpc_from_lmpc();
         } else if let Some(n) = self.nmpc.as_mut() {
-            n.shift_time(self.mpc.sampling)?;
+            n.shift_time(shift)?;
         }
         let first = match self.nmpc.as_mut() {
             Some(n) => n.solve(x0)?,
@@ -327,10 +448,10 @@ impl Controller {
         };
         let mut iterations = first.iterations;
         if accepted(&first, self.settings.accept_violation) {
-            return Ok(self.nmpc_report(t, first, first.status, Strategy::Sqp, iterations));
+            return Ok(self.nmpc_report(t, start, first, first.status, Strategy::Sqp, iterations));
         }
         if !lmpc_done {
-            self.solve_lmpc(x0)?;
+            self.solve_lmpc(x0, shift)?;
         }
         let accept = self.settings.accept_violation;
         if let Some(r) = self.relaxed.as_mut() {
@@ -341,7 +462,14 @@ impl Controller {
                 if let Some(n) = self.nmpc.as_mut() {
                     copy_plan(r, n);
                 }
-                return Ok(self.nmpc_report(t, retry, first.status, Strategy::Relaxed, iterations));
+                return Ok(self.nmpc_report(
+                    t,
+                    start,
+                    retry,
+                    first.status,
+                    Strategy::Relaxed,
+                    iterations,
+                ));
             }
         }
         // failure: apply the linear plan and restart the NMPC from it
@@ -363,12 +491,14 @@ impl Controller {
             cost: st.cost,
             kkt: st.kkt,
             u,
+            plan_start: start,
         })
     }
 
     fn nmpc_report(
         &self,
         t: f64,
+        start: f64,
         st: ocp_transcription::SqpStats,
         first: SqpStatus,
         strategy: Strategy,
@@ -386,6 +516,7 @@ impl Controller {
             cost: st.cost,
             kkt: st.kkt,
             u,
+            plan_start: start,
         }
     }
 }

@@ -30,7 +30,10 @@
 //! search) warm-started from the previous plan shifted by `τs`; on failure a retry from the
 //! linear MPC plan with the paper's sub-relaxation and a Levenberg–Marquardt term; if that
 //! fails too, the linear MPC plan is applied. Linear MPC: the same problem with (29)
-//! linearised at `q_r`, one QP per sample. The control `u_0` is held for `τs` on the plant.
+//! linearised at `q_r`, one QP per sample. The plan's controls lie on the absolute grid
+//! `kΔt`, `Δt = τp/Nc` ([`ControlGrid::Absolute`], default): a sample taken off the grid is
+//! predicted with the controller's model to the next grid time, where its plan takes over
+//! (the paper's `τs = 0.2 s` is not a multiple of its `Δt = 0.25 s`; see docs/mpc.md).
 //!
 //! **Closed loops** ([`run`], [`sweep`]): the FE plant of multibody-constraints (joints as
 //! hard constraints, follower loads and joint torques as inputs) or the modal model itself;
@@ -69,11 +72,11 @@ mod weights;
 #[cfg(test)]
 mod tests;
 
-pub use closed_loop::{run, sweep, Record, RunResult, RunSummary, Snapshot};
+pub use closed_loop::{open_loop, run, sweep, Record, RunResult, RunSummary, Snapshot};
 pub use controller::{Controller, ControllerKind, ControllerSettings, SampleReport, Strategy};
 pub use dynamics::RomDynamics;
 pub use error::{MpcError, Result};
 pub use export::{export_first_sample, first_sample_problem, OcpExport};
 pub use plant::{ControlInput, PlantKind};
 pub use scenario::{Scenario, Setup};
-pub use weights::{MpcSettings, Weights};
+pub use weights::{ControlGrid, MpcSettings, Weights};

@@ -134,6 +134,13 @@ impl Scenario {
             return Err(invalid("rom_plant_substeps", 0, "must be at least 1"));
         }
         ratio("output_interval per sampling", self.mpc.sampling, self.output_interval)?;
+        let dt_plan = self.mpc.horizon / self.mpc.intervals as f64;
+        if self.mpc.control_grid == crate::weights::ControlGrid::Absolute
+            || self.mpc.sampling > dt_plan + 1e-12
+        {
+            // the plan's switching times must fall on output-interval boundaries
+            ratio("output_interval per control interval τp/Nc", dt_plan, self.output_interval)?;
+        }
         ratio("output_interval per duration", self.duration, self.output_interval)?;
         ratio("plant.dt per output_interval", self.output_interval, self.plant.dt)?;
         ratio(
