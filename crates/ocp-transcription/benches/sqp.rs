@@ -188,11 +188,14 @@ fn time_iteration(
     (cpu * per, f * ti * per, f * tc * per, f * tq * per, qi)
 }
 
+/// One real-time iteration with a full step: linearise (24 integrations with sensitivities),
+/// condense, QP, step.
 fn rti(kind: IntegratorKind, substeps: usize, form: QpForm) -> SqpSettings {
     SqpSettings {
         mode: SqpMode::RealTimeIteration,
         qp_form: form,
         integrator: integrator(kind, substeps),
+        globalisation: ocp_transcription::Globalisation::FullStep,
         ..SqpSettings::default()
     }
 }
@@ -207,18 +210,24 @@ fn qp_table() {
         (IntegratorKind::Rk4, 64),
     ] {
         for form in [QpForm::CondensedDense, QpForm::CondensedClarabel, QpForm::SparseClarabel] {
+            if kind == IntegratorKind::Rk4 && form != QpForm::CondensedDense {
+                continue;
+            }
             let reps = if form == QpForm::SparseClarabel { 3 } else { 7 };
             let (t, ti, tc, tq, qi) = time_iteration(61, 24, rti(kind, n, form), reps);
             println!("| {kind:?} × {n} | {form:?} | {t:.1} | {ti:.1} | {tc:.1} | {tq:.1} | {qi} |");
         }
     }
-    // without the line-search trial integration (full steps, as RTI usually runs)
-    let full = SqpSettings {
-        globalisation: ocp_transcription::Globalisation::FullStep,
+    // with the merit line search (its trials are state-only integrations of all intervals)
+    let merit = SqpSettings {
+        globalisation: ocp_transcription::Globalisation::merit(),
         ..rti(IntegratorKind::LawsonRk4, 20, QpForm::CondensedDense)
     };
-    let (t, ti, tc, tq, qi) = time_iteration(61, 24, full, 7);
-    println!("| LawsonRk4 × 20, full step | CondensedDense | {t:.1} | {ti:.1} | {tc:.1} | {tq:.1} | {qi} |");
+    let (t, ti, tc, tq, qi) = time_iteration(61, 24, merit, 7);
+    println!("| LawsonRk4 × 20, merit line search | CondensedDense | {t:.1} | {ti:.1} | {tc:.1} | {tq:.1} | {qi} |");
+    let lawson16 = rti(IntegratorKind::LawsonRk4, 16, QpForm::CondensedDense);
+    let (t, ti, tc, tq, qi) = time_iteration(61, 24, lawson16, 7);
+    println!("| LawsonRk4 × 16 | CondensedDense | {t:.1} | {ti:.1} | {tc:.1} | {tq:.1} | {qi} |");
     // wall clock with the intervals on the thread pool (2 cores here)
     for n in [20, 24] {
         let settings = SqpSettings {
