@@ -19,7 +19,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .split(',')
         .map(|s| s.parse())
         .collect::<Result<_, _>>()?;
-    let scenario = if dim == "3d" { Scenario::paper_3d(50)? } else { Scenario::paper_2d(50)? };
+    let mut scenario = if dim == "3d" { Scenario::paper_3d(50)? } else { Scenario::paper_2d(50)? };
+    if std::env::var("MPC_GRID").is_ok_and(|v| v == "absolute") {
+        scenario.mpc.control_grid = mpc::ControlGrid::Absolute;
+    }
     let setup = Setup::new(&scenario)?;
     let mut c = ControllerSettings::of(kind);
     c.real_time_iteration = std::env::var("MPC_RTI").is_ok();

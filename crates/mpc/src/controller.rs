@@ -4,10 +4,10 @@
 use crate::dynamics::RomDynamics;
 use crate::error::{invalid, Result};
 use crate::weights::{MpcSettings, Weights};
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DVector;
 use ocp_transcription::{
-    Dynamics, Globalisation, HessianApproximation, Integrator, IntegratorKind, IntegratorSettings,
-    LinearPart, Ocp, QpForm, SqpMode, SqpSettings, SqpSolver, SqpStatus,
+    Globalisation, HessianApproximation, Integrator, IntegratorKind, IntegratorSettings, Ocp,
+    QpForm, SqpMode, SqpSettings, SqpSolver, SqpStatus,
 };
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
@@ -182,49 +182,8 @@ pub struct Controller {
     /// Start time of the last plan (for the warm-start shift).
     last_start: Option<f64>,
     /// The model used to predict a measured state to the plan's start: the nonlinear model
-    /// (NMPC) or its linearisation at the reference (LMPC).
-    predictor: Predictor,
-}
-
-/// State predictor of a controller (see [`Controller::predict`]).
-#[derive(Clone, Debug)]
-enum Predictor {
-    Nonlinear(RomDynamics),
-    Linear(Linearised),
-}
-
-/// `ẋ = A (x − x_r) + B u`: the model linearised at `(x_r, 0)` (an equilibrium).
-#[derive(Clone, Debug)]
-struct Linearised {
-    a: DMatrix<f64>,
-    b: DMatrix<f64>,
-    x_ref: DVector<f64>,
-}
-
-impl Dynamics for Linearised {
-    fn nx(&self) -> usize {
-        self.a.nrows()
-    }
-    fn nu(&self) -> usize {
-        self.b.ncols()
-    }
-    fn rhs(&self, x: &[f64], u: &[f64], xdot: &mut [f64]) {
-        let n = self.a.nrows();
-        for (i, xd) in xdot.iter_mut().enumerate().take(n) {
-            let mut v = 0.0;
-            for j in 0..n {
-                v += self.a[(i, j)] * (x[j] - self.x_ref[j]);
-            }
-            for (c, uc) in u.iter().enumerate() {
-                v += self.b[(i, c)] * uc;
-            }
-            *xd = v;
-        }
-    }
-    fn jacobians(&self, _x: &[f64], _u: &[f64], fx: &mut DMatrix<f64>, fu: &mut DMatrix<f64>) {
-        fx.copy_from(&self.a);
-        fu.copy_from(&self.b);
-    }
+    /// (29) for both controllers (a linearised predictor made the 3D LMPC diverge at ω0 = 0.5).
+    predictor: RomDynamics,
 }
 
 impl std::fmt::Debug for Controller {
@@ -273,16 +232,7 @@ impl Controller {
             ..base.clone()
         };
         let lmpc = SqpSolver::new(model.clone(), ocp.clone(), lq)?;
-        let predictor = match settings.kind {
-            ControllerKind::Nmpc => Predictor::Nonlinear(model.clone()),
-            ControllerKind::Lmpc => {
-                let x_ref = weights.x_ref.clone();
-                let mut a = DMatrix::zeros(nx, nx);
-                let mut b = DMatrix::zeros(nx, nu);
-                model.jacobians(x_ref.as_slice(), &vec![0.0; nu], &mut a, &mut b);
-                Predictor::Linear(Linearised { a, b, x_ref })
-            }
-        };
+        let predictor = model.clone();
         let (nmpc, relaxed) = match settings.kind {
             ControllerKind::Lmpc => (None, None),
             ControllerKind::Nmpc => {
@@ -332,8 +282,9 @@ impl Controller {
     }
 
     /// Predicts the modal state `x` forward by `duration` (s, ≥ 0) under the constant control
-    /// `u`, with the controller's own model (NMPC: the nonlinear model (29); LMPC: its
-    /// linearisation at the reference) and its integrator (substeps scaled to `duration`).
+    /// `u`, with the nonlinear model (29) (for the LMPC too: its linearisation as predictor
+    /// made the 3D LMPC diverge at ω0 = 0.5) and the controller's integrator (substeps scaled
+    /// to `duration`).
     pub fn predict(&self, x: &[f64], u: &[f64], duration: f64) -> Result<Vec<f64>> {
         if !(duration.is_finite() && duration >= 0.0) {
             return Err(invalid("prediction duration", duration, "must be finite and ≥ 0"));
@@ -345,18 +296,9 @@ impl Controller {
         let base = &self.settings.integrator;
         let substeps = ((base.substeps as f64 * duration / self.interval()).ceil() as usize).max(1);
         let settings = IntegratorSettings { substeps, ..base.clone() };
-        match &self.predictor {
-            Predictor::Nonlinear(m) => {
-                let mut it = Integrator::new(m, &settings, duration)?;
-                it.integrate(m, x, u, &mut out)?;
-            }
-            Predictor::Linear(m) => {
-                let settings =
-                    IntegratorSettings { linear_part: LinearPart::Matrix(m.a.clone()), ..settings };
-                let mut it = Integrator::new(m, &settings, duration)?;
-                it.integrate(m, x, u, &mut out)?;
-            }
-        }
+        let m = &self.predictor;
+        let mut it = Integrator::new(m, &settings, duration)?;
+        it.integrate(m, x, u, &mut out)?;
         if let Some(i) = out.iter().position(|v| !v.is_finite()) {
             return Err(invalid("predicted state", format!("entry {i} non-finite"), "diverged"));
         }

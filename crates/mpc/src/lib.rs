@@ -30,10 +30,11 @@
 //! search) warm-started from the previous plan shifted by `τs`; on failure a retry from the
 //! linear MPC plan with the paper's sub-relaxation and a Levenberg–Marquardt term; if that
 //! fails too, the linear MPC plan is applied. Linear MPC: the same problem with (29)
-//! linearised at `q_r`, one QP per sample. The plan's controls lie on the absolute grid
-//! `kΔt`, `Δt = τp/Nc` ([`ControlGrid::Absolute`], default): a sample taken off the grid is
-//! predicted with the controller's model to the next grid time, where its plan takes over
-//! (the paper's `τs = 0.2 s` is not a multiple of its `Δt = 0.25 s`; see docs/mpc.md).
+//! linearised at `q_r`, one QP per sample. By default each plan starts at its sample and its
+//! `u*(t)` is applied for `τs` ([`ControlGrid::Sample`]); option [`ControlGrid::Absolute`]
+//! keeps the controls on the grid `kΔt`, `Δt = τp/Nc`, predicting an off-grid sample to the
+//! next grid time (the paper's `τs = 0.2 s` is not a multiple of its `Δt = 0.25 s`; see
+//! docs/mpc.md).
 //!
 //! **Closed loops** ([`run`], [`sweep`]): the FE plant of multibody-constraints (joints as
 //! hard constraints, follower loads and joint torques as inputs) or the modal model itself;

@@ -329,14 +329,14 @@ fn plant_at_rest_in_the_reference_has_zero_cost() {
     assert!(setup.weights.state_cost(&q).abs() <= 1e-24);
 }
 
-/// With the absolute control grid (default) every plan starts on the grid `kΔt` at or after
+/// With the absolute control grid (option) every plan starts on the grid `kΔt` at or after
 /// its sample, the applied control changes only on that grid, and a sample on the grid starts
 /// its plan there.
 #[test]
 fn absolute_grid_switches_only_on_the_control_grid() {
-    let setup = setup_2d();
-    assert_eq!(setup.scenario.mpc.control_grid, ControlGrid::Absolute);
-    let mut sc = setup.scenario.clone();
+    let mut sc = setup_2d().scenario.clone();
+    assert_eq!(sc.mpc.control_grid, ControlGrid::Sample);
+    sc.mpc.control_grid = ControlGrid::Absolute;
     sc.duration = 2.0;
     let setup = Setup::new(&sc).unwrap();
     let r =
@@ -381,9 +381,8 @@ fn sample_grid_applies_the_plan_between_samples() {
     assert_eq!(changed, r.samples.len());
 }
 
-/// The predictor: zero duration is the identity; the LMPC's (linearised) and the NMPC's
-/// (nonlinear) predictions agree to first order for a small state (the nonlinear terms of (29)
-/// are quadratic), and splitting a prediction in two is consistent to integrator accuracy.
+/// The predictor: zero duration is the identity, it moves the state, and splitting a
+/// prediction in two is consistent to integrator accuracy.
 #[test]
 fn predictor_is_consistent() {
     let setup = setup_2d();
@@ -393,22 +392,17 @@ fn predictor_is_consistent() {
         .rigid_rotation_state(nalgebra::Vector3::new(0.0, 1e-3, 0.0), nalgebra::Vector3::zeros());
     let q = setup.rom.project_full(&x0, None).unwrap();
     let u = vec![0.01, -0.02, 0.03];
-    let mk = |kind| {
-        Controller::new(
-            RomDynamics::new(&setup.rom).unwrap(),
-            &setup.weights,
-            &s.mpc,
-            &ControllerSettings::of(kind),
-        )
-        .unwrap()
-    };
-    let (n, l) = (mk(ControllerKind::Nmpc), mk(ControllerKind::Lmpc));
+    let n = Controller::new(
+        RomDynamics::new(&setup.rom).unwrap(),
+        &setup.weights,
+        &s.mpc,
+        &ControllerSettings::of(ControllerKind::Nmpc),
+    )
+    .unwrap();
     assert_eq!(n.predict(&q, &u, 0.0).unwrap(), q);
     let pn = n.predict(&q, &u, 0.15).unwrap();
-    let pl = l.predict(&q, &u, 0.15).unwrap();
-    let d: f64 = pn.iter().zip(&pl).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
     let scale: f64 = pn.iter().zip(&q).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
-    assert!(scale > 0.0 && d < 1e-2 * scale, "linear vs nonlinear {d} (change {scale})");
+    assert!(scale > 0.0);
     let half = n.predict(&n.predict(&q, &u, 0.05).unwrap(), &u, 0.1).unwrap();
     let e: f64 = half.iter().zip(&pn).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
     // different substep sizes (4 + 7 vs 10 substeps, h ≈ 0.014 s): Lawson RK4 is exact on W,
