@@ -956,9 +956,9 @@ fn malformed_scenes_name_file_line_field_and_what_is_allowed() {
 }
 
 /// A value of the right TOML type but out of the Rust type's range (a negative count) names
-/// its field. scene.rs takes the field from the first backquoted word of toml's message,
-/// which here is the value: the error reads "field `beams[1].-4`" (reported to the owner of
-/// scene.rs; fix: for "invalid value"/"invalid type" messages use the key at the span).
+/// its field. scene.rs used to take the field from the first backquoted word of toml's
+/// message, which here is the value ("field `beams[1].-4`"); it now takes the key at the
+/// span for "invalid …" messages. Regression test.
 #[test]
 fn negative_count_names_its_field() {
     let dir = scratch("negative-count");
