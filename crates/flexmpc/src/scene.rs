@@ -942,6 +942,10 @@ pub fn load_str(file: &Path, text: &str) -> Result<Scene, SceneError> {
     build(file, text, spec)
 }
 
+/// Largest mesh a scene may ask for, per beam: beyond it a step system needs gigabytes, and
+/// no run of this library needs it (frequencies converge at second order, docs/intrinsic-beam.md).
+pub const MAX_ELEMENTS_PER_BEAM: usize = 100_000;
+
 fn build(file: &Path, text: &str, spec: SceneSpec) -> Result<Scene, SceneError> {
     let ctx = Ctx { file, text };
     let components = match spec.components.as_str() {
@@ -974,6 +978,16 @@ fn build(file: &Path, text: &str, spec: SceneSpec) -> Result<Scene, SceneError> 
         }
         if bs.elements == 0 {
             return ctx.err(span, f("elements"), "must be at least 1");
+        }
+        if bs.elements > MAX_ELEMENTS_PER_BEAM {
+            return ctx.err(
+                span,
+                f("elements"),
+                format!(
+                    "at most {MAX_ELEMENTS_PER_BEAM} per beam (its step system would need gigabytes), got {}",
+                    bs.elements
+                ),
+            );
         }
         let mesh = Mesh::uniform(bs.length, bs.elements)
             .or_else(|e| ctx.err(span.clone(), f("length"), e.to_string()))?;
@@ -1286,6 +1300,22 @@ fn build(file: &Path, text: &str, spec: SceneSpec) -> Result<Scene, SceneError> 
             }
         }
         plant.set_state(&x).or_else(|e| ctx.err(None, "initial", e.to_string()))?;
+    }
+    // Finite inputs can still overflow: a rate or a gravity near 1e308 squares to infinity.
+    let (kinetic, potential) = (plant.energy(), plant.potential_energy());
+    if !kinetic.is_finite() {
+        return ctx.err(
+            spec.initial.rigid.first().map(|r| r.span()),
+            "initial.rigid",
+            format!("the initial state's energy is not finite ({kinetic}): rates too large"),
+        );
+    }
+    if !potential.is_finite() {
+        return ctx.err(
+            None,
+            "gravity",
+            format!("the potential energy is not finite ({potential}): gravity or loads too large"),
+        );
     }
     let steps = (run.duration / run.dt).round() as usize;
     let output_every = run.output_every.unwrap_or(10);
@@ -1877,6 +1907,20 @@ duration = 0.01
         );
         // unknown field (typo)
         expect_error("elements = 4\nattach", "elemnts = 4\nattach", "elemnts", "elemnts");
+        // a mesh too large to allocate
+        expect_error(
+            "elements = 4\nattach",
+            "elements = 1000000\nattach",
+            "elements = 1000000",
+            "beams[1].elements",
+        );
+        // finite rates whose energy overflows
+        expect_error(
+            "[run]",
+            "[[initial.rigid]]\nomega = [0.0, 1e200, 0.0]\n\n[run]",
+            "[[initial.rigid]]",
+            "initial.rigid",
+        );
         // missing field
         expect_error("dt = 1e-3\n", "", "[run]", "dt");
         // unknown beam in a joint
