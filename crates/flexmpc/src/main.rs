@@ -53,6 +53,9 @@ enum Command {
         /// Output folder (default `out/<scene name>`).
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Simulated time (s; default: `[run] duration`).
+        #[arg(long)]
+        duration: Option<f64>,
     },
     /// Constrained linear modes of a scene's structure: frequencies, labels, plots.
     Modes {
@@ -255,8 +258,14 @@ fn main() -> Result<()> {
         rayon::ThreadPoolBuilder::new().num_threads(n).build_global()?;
     }
     match &cli.command {
-        Some(Command::Simulate { scene, out }) => {
-            let s = scene::load(scene)?;
+        Some(Command::Simulate { scene, out, duration }) => {
+            let mut s = scene::load(scene)?;
+            if let Some(d) = *duration {
+                if !(d.is_finite() && d > 0.0) {
+                    bail!("--duration must be finite and > 0, got {d}");
+                }
+                s.steps = (d / s.plant.settings().dt).round().max(1.0) as usize;
+            }
             let out = out.clone().unwrap_or_else(|| default_out(scene));
             let summary = run::simulate(s, &out, cli.quiet || cli.json)?;
             print_simulation(&summary, &cli)?;
