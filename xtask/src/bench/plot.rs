@@ -150,18 +150,8 @@ impl Chart {
             .label_style(("sans-serif", 14))
             .axis_desc_style(("sans-serif", 16))
             .draw()?;
-        let palette = [
-            RGBColor(31, 119, 180),
-            RGBColor(214, 39, 40),
-            RGBColor(44, 160, 44),
-            RGBColor(148, 103, 189),
-            RGBColor(255, 127, 14),
-            RGBColor(23, 190, 207),
-            RGBColor(140, 86, 75),
-            BLACK,
-        ];
         for (k, s) in self.series.iter().enumerate() {
-            let color = palette[s.color.unwrap_or(k) % palette.len()];
+            let color = flexmpc::plot::color(s.color.unwrap_or(k));
             let good: Vec<usize> = (0..s.points.len()).filter(|&i| ok(&s.points[i])).collect();
             if good.is_empty() {
                 continue;
