@@ -1001,6 +1001,19 @@ fn build(file: &Path, text: &str, spec: SceneSpec) -> Result<Scene, SceneError> 
             },
             (None, o, r) => {
                 let o = o.unwrap_or([0.0; 3]);
+                if let Some(r) = &r {
+                    let n = Vector3::from(r.axis).norm();
+                    if !(n.is_finite() && n > 0.0 && r.angle_deg.is_finite()) {
+                        return ctx.err(
+                            span,
+                            f("rotation"),
+                            format!(
+                                "axis must be finite and non-zero and angle_deg finite, got axis {:?}, angle_deg {}",
+                                r.axis, r.angle_deg
+                            ),
+                        );
+                    }
+                }
                 let q = r
                     .map(|r| axis_angle(&Vector3::from(r.axis), r.angle_deg.to_radians()))
                     .unwrap_or(nalgebra::Vector4::new(1.0, 0.0, 0.0, 0.0));
@@ -1907,6 +1920,13 @@ duration = 0.01
         );
         // unknown field (typo)
         expect_error("elements = 4\nattach", "elemnts = 4\nattach", "elemnts", "elemnts");
+        // a beam rotation about a zero axis
+        expect_error(
+            "elements = 4\n\n[[beams]]",
+            "elements = 4\nrotation = { axis = [0.0, 0.0, 0.0], angle_deg = 10.0 }\n\n[[beams]]",
+            "rotation = {",
+            "beams[0].rotation",
+        );
         // a mesh too large to allocate
         expect_error(
             "elements = 4\nattach",
