@@ -590,10 +590,8 @@ mod tests {
                 let input =
                     StepInput { time: 0.2, dt: 0.05, loads: &problem.loads, kinematics: &kin };
                 let mut solver = StepSolver::new(&problem, LinearSolver::Auto).unwrap();
-                let mut values = vec![0.0; solver.nnz()];
-                let nnz = problem.beam.jacobian_nnz();
-                problem.beam.jacobian_values(&input, &old, &new, &mut values[..nnz]).unwrap();
-                values[nnz..].iter_mut().for_each(|v| *v = 1.0);
+                let values = values(&problem, &kin, &old, &new);
+                assert_eq!(values.len(), solver.nnz());
                 let mut mid = vec![0.0; problem.dim()];
                 problem.beam.midpoint(&old, &new, &mut mid).unwrap();
                 let kappa0 = problem.beam.section().kappa0;
