@@ -65,37 +65,85 @@ fn time_color(k: usize, n: usize) -> RGBColor {
     RGBColor((30.0 + 200.0 * f) as u8, 60, (220.0 - 190.0 * f) as u8)
 }
 
-/// Fig. 7 style: every snapshot of the deformed structure, coloured by time.
-fn snapshots_svg(result: &RunResult, planar: bool, path: &Path) -> Result<()> {
+/// Draws every snapshot of `result` in plane `(a, b)` into `area`, coloured by time.
+fn draw_snapshots<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    result: &RunResult,
+    (name, a, b): (&str, usize, usize),
+    title: &str,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let n = result.snapshots.len();
+    let axis = ["x", "y", "z"];
+    let ((ca, cb), w) = window(result, a, b);
+    let mut chart = ChartBuilder::on(area)
+        .caption(format!("{title} ({name} plane)"), ("sans-serif", 16))
+        .margin(10)
+        .x_label_area_size(30)
+        .y_label_area_size(45)
+        .build_cartesian_2d((ca - w)..(ca + w), (cb - w)..(cb + w))?;
+    chart.configure_mesh().x_desc(axis[a]).y_desc(axis[b]).draw()?;
+    for (k, s) in result.snapshots.iter().enumerate() {
+        let c = time_color(k, n);
+        let width = if k == 0 || k + 1 == n { 3 } else { 1 };
+        for beam in &s.positions {
+            chart.draw_series(LineSeries::new(
+                beam.iter().map(|p| (p[a], p[b])),
+                c.stroke_width(width),
+            ))?;
+        }
+    }
+    Ok(())
+}
+
+/// Fig. 7 style: every snapshot of the deformed structure, coloured by time, one panel per
+/// plane.
+pub fn snapshots_svg(result: &RunResult, planar: bool, path: &Path) -> Result<()> {
     let pl = planes(planar);
     let root = SVGBackend::new(path, (560 * pl.len() as u32, 560)).into_drawing_area();
     root.fill(&WHITE)?;
     let areas = root.split_evenly((1, pl.len()));
-    let n = result.snapshots.len();
-    let axis = ["x", "y", "z"];
-    for ((name, a, b), area) in pl.iter().zip(areas.iter()) {
-        let ((ca, cb), w) = window(result, *a, *b);
-        let mut chart = ChartBuilder::on(area)
-            .caption(
-                format!(
-                    "snapshots every {:.2} s ({name} plane), blue → red",
-                    result.snapshots.get(1).map_or(0.0, |s| s.t)
-                ),
-                ("sans-serif", 16),
-            )
-            .margin(10)
-            .x_label_area_size(30)
-            .y_label_area_size(45)
-            .build_cartesian_2d((ca - w)..(ca + w), (cb - w)..(cb + w))?;
-        chart.configure_mesh().x_desc(axis[*a]).y_desc(axis[*b]).draw()?;
-        for (k, s) in result.snapshots.iter().enumerate() {
-            let c = time_color(k, n);
-            let width = if k == 0 || k + 1 == n { 3 } else { 1 };
-            for beam in &s.positions {
-                chart.draw_series(LineSeries::new(
-                    beam.iter().map(|p| (p[*a], p[*b])),
-                    c.stroke_width(width),
-                ))?;
+    let title = format!(
+        "snapshots every {:.2} s, blue → red",
+        result.snapshots.get(1).map_or(0.0, |s| s.t)
+    );
+    for (plane, area) in pl.iter().zip(areas.iter()) {
+        draw_snapshots(area, result, *plane, &title)?;
+    }
+    root.present()?;
+    Ok(())
+}
+
+/// Figs. 7 and 9 style for a sweep: the snapshots of every run, one row per controller, one
+/// panel per ω0, in the first plane of the structure (`x–z` planar, `x–y` spatial; each run's
+/// `runs/<controller>-w<ω0>-snapshots.svg` has every plane).
+pub fn sweep_snapshots_svg(
+    runs: &[crate::control::SweepRun],
+    planar: bool,
+    path: &Path,
+) -> Result<()> {
+    let kinds = plot::sweep_kinds(runs);
+    let cols = runs.len().div_ceil(kinds.len().max(1)).max(1);
+    let root = SVGBackend::new(path, (300 * cols as u32, 320 * kinds.len().max(1) as u32))
+        .into_drawing_area();
+    root.fill(&WHITE)?;
+    let areas = root.split_evenly((kinds.len().max(1), cols));
+    let plane = planes(planar)[0];
+    for (row, k) in kinds.iter().enumerate() {
+        for (col, r) in runs.iter().filter(|r| r.controller == *k).enumerate() {
+            let Some(area) = areas.get(row * cols + col) else { continue };
+            let title = format!("{} ω0 = {}", k.name().to_uppercase(), r.omega0);
+            match &r.result {
+                Ok(res) => draw_snapshots(area, res, plane, &title)?,
+                Err(_) => {
+                    area.draw(&Text::new(
+                        format!("{title}: failed"),
+                        (10, 20),
+                        ("sans-serif", 14).into_font(),
+                    ))?;
+                }
             }
         }
     }
@@ -194,8 +242,17 @@ fn figure(html: &mut String, src: &str, caption: &str) {
 }
 
 /// Writes the figures and `index.html` of `result` into `out`; returns the path of
-/// `index.html`.
-pub fn write(scene: &Scene, control: &Control, result: &RunResult, out: &Path) -> Result<PathBuf> {
+/// `index.html`. Every file written is a pure function of the inputs: no measured time is
+/// embedded. With `timings`, the report links to the timing files (`timings.json`,
+/// `timings.csv`, `solve_times.svg`, written by [`crate::timings::write_run`]); without, it
+/// says they were not recorded.
+pub fn write(
+    scene: &Scene,
+    control: &Control,
+    result: &RunResult,
+    out: &Path,
+    timings: bool,
+) -> Result<PathBuf> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let sc = &control.scenario;
     let structure = &sc.structure;
@@ -218,7 +275,7 @@ pub fn write(scene: &Scene, control: &Control, result: &RunResult, out: &Path) -
             x: "t (s)".into(),
             y: "V/V(0)".into(),
             log_y: true,
-            reference: Some((0.1, "0.1 (criterion)".into())),
+            references: vec![(0.1, "0.1 (criterion)".into())],
             points: false,
         },
         &[(control.controller.kind.name().to_uppercase(), cost)],
@@ -267,21 +324,6 @@ pub fn write(scene: &Scene, control: &Control, result: &RunResult, out: &Path) -
         },
         &angles,
     )?;
-    // solve time per sample against τs
-    let solve: Vec<(f64, f64)> = result.samples.iter().map(|s| (s.t, s.solve_time)).collect();
-    plot::lines(
-        &out.join("solve_times.svg"),
-        (900, 420),
-        &Axes {
-            title: "solve time per sample".into(),
-            x: "t (s)".into(),
-            y: "solve time (s)".into(),
-            log_y: true,
-            reference: Some((sc.mpc.sampling, format!("τs = {} s", sc.mpc.sampling))),
-            points: false,
-        },
-        &[("solve time".into(), solve)],
-    )?;
     // snapshots (Fig. 7) and their animation
     snapshots_svg(result, planar, &out.join("snapshots.svg"))?;
     animation_svg(result, planar, &out.join("animation.svg"))?;
@@ -308,7 +350,12 @@ figcaption {{ color: #555; font-size: 0.9em; }}
     let _ = writeln!(
         h,
         r#"<p id="figure-status">figures: script did not run</p>
-<p>Files: <a href="timeseries.csv">timeseries.csv</a>, <a href="samples.json">samples.json</a> (per-sample solver log), <a href="summary.json">summary.json</a>, <a href="snapshots.json">snapshots.json</a>.</p>"#
+<p>Files: <a href="timeseries.csv">timeseries.csv</a>, <a href="samples.json">samples.json</a> (per-sample solver log), <a href="summary.json">summary.json</a>, <a href="snapshots.json">snapshots.json</a>{}.</p>"#,
+        if timings {
+            r#"; measured timings: <a href="timings.json">timings.json</a>, <a href="timings.csv">timings.csv</a>"#
+        } else {
+            ""
+        }
     );
 
     // closed-loop summary
@@ -334,13 +381,6 @@ figcaption {{ color: #555; font-size: 0.9em; }}
         ),
         ("rigid rate at T / at 0", format!("{:.3e}", s.rigid_rate_ratio)),
         (
-            "solve time per sample: median / worst (s)",
-            format!(
-                "{:.4} / {:.4} (τs = {} s)",
-                s.solve_time_median_s, s.solve_time_worst_s, sc.mpc.sampling
-            ),
-        ),
-        (
             "samples: total / failed first attempts / relaxed / LMPC fallback",
             format!(
                 "{} / {} / {} / {}",
@@ -352,7 +392,6 @@ figcaption {{ color: #555; font-size: 0.9em; }}
         ),
         ("time reached (s)", format!("{}", s.t_end)),
         ("stopped early because", s.error.clone().unwrap_or_else(|| "—".into())),
-        ("wall time of the loop, plant included (s)", format!("{:.2}", result.wall_time_s)),
     ] {
         row(&mut h, k, &v);
     }
@@ -372,11 +411,27 @@ figcaption {{ color: #555; font-size: 0.9em; }}
     figure(&mut h, "inputs.svg", "Control inputs, each held for τs (paper Fig. 10).");
     figure(&mut h, "angles.svg", "Joint angles (supports: the root link's orientation).");
     let _ = writeln!(h, "<h2>Solve time per sample</h2>");
-    figure(
-        &mut h,
-        "solve_times.svg",
-        "Wall time of each sample's solve (all attempts) against the sampling time τs.",
-    );
+    if timings {
+        let _ = writeln!(
+            h,
+            r#"<p>Measured wall-clock times (they change from run to run, so they are kept in their own files: <a href="timings.json">timings.json</a> has the median and worst solve time and the loop's wall time, <a href="timings.csv">timings.csv</a> each sample's; every other file of this folder is reproducible).</p>"#
+        );
+        figure(
+            &mut h,
+            "solve_times.svg",
+            &format!(
+                "Wall time of each sample's solve (all attempts) against the sampling time τs = {} s and the {} ms goal.",
+                sc.mpc.sampling,
+                crate::timings::SOLVE_TIME_GOAL_S * 1e3
+            ),
+        );
+    } else {
+        let _ = writeln!(
+            h,
+            "<p>Timings were not recorded (<code>--no-timings</code>): this folder is a pure \
+             function of the inputs.</p>"
+        );
+    }
 
     // scene summary
     let _ = writeln!(h, "<h2>Scene</h2><table>");
