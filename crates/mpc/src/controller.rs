@@ -3,6 +3,7 @@
 
 use crate::dynamics::RomDynamics;
 use crate::error::{invalid, Result};
+use crate::validity::JointMonitor;
 use crate::weights::{MpcSettings, Weights};
 use nalgebra::DVector;
 use ocp_transcription::{
@@ -31,6 +32,9 @@ impl ControllerKind {
         }
     }
 }
+
+/// Default of [`ControllerSettings::plan_joint_limit_deg`] (deg).
+pub const DEFAULT_PLAN_JOINT_LIMIT: Option<f64> = Some(25.0);
 
 /// Settings of the controllers' solvers. Defaults in brackets.
 #[derive(Clone, Debug, PartialEq)]
@@ -71,6 +75,12 @@ pub struct ControllerSettings {
     pub retry_levenberg_marquardt: f64,
     /// When every NMPC attempt fails, apply the linear MPC plan [true].
     pub fallback_to_lmpc: bool,
+    /// Range of validity of the controller model: an NMPC plan (first attempt or relaxed
+    /// retry) whose predicted joint angle between links exceeds this (deg) at any of its
+    /// nodes is treated as a failed attempt (→ relaxed retry → linear MPC fallback), like a
+    /// solver failure. Needs the joint geometry ([`Controller::set_joint_monitor`]; the closed
+    /// loop sets it); `None`: no check. [PLAN_JOINT_LIMIT]
+    pub plan_joint_limit_deg: Option<f64>,
 }
 
 impl Default for ControllerSettings {
@@ -88,6 +98,7 @@ impl Default for ControllerSettings {
             retry_relaxation: Some(0.5),
             retry_levenberg_marquardt: 1e-3,
             fallback_to_lmpc: true,
+            plan_joint_limit_deg: DEFAULT_PLAN_JOINT_LIMIT,
         }
     }
 }
@@ -125,6 +136,11 @@ impl ControllerSettings {
         if let Some(a) = self.retry_relaxation {
             if !(a > 0.0 && a <= 1.0) {
                 return Err(invalid("retry_relaxation", a, "must be in (0, 1]"));
+            }
+        }
+        if let Some(a) = self.plan_joint_limit_deg {
+            if !(a > 0.0 && a <= 180.0) {
+                return Err(invalid("plan_joint_limit_deg", a, "must be in (0, 180]"));
             }
         }
         Ok(())
@@ -169,6 +185,12 @@ pub struct SampleReport {
     /// Time at which the plan starts (its first control takes over): the sample time, or
     /// with [`crate::ControlGrid::Absolute`] the next grid time `kΔt ≥ t` (s).
     pub plan_start: f64,
+    /// Largest joint angle between links predicted over the applied plan's nodes (deg), when
+    /// the controller has a [`JointMonitor`].
+    pub plan_joint_angle_deg: Option<f64>,
+    /// NMPC attempts of this sample that converged (or were acceptable) but were rejected
+    /// because their plan left [`ControllerSettings::plan_joint_limit_deg`].
+    pub joint_limit_rejections: usize,
 }
 
 /// A receding-horizon controller on the augmented modal model.
@@ -184,6 +206,8 @@ pub struct Controller {
     /// The model used to predict a measured state to the plan's start: the nonlinear model
     /// (29) for both controllers (a linearised predictor made the 3D LMPC diverge at ω0 = 0.5).
     predictor: RomDynamics,
+    /// Joint angles of plans, for the validity check and the reports.
+    monitor: Option<JointMonitor>,
 }
 
 impl std::fmt::Debug for Controller {
@@ -273,7 +297,28 @@ impl Controller {
             samples: 0,
             last_start: None,
             predictor,
+            monitor: None,
         })
+    }
+
+    /// Gives the controller the joint geometry of its model, so that it reports each plan's
+    /// predicted joint angles and applies [`ControllerSettings::plan_joint_limit_deg`]
+    /// ([`crate::run`] does this).
+    pub fn set_joint_monitor(&mut self, monitor: JointMonitor) {
+        self.monitor = Some(monitor);
+    }
+
+    /// Largest predicted joint angle (deg) over the nodes of `solver`'s plan.
+    fn plan_angle(&self, solver: &SqpSolver<RomDynamics>) -> Option<f64> {
+        self.monitor.as_ref().map(|m| m.plan_max_angle(solver.states()).to_degrees())
+    }
+
+    /// Whether a plan with the predicted joint angle `angle` is within the model's range.
+    fn within_range(&self, angle: Option<f64>) -> bool {
+        match (angle, self.settings.plan_joint_limit_deg) {
+            (Some(a), Some(limit)) => a <= limit,
+            _ => true,
+        }
     }
 
     /// Length of the plan's control intervals `Δt = τp / Nc` (s).
@@ -355,6 +400,7 @@ impl Controller {
         let report = match self.settings.kind {
             ControllerKind::Lmpc => {
                 let st = self.solve_lmpc(x0, shift)?;
+                let plan_joint_angle_deg = self.plan_angle(&self.lmpc);
                 SampleReport {
                     t,
                     status: status_name(st.status),
@@ -366,6 +412,8 @@ impl Controller {
                     kkt: st.kkt,
                     u: self.lmpc.first_control().iter().copied().collect(),
                     plan_start: start,
+                    plan_joint_angle_deg,
+                    joint_limit_rejections: 0,
                 }
             }
             ControllerKind::Nmpc => self.step_nmpc(t, start, x0, shift)?,
@@ -389,29 +437,47 @@ impl Controller {
             None => return Err(invalid("controller", "lmpc", "no NMPC solver")),
         };
         let mut iterations = first.iterations;
-        if accepted(&first, self.settings.accept_violation) {
-            return Ok(self.nmpc_report(t, start, first, first.status, Strategy::Sqp, iterations));
+        let mut rejections = 0;
+        let accept = self.settings.accept_violation;
+        if accepted(&first, accept) {
+            let angle = self.nmpc.as_ref().and_then(|n| self.plan_angle(n));
+            if self.within_range(angle) {
+                return Ok(self.nmpc_report(
+                    t,
+                    start,
+                    first,
+                    first.status,
+                    Strategy::Sqp,
+                    iterations,
+                    (angle, rejections),
+                ));
+            }
+            rejections += 1;
         }
         if !lmpc_done {
             self.solve_lmpc(x0, shift)?;
         }
-        let accept = self.settings.accept_violation;
         if let Some(r) = self.relaxed.as_mut() {
             copy_plan(&self.lmpc, r);
             let retry = r.solve(x0)?;
             iterations += retry.iterations;
             if accepted(&retry, accept) {
-                if let Some(n) = self.nmpc.as_mut() {
-                    copy_plan(r, n);
+                let angle = self.relaxed.as_ref().and_then(|r| self.plan_angle(r));
+                if self.within_range(angle) {
+                    if let (Some(n), Some(r)) = (self.nmpc.as_mut(), self.relaxed.as_ref()) {
+                        copy_plan(r, n);
+                    }
+                    return Ok(self.nmpc_report(
+                        t,
+                        start,
+                        retry,
+                        first.status,
+                        Strategy::Relaxed,
+                        iterations,
+                        (angle, rejections),
+                    ));
                 }
-                return Ok(self.nmpc_report(
-                    t,
-                    start,
-                    retry,
-                    first.status,
-                    Strategy::Relaxed,
-                    iterations,
-                ));
+                rejections += 1;
             }
         }
         // failure: apply the linear plan and restart the NMPC from it
@@ -434,9 +500,12 @@ impl Controller {
             kkt: st.kkt,
             u,
             plan_start: start,
+            plan_joint_angle_deg: self.plan_angle(&self.lmpc),
+            joint_limit_rejections: rejections,
         })
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn nmpc_report(
         &self,
         t: f64,
@@ -445,6 +514,7 @@ impl Controller {
         first: SqpStatus,
         strategy: Strategy,
         iterations: usize,
+        (plan_joint_angle_deg, joint_limit_rejections): (Option<f64>, usize),
     ) -> SampleReport {
         let u =
             self.nmpc.as_ref().map_or(Vec::new(), |n| n.first_control().iter().copied().collect());
@@ -459,6 +529,8 @@ impl Controller {
             kkt: st.kkt,
             u,
             plan_start: start,
+            plan_joint_angle_deg,
+            joint_limit_rejections,
         }
     }
 }

@@ -68,16 +68,21 @@ mod error;
 mod export;
 mod plant;
 mod scenario;
+mod validity;
 mod weights;
 
 #[cfg(test)]
 mod tests;
 
 pub use closed_loop::{open_loop, run, sweep, Record, RunResult, RunSummary, Snapshot};
-pub use controller::{Controller, ControllerKind, ControllerSettings, SampleReport, Strategy};
+pub use controller::{
+    Controller, ControllerKind, ControllerSettings, SampleReport, Strategy,
+    DEFAULT_PLAN_JOINT_LIMIT,
+};
 pub use dynamics::RomDynamics;
 pub use error::{MpcError, Result};
 pub use export::{export_first_sample, first_sample_problem, OcpExport};
 pub use plant::{ControlInput, PlantKind};
 pub use scenario::{Scenario, Setup};
+pub use validity::JointMonitor;
 pub use weights::{ControlGrid, MpcSettings, Weights};

@@ -412,3 +412,90 @@ fn predictor_is_consistent() {
     assert!(e < 1e-5 * qmax, "split prediction differs by {e}");
     assert!(n.predict(&q, &u, -1.0).is_err());
 }
+
+/// The joint monitor reads the same elbow angle as the closed loop's records with the modal
+/// plant (both reconstruct `ξ = Φξ qξ` at the joint's two end nodes; only the summation
+/// order differs: round-off), is zero at the reference and `+∞` for a non-finite state.
+#[test]
+fn joint_monitor_matches_the_records() {
+    let mut sc = setup_2d().scenario.clone();
+    sc.duration = 1.0;
+    let setup = Setup::new(&sc).unwrap();
+    let m = JointMonitor::new(&setup).unwrap();
+    assert_eq!(m.len(), 1);
+    let q_ref: Vec<f64> = setup.weights.x_ref.iter().copied().collect();
+    assert!(m.max_angle(&q_ref).abs() <= 1e-12);
+    let r =
+        run(&setup, 1.0, &ControllerSettings::of(ControllerKind::Lmpc), PlantKind::Rom).unwrap();
+    let elbow = setup.joint_nodes.iter().position(|n| n.len() == 2).unwrap();
+    let mut largest = 0.0f64;
+    for rec in &r.records {
+        let a = m.max_angle(&rec.q);
+        assert!((a - rec.joint_angles[elbow].abs()).abs() <= 1e-12, "t = {}", rec.t);
+        largest = largest.max(a);
+    }
+    // at ω0 = 1 the elbow moves by degrees within the first second: the test is not vacuous
+    assert!(largest.to_degrees() > 1.0, "{largest}");
+    let mut bad = q_ref.clone();
+    bad[setup.rom.xi_offset()] = f64::NAN;
+    assert_eq!(m.max_angle(&bad), f64::INFINITY);
+}
+
+/// A plan beyond `plan_joint_limit_deg` is a failed attempt: with a limit far below what any
+/// plan at ω0 = 0.5 predicts, every NMPC attempt is rejected and the linear MPC plan is
+/// applied (strategy `Fallback`, its control exactly); without the limit the first attempt
+/// is accepted. The run's counters say so.
+#[test]
+fn plans_outside_the_joint_limit_fall_back_to_the_lmpc_plan() {
+    let setup = setup_2d();
+    let s = &setup.scenario;
+    let x0 = s
+        .structure
+        .rigid_rotation_state(nalgebra::Vector3::new(0.0, 0.5, 0.0), nalgebra::Vector3::zeros());
+    let q = setup.rom.project_full(&x0, None).unwrap();
+    let step = |settings: &ControllerSettings| {
+        let mut c = Controller::new(
+            RomDynamics::new(&setup.rom).unwrap(),
+            &setup.weights,
+            &s.mpc,
+            settings,
+        )
+        .unwrap();
+        c.set_joint_monitor(JointMonitor::new(setup).unwrap());
+        c.step(0.0, &q).unwrap()
+    };
+    let free = step(&ControllerSettings { plan_joint_limit_deg: None, ..Default::default() });
+    assert_eq!(free.strategy, Strategy::Sqp);
+    assert_eq!(free.joint_limit_rejections, 0);
+    let planned = free.plan_joint_angle_deg.unwrap();
+    assert!(planned > 0.5, "{planned}");
+    let tight =
+        ControllerSettings { plan_joint_limit_deg: Some(0.1 * planned), ..Default::default() };
+    let r = step(&tight);
+    assert_eq!(r.strategy, Strategy::Fallback);
+    assert!(r.joint_limit_rejections >= 1, "{r:?}");
+    let lmpc = step(&ControllerSettings::of(ControllerKind::Lmpc));
+    assert_eq!(r.u, lmpc.u);
+    // a limit above the plan changes nothing
+    let loose =
+        ControllerSettings { plan_joint_limit_deg: Some(2.0 * planned), ..Default::default() };
+    assert_eq!(step(&loose).u, free.u);
+
+    let mut sc = s.clone();
+    sc.duration = 0.4;
+    let short = Setup::new(&sc).unwrap();
+    let run = run(&short, 0.5, &tight, PlantKind::Rom).unwrap();
+    assert_eq!(run.summary.joint_limit_samples, run.samples.len());
+    assert_eq!(run.summary.fallback_samples, run.samples.len());
+    assert!(run.summary.max_plan_joint_angle_deg > 0.0);
+}
+
+#[test]
+fn joint_limit_validation_names_the_field() {
+    for bad in [0.0, -1.0, 181.0, f64::NAN] {
+        let c = ControllerSettings { plan_joint_limit_deg: Some(bad), ..Default::default() };
+        assert!(c.validate().unwrap_err().to_string().contains("plan_joint_limit_deg"), "{bad}");
+    }
+    let c = ControllerSettings { plan_joint_limit_deg: None, ..Default::default() };
+    assert!(c.validate().is_ok());
+}
