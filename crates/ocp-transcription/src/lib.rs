@@ -76,7 +76,9 @@ mod sqp;
 
 pub use dynamics::Dynamics;
 pub use error::{OcpError, Result};
-pub use integrator::{Integrator, IntegratorKind, IntegratorSettings, LinearPart};
+pub use integrator::{
+    interval_error, AdaptiveSubsteps, Integrator, IntegratorKind, IntegratorSettings, LinearPart,
+};
 pub use ocp::Ocp;
 pub use qp::QpForm;
 pub use sqp::{
