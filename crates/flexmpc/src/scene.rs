@@ -317,7 +317,7 @@ pub struct WeightsSpec {
     pub u_max: Option<f64>,
 }
 
-/// `[controller]`: which MPC and its solver settings (defaults in brackets, those of
+/// `[controller]`: which MPC and its solver settings (the defaults are those of
 /// `mpc::ControllerSettings`).
 #[derive(Debug, Deserialize, Default)]
 #[serde(deny_unknown_fields)]
