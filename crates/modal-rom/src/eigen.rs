@@ -55,7 +55,7 @@ pub struct EigenSettings {
     pub rigid_tolerance: f64,
     /// Relative singular-value cut-off for constraint rank and massless directions (singular
     /// values of `F Z`, `FᵀF = B1`: an Euler–Bernoulli section's clamped slaved rotations reach
-    /// `≈ 1/(8N²)`, exact massless directions round-off). Default `1e-10`. Range `(0, 1e-3]`.
+    /// `≈ 0.74/N²`, exact massless directions round-off). Default `1e-10`. Range `(0, 1e-3]`.
     pub rank_tolerance: f64,
 }
 
@@ -403,7 +403,7 @@ fn mass_factor(b1: &Mat<f64>, tol: f64) -> Result<Mat<f64>> {
 /// returned `L1` (lower, `L1L1ᵀ = ZᵀB1Z` on the new `Z`) comes from the QR factor of `F Z`,
 /// again without squaring. Returns the new `Z` and `L1`.
 fn condense_massless(
-    b1: &Mat<f64>,
+    f: &Mat<f64>,
     z: &Mat<f64>,
     de: &Mat<f64>,
     l2: &Mat<f64>,
@@ -411,14 +411,18 @@ fn condense_massless(
 ) -> Result<(Mat<f64>, Mat<f64>)> {
     let numerical =
         |stage: &str, e: String| ModalError::Numerical { stage: stage.into(), reason: e };
-    let f = mass_factor(b1, tol)?;
     let nz = z.ncols();
-    let fz = &f * z;
-    let svd = fz.svd().map_err(|e| numerical("SVD of the mass factor on Z", format!("{e:?}")))?;
-    let s = svd.S().column_vector();
-    let smax = (0..s.nrows()).map(|i| s[i]).fold(0.0f64, f64::max);
-    let rank = (0..s.nrows()).filter(|&i| s[i] > tol * smax).count();
-    let v = svd.V();
+    let fz = f * z;
+    // (rank, V): a block without any mass (no rows in F) is massless in every direction
+    let (rank, v) = if fz.nrows() == 0 {
+        (0, Mat::<f64>::identity(nz, nz))
+    } else {
+        let svd =
+            fz.svd().map_err(|e| numerical("SVD of the mass factor on Z", format!("{e:?}")))?;
+        let s = svd.S().column_vector();
+        let smax = (0..s.nrows()).map(|i| s[i]).fold(0.0f64, f64::max);
+        ((0..s.nrows()).filter(|&i| s[i] > tol * smax).count(), svd.V().to_owned())
+    };
     let z_new = if rank == nz {
         z.to_owned()
     } else {
@@ -428,22 +432,27 @@ fn condense_massless(
         let mut sz = de.transpose() * z;
         l2.solve_lower_triangular_in_place(sz.as_mut());
         let (s_r, s_n) = (&sz * &vr, &sz * &vn);
-        let svd_n =
-            s_n.svd().map_err(|e| numerical("SVD of the massless strain map", format!("{e:?}")))?;
-        let sn = svd_n.S().column_vector();
-        let scale = max_abs(sz.as_ref()).max(f64::MIN_POSITIVE);
         let n_massless = nz - rank;
-        if sn.nrows() < n_massless
-            || (0..n_massless).any(|i| sn[i] <= tol * scale || !sn[i].is_finite())
-        {
-            return Err(numerical(
+        let scale = max_abs(sz.as_ref()).max(f64::MIN_POSITIVE);
+        let without_stiffness = |smallest: f64| {
+            numerical(
                 "static condensation of massless directions",
                 format!(
                     "{n_massless} massless direction(s) of a block without stiffness of their own \
-                     (the smallest strain singular value is {:e} of {scale:e}): a massless \
-                     mechanism has no dynamics",
-                    (0..sn.nrows().min(n_massless)).map(|i| sn[i]).fold(f64::INFINITY, f64::min)
+                     (the smallest strain singular value is {smallest:e} of {scale:e}): a \
+                     massless mechanism has no dynamics"
                 ),
+            )
+        };
+        if s_n.nrows() < n_massless {
+            return Err(without_stiffness(0.0));
+        }
+        let svd_n =
+            s_n.svd().map_err(|e| numerical("SVD of the massless strain map", format!("{e:?}")))?;
+        let sn = svd_n.S().column_vector();
+        if (0..n_massless).any(|i| sn[i] <= tol * scale || !sn[i].is_finite()) {
+            return Err(without_stiffness(
+                (0..n_massless).map(|i| sn[i]).fold(f64::INFINITY, f64::min),
             ));
         }
         // b = −(S N)⁺ S V_r a: the least-squares (minimum strain energy) massless part
@@ -458,7 +467,10 @@ fn condense_massless(
         let b = vn_s * &coef; // n_massless × rank
         z * (&vr - &vn * &b)
     };
-    let qr = (&f * &z_new).qr();
+    if rank == 0 {
+        return Ok((Mat::zeros(z.nrows(), 0), Mat::zeros(0, 0)));
+    }
+    let qr = (f * &z_new).qr();
     let t = qr.thin_R();
     let l1 = t.transpose().to_owned();
     if (0..l1.nrows()).any(|i| l1[(i, i)] == 0.0 || !l1[(i, i)].is_finite()) {
@@ -529,20 +541,21 @@ fn solve_block(
             .L()
             .to_owned()
     };
-    // Massless directions. A block with a structurally massless coordinate (a zero diagonal
-    // entry of B1, e.g. the rotation of an Euler–Bernoulli section) is handled by
-    // `condense_massless` whatever the conditioning of ZᵀB1Z; other blocks keep the plain
-    // Cholesky route unless it fails (a singular non-diagonal mass matrix).
-    let structurally_massless = (0..s1.len()).any(|i| b1[(i, i)] == 0.0);
+    // Massless directions. A block whose B1 has a null space (a zero diagonal entry of a
+    // diagonal B1, e.g. the rotation of an Euler–Bernoulli section; eigenvalues ≤ tol · max of
+    // a non-diagonal one) goes through `condense_massless` whatever the conditioning of ZᵀB1Z;
+    // other blocks (every paper section) keep the plain Cholesky route, unchanged.
     let mut l1 = None;
     if z.ncols() > 0 {
+        let f = mass_factor(&b1, tol)?;
+        let massless_coordinates = f.nrows() < s1.len();
         let mut b1r = z.transpose() * &b1 * &z;
         symmetrize(&mut b1r);
-        let chol = if structurally_massless { None } else { b1r.llt(Side::Lower).ok() };
+        let chol = if massless_coordinates { None } else { b1r.llt(Side::Lower).ok() };
         match chol {
             Some(c) => l1 = Some(c.L().to_owned()),
             None => {
-                let (z_new, l1_new) = condense_massless(&b1, &z, &de, &l2, tol)?;
+                let (z_new, l1_new) = condense_massless(&f, &z, &de, &l2, tol)?;
                 z = z_new;
                 l1 = Some(l1_new);
             }

@@ -229,3 +229,73 @@ proptest! {
         }
     }
 }
+
+/// The route does not depend on the coordinates: rotating each node's `(v3, ω2)` pair (a
+/// non-diagonal, singular `B1` with no zero diagonal entry: massless directions found by the
+/// eigen decomposition of `B1`, not by zero entries) leaves the spectrum, the rigid count and
+/// the mode count unchanged to round-off.
+#[test]
+fn rotated_coordinates_give_the_same_modes() {
+    use faer::Mat;
+    use modal_rom::eigen::{solve, EigenSettings, SecondOrderProblem};
+    for (support, n) in [(Some(JointKind::Weld), 40usize), (None, 33), (Some(JointKind::Ball), 57)]
+    {
+        let s = structure(samples::euler_bernoulli_section(), 1.0, n, Components::Planar, support);
+        let model = StructureModel::new(&s).unwrap();
+        let p = &model.problem;
+        let n1 = p.n1();
+        let mut q = Mat::<f64>::identity(n1, n1);
+        for node in 0..=n {
+            let (i, j) = (model.layout.x1_index(0, node, 1), model.layout.x1_index(0, node, 2));
+            let a = 0.3 + 0.01 * node as f64;
+            let (c, sn) = (a.cos(), a.sin());
+            q[(i, i)] = c;
+            q[(i, j)] = -sn;
+            q[(j, i)] = sn;
+            q[(j, j)] = c;
+        }
+        let mut b1 = q.transpose() * &p.b1 * &q;
+        for jj in 0..n1 {
+            for ii in 0..jj {
+                let m = 0.5 * (b1[(ii, jj)] + b1[(jj, ii)]);
+                b1[(ii, jj)] = m;
+                b1[(jj, ii)] = m;
+            }
+        }
+        let rotated =
+            SecondOrderProblem::new(b1, p.b2.clone(), q.transpose() * &p.d, &p.g * &q).unwrap();
+        let settings = EigenSettings::default();
+        let (a, b) =
+            (solve(p, &settings, None).unwrap(), solve(&rotated, &settings, None).unwrap());
+        assert_eq!(a.n_rigid, b.n_rigid, "{n} elements");
+        assert_eq!(a.omega.len(), b.omega.len(), "{n} elements");
+        for k in a.n_rigid..a.n_rigid + 6 {
+            let r = b.omega[k] / a.omega[k] - 1.0;
+            assert!(r.abs() < ROUND_OFF, "{n} elements, mode {k}: {r:e}");
+        }
+    }
+}
+
+/// A massless direction without stiffness (a mechanism with no dynamics) is a clear error.
+#[test]
+fn massless_mechanism_is_an_error() {
+    use faer::Mat;
+    use modal_rom::eigen::{solve, EigenSettings, SecondOrderProblem};
+    // coordinate 0: mass 1 on a spring (D = 1, B2 = 1); coordinate 1: massless, no strain;
+    // once alone (its own block), once tied to coordinate 0 by a velocity row x0 − x1 = 0 …
+    let b1 = Mat::from_fn(2, 2, |i, j| if i == 0 && j == 0 { 1.0 } else { 0.0 });
+    let b2 = Mat::from_fn(1, 1, |_, _| 1.0);
+    let d = Mat::from_fn(2, 1, |i, _| if i == 0 { 1.0 } else { 0.0 });
+    let alone =
+        SecondOrderProblem::new(b1.clone(), b2.clone(), d.clone(), Mat::zeros(0, 2)).unwrap();
+    let e = solve(&alone, &EigenSettings::default(), None).unwrap_err();
+    assert!(e.to_string().contains("massless"), "{e}");
+    // … which makes it a slave of the massive one: the direction (1, 1) has mass 1 and
+    // stiffness 1, ω = 1, no error.
+    let tied = Mat::from_fn(1, 2, |_, j| if j == 0 { 1.0 } else { -1.0 });
+    let modes =
+        solve(&SecondOrderProblem::new(b1, b2, d, tied).unwrap(), &EigenSettings::default(), None)
+            .unwrap();
+    assert_eq!(modes.omega.len(), 1);
+    assert!((modes.omega[0] - 1.0).abs() < 1e-14, "ω = {}", modes.omega[0]);
+}
