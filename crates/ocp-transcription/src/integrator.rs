@@ -385,6 +385,8 @@ pub struct Integrator {
     interval: f64,
     h: f64,
     lawson: Option<Lawson>,
+    /// Lawson with `L` = the model's linear part: [`Dynamics::remainder_and_jacobians`] applies.
+    model_linear_part: bool,
     newton_tolerance: f64,
     newton_max_iterations: usize,
     x: Vec<f64>,
@@ -497,6 +499,7 @@ impl Integrator {
             adaptive: settings.adaptive.clone(),
             interval,
             h,
+            model_linear_part: lawson.is_some() && settings.linear_part == LinearPart::Model,
             lawson,
             newton_tolerance: settings.newton_tolerance,
             newton_max_iterations: settings.newton_max_iterations,
@@ -874,27 +877,44 @@ impl Integrator {
         sens: bool,
         tape: Option<usize>,
     ) -> Result<()> {
-        if sens {
-            model.rhs_and_jacobians(&self.xs, u, &mut self.k[j], &mut self.fx, &mut self.fu);
-        } else {
-            model.rhs(&self.xs, u, &mut self.k[j]);
-        }
-        if let Some(lw) = &self.lawson {
-            lw.l_op.apply_vec(&mut self.k[j], &self.xs, -1.0, true);
+        // the model's own `g = f − Lx`, `∂f/∂x − L` when `L` is its linear part (saves a
+        // copy of `W` into the Jacobian and its subtraction at every stage)
+        let remainder = sens
+            && self.model_linear_part
+            && model.remainder_and_jacobians(
+                &self.xs,
+                u,
+                &mut self.k[j],
+                &mut self.fx,
+                &mut self.fu,
+            );
+        if !remainder {
+            if sens {
+                model.rhs_and_jacobians(&self.xs, u, &mut self.k[j], &mut self.fx, &mut self.fu);
+            } else {
+                model.rhs(&self.xs, u, &mut self.k[j]);
+            }
+            if let Some(lw) = &self.lawson {
+                lw.l_op.apply_vec(&mut self.k[j], &self.xs, -1.0, true);
+            }
         }
         if !all_finite(&self.k[j]) {
             return Err(OcpError::NonFiniteDynamics { stage: "rhs" });
         }
+        // stage 1 reads the substep's `S` in place (no copy into `sx`)
+        let sx = if j == 0 { &self.s } else { &self.sx };
         if let Some(base) = tape {
             self.tape_x[base + j].copy_from_slice(&self.xs);
-            self.tape_s[base + j].copy_from(&self.sx);
+            self.tape_s[base + j].copy_from(sx);
         }
         if sens {
-            if let Some(lw) = &self.lawson {
-                self.fx -= &lw.l;
+            if !remainder {
+                if let Some(lw) = &self.lawson {
+                    self.fx -= &lw.l;
+                }
             }
             // a NaN/∞ in the Jacobians propagates into the sensitivities, checked once per interval
-            crate::la::mul_right_t(&mut self.ks[j], &self.sx, &self.fx, &mut self.rows);
+            crate::la::mul_right_t(&mut self.ks[j], sx, &self.fx, &mut self.rows);
             for c in 0..self.nu {
                 for i in 0..self.nx {
                     self.ks[j][(self.nx + c, i)] += self.fu[(i, c)];
@@ -913,11 +933,8 @@ impl Integrator {
     ) -> Result<()> {
         let h = self.h;
         let sens = sens || tape.is_some();
-        // stage 1: X1 = x
+        // stage 1: X1 = x (its sensitivity is `S` itself, read in place by `stage`)
         self.xs.copy_from_slice(&self.x);
-        if sens {
-            self.sx.copy_from(&self.s);
-        }
         self.stage(model, u, 0, sens, tape)?;
         // E x, E k1 (and E S, E K1) serve stages 2 to 4 and the update, so that E² is never
         // applied: 4 propagator products per substep instead of 6

@@ -71,6 +71,7 @@ mod integrator;
 mod la;
 mod ocp;
 mod qp;
+mod quadratic;
 pub mod samples;
 mod sqp;
 
@@ -81,6 +82,7 @@ pub use integrator::{
 };
 pub use ocp::Ocp;
 pub use qp::QpForm;
+pub use quadratic::QuadraticTerms;
 pub use sqp::{
     Globalisation, HessianApproximation, IterationLog, SqpMode, SqpSettings, SqpSolver, SqpStats,
     SqpStatus, AUTO_SPARSE_CONDITION,
