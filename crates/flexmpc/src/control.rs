@@ -240,6 +240,8 @@ pub struct SweepOutput {
     pub figures: Vec<PathBuf>,
     /// The timing files (empty with `--no-timings`).
     pub timings: Vec<PathBuf>,
+    /// `index.html`: the sweep's report.
+    pub report: PathBuf,
 }
 
 /// Parses `--omega0`: a list `0.5,1,2` or a range `start:stop:step` (stop included).
@@ -274,7 +276,7 @@ pub fn parse_omegas(text: &str) -> Result<Vec<f64>> {
 /// Every `omegas` × `kinds` closed loop of `scene`, in parallel (rayon's global pool), into
 /// `out`: `sweep.csv`, `sweep.json`, `cost.svg` (Fig. 6), `inputs.svg` (Fig. 10),
 /// `snapshots.svg` (Figs. 7, 9) and per run `runs/<controller>-w<ω0>.csv` and
-/// `runs/<controller>-w<ω0>-snapshots.svg` — each a pure function of the inputs, in the
+/// `runs/<controller>-w<ω0>-snapshots.svg`, the report `index.html` — each a pure function of the inputs, in the
 /// order of the input (controllers outer, ω0 inner), whatever order the runs finish in — and,
 /// with `opts.timings`, `timings.json`, `timings.csv` and `solve_times.svg`.
 pub fn run_sweep(
@@ -386,7 +388,8 @@ pub fn run_sweep(
         crate::timings::remove(out)?;
         Vec::new()
     };
-    Ok(SweepOutput { runs, csv, json, plot, figures: vec![inputs, snapshots], timings })
+    let report = crate::report::write_sweep(scene, &control, &runs, out, opts.timings)?;
+    Ok(SweepOutput { runs, csv, json, plot, figures: vec![inputs, snapshots], timings, report })
 }
 
 /// `flexmpc ocp`: solves the first sample's optimal control problem alone (from the projected

@@ -527,6 +527,7 @@ fn main() -> Result<()> {
                         o.timings.iter().map(|p| p.display().to_string()).collect();
                     println!("measured timings: {}", t.join(", "));
                 }
+                println!("report: {}", o.report.display());
             }
         }
         None => {

@@ -227,6 +227,25 @@ fn animation_svg(result: &RunResult, planar: bool, path: &Path) -> Result<()> {
     Ok(())
 }
 
+/// The page head and its style sheet (no external resources).
+fn head(h: &mut String, title: &str) {
+    let _ = writeln!(
+        h,
+        r#"<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>{}</title>
+<style>
+body {{ font-family: sans-serif; max-width: 1250px; margin: 1em auto; padding: 0 1em; color: #222; }}
+table {{ border-collapse: collapse; margin: 0.5em 0 1em; }}
+th, td {{ border: 1px solid #bbb; padding: 3px 8px; text-align: left; }}
+th {{ background: #f0f0f0; }}
+figure {{ margin: 1em 0; }} img {{ max-width: 100%; border: 1px solid #ddd; }}
+figcaption {{ color: #555; font-size: 0.9em; }}
+.ok {{ color: #161; font-weight: bold; }} .fail {{ color: #a11; font-weight: bold; }}
+</style></head><body>"#,
+        esc(title)
+    );
+}
+
 fn row(html: &mut String, key: &str, value: &str) {
     let _ = writeln!(html, "<tr><th>{}</th><td>{}</td></tr>", esc(key), esc(value));
 }
@@ -331,21 +350,7 @@ pub fn write(
     let s = &result.summary;
     let title = format!("flexmpc: {}", scene.name);
     let mut h = String::new();
-    let _ = writeln!(
-        h,
-        r#"<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><title>{}</title>
-<style>
-body {{ font-family: sans-serif; max-width: 1250px; margin: 1em auto; padding: 0 1em; color: #222; }}
-table {{ border-collapse: collapse; margin: 0.5em 0 1em; }}
-th, td {{ border: 1px solid #bbb; padding: 3px 8px; text-align: left; }}
-th {{ background: #f0f0f0; }}
-figure {{ margin: 1em 0; }} img {{ max-width: 100%; border: 1px solid #ddd; }}
-figcaption {{ color: #555; font-size: 0.9em; }}
-.ok {{ color: #161; font-weight: bold; }} .fail {{ color: #a11; font-weight: bold; }}
-</style></head><body>"#,
-        esc(&title)
-    );
+    head(&mut h, &title);
     let _ = writeln!(h, "<h1>{}</h1>\n<p>{}</p>", esc(&title), esc(scene.description.trim()));
     let _ = writeln!(
         h,
@@ -564,6 +569,108 @@ window.addEventListener('load', function () {{
 </script>
 </body></html>"#
     );
+    let path = out.join("index.html");
+    std::fs::write(&path, h).with_context(|| format!("writing {}", path.display()))?;
+    Ok(path)
+}
+
+/// Writes the sweep's `index.html` into `out` (next to the figures written by
+/// [`crate::control::run_sweep`]): one table row per run and the figures — scaled cost
+/// (Figs. 6, 8), snapshots (Figs. 7, 9), inputs (Fig. 10) and, with `timings`, the solve time
+/// per sample (linked, no measured number in the page). Returns its path.
+pub fn write_sweep(
+    scene: &Scene,
+    control: &Control,
+    runs: &[crate::control::SweepRun],
+    out: &Path,
+    timings: bool,
+) -> Result<PathBuf> {
+    let title = format!("flexmpc sweep: {}", scene.name);
+    let mut h = String::new();
+    head(&mut h, &title);
+    let _ = writeln!(h, "<h1>{}</h1>\n<p>{}</p>", esc(&title), esc(scene.description.trim()));
+    let _ = writeln!(
+        h,
+        r#"<p>{} closed loops on the {} plant ({} s each, τs = {} s). Files: <a href="sweep.csv">sweep.csv</a>, <a href="sweep.json">sweep.json</a>, per run <code>runs/&lt;controller&gt;-w&lt;ω0&gt;.csv</code> and <code>-snapshots.svg</code>{}.</p>"#,
+        runs.len(),
+        control.plant.name(),
+        control.scenario.duration,
+        control.scenario.mpc.sampling,
+        if timings {
+            r#"; measured timings: <a href="timings.json">timings.json</a>, <a href="timings.csv">timings.csv</a>"#
+        } else {
+            ""
+        }
+    );
+    let _ = writeln!(
+        h,
+        "<h2>Runs</h2><table><tr><th>controller</th><th>ω0 (rad/s)</th><th>stabilised</th>\
+         <th>V(T)/V(0)</th><th>largest joint angle (deg)</th><th>orientation error / largest \
+         (deg)</th><th>rigid rate ratio</th><th>relaxed / fallback samples</th><th>stopped \
+         early</th><th>time series</th></tr>"
+    );
+    for r in runs {
+        match &r.result {
+            Ok(res) => {
+                let s = &res.summary;
+                let stem = format!("{}-w{}", s.controller, s.omega0);
+                let _ = writeln!(
+                    h,
+                    r#"<tr><td>{}</td><td>{}</td><td class="{}">{}</td><td>{:.3e}</td><td>{:.1}</td><td>{:.2} / {:.1}</td><td>{:.2e}</td><td>{} / {}</td><td>{}</td><td><a href="runs/{stem}.csv">csv</a>, <a href="runs/{stem}-snapshots.svg">snapshots</a></td></tr>"#,
+                    esc(&s.controller),
+                    s.omega0,
+                    if s.stabilised { "ok" } else { "fail" },
+                    if s.stabilised { "yes" } else { "no" },
+                    s.v_ratio_final,
+                    s.max_joint_angle_deg,
+                    s.orientation_error_deg,
+                    s.max_orientation_deg,
+                    s.rigid_rate_ratio,
+                    s.relaxed_samples,
+                    s.fallback_samples,
+                    esc(&s
+                        .error
+                        .as_ref()
+                        .map_or("—".to_string(), |e| format!("at {} s: {e}", s.t_end))),
+                );
+            }
+            Err(e) => {
+                let _ = writeln!(
+                    h,
+                    r#"<tr><td>{}</td><td>{}</td><td class="fail">failed</td><td colspan="7">{}</td></tr>"#,
+                    r.controller.name(),
+                    r.omega0,
+                    esc(e)
+                );
+            }
+        }
+    }
+    let _ = writeln!(h, "</table>");
+    let _ = writeln!(h, "<h2>Cost</h2>");
+    figure(&mut h, "cost.svg", "State part of the cost, V(t)/V(0), per ω0 (paper Figs. 6, 8).");
+    let _ = writeln!(h, "<h2>Snapshots</h2>");
+    figure(&mut h, "snapshots.svg", "Deformed structure every snapshot interval, blue (t = 0) to red (end), per run (paper Figs. 7, 9).");
+    let _ = writeln!(h, "<h2>Inputs</h2>");
+    figure(&mut h, "inputs.svg", "Control inputs per ω0, each held for τs (paper Fig. 10).");
+    let _ = writeln!(h, "<h2>Solve time per sample</h2>");
+    if timings {
+        figure(
+            &mut h,
+            "solve_times.svg",
+            &format!(
+                "Measured wall time of each sample's solve against τs = {} s and the {} ms goal (timings.json, timings.csv).",
+                control.scenario.mpc.sampling,
+                crate::timings::SOLVE_TIME_GOAL_S * 1e3
+            ),
+        );
+    } else {
+        let _ = writeln!(
+            h,
+            "<p>Timings were not recorded (<code>--no-timings</code>): this folder is a pure \
+             function of the inputs.</p>"
+        );
+    }
+    let _ = writeln!(h, "<p>Written by flexmpc {}.</p>\n</body></html>", env!("CARGO_PKG_VERSION"));
     let path = out.join("index.html");
     std::fs::write(&path, h).with_context(|| format!("writing {}", path.display()))?;
     Ok(path)

@@ -158,12 +158,13 @@ fn sweep_is_reproducible_across_thread_counts() {
     }
     assert_same(&dir.join("a"), &dir.join("b"), false);
     let f = files(&dir.join("a"));
-    for name in ["sweep.csv", "sweep.json", "cost.svg", "inputs.svg", "snapshots.svg"] {
+    for name in ["sweep.csv", "sweep.json", "cost.svg", "inputs.svg", "snapshots.svg", "index.html"]
+    {
         assert!(f.contains_key(name), "{name} missing");
     }
     assert!(f.contains_key("runs/lmpc-w0.5.csv") && f.contains_key("runs/nmpc-w1-snapshots.svg"));
     run(&args, &scene, "--out", &dir.join("c"));
-    assert_only_timings_added(&dir.join("a"), &dir.join("c"), &[]);
+    assert_only_timings_added(&dir.join("a"), &dir.join("c"), &["index.html"]);
 }
 
 /// `flexmpc ocp --export`: the exported problem is the same twice.
