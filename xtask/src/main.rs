@@ -374,3 +374,36 @@ fn write_verification_docs(args: &[String], table: &str, rows: &[Row], seconds: 
     eprintln!("wrote {}", path.display());
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn clock_format() {
+        assert_eq!(hms(0.0), "0:00:00");
+        assert_eq!(hms(59.6), "0:01:00");
+        assert_eq!(hms(3725.4), "1:02:05");
+        assert_eq!(hms(-3.0), "0:00:00");
+    }
+
+    #[test]
+    fn cpu_time_is_read_on_linux() {
+        if cfg!(target_os = "linux") {
+            let c = cpu_seconds().expect("/proc/self/stat parses");
+            assert!(c.is_finite() && c >= 0.0, "{c}");
+        }
+    }
+
+    #[test]
+    fn markdown_escapes_bars_in_metric_names() {
+        let rows = vec![Row {
+            case: "a/b".into(),
+            metric: flexmpc_verification::Metric::at_most("max |x|", 1.0, 2.0),
+            seconds: 0.5,
+        }];
+        let t = markdown_table(&rows);
+        assert!(t.contains("max \\|x\\|"), "{t}");
+        assert_eq!(t.lines().nth(2).unwrap().matches(" | ").count(), 5, "{t}");
+    }
+}

@@ -30,6 +30,11 @@ pub const SUMMARY_KEYS: [&str; 3] = ["solve_time_worst_s", "solve_time_median_s"
 /// Key of a per-sample report that holds its measured solve time.
 pub const SAMPLE_KEY: &str = "solve_time";
 
+/// A sample time rounded to 1 ns, so that `0.6000000000000001` prints as `0.6`.
+fn round_t(t: f64) -> f64 {
+    (t * 1e9).round() / 1e9
+}
+
 /// Removes `keys` from a JSON object (no-op on other values).
 fn strip(v: &mut Value, keys: &[&str]) {
     if let Value::Object(m) = v {
@@ -71,7 +76,7 @@ pub fn run_json(r: &RunResult) -> Value {
     let samples: Vec<Value> = r
         .samples
         .iter()
-        .map(|x| json!({ "t": x.t, "solve_time_s": x.solve_time, "iterations": x.iterations }))
+        .map(|x| json!({ "t": round_t(x.t), "solve_time_s": x.solve_time, "iterations": x.iterations }))
         .collect();
     json!({
         "controller": s.controller,
@@ -139,7 +144,7 @@ pub fn write_run(r: &RunResult, sampling: f64, out: &Path) -> Result<Vec<PathBuf
     let mut f = create(&csv_path)?;
     writeln!(f, "t,solve_time_s,iterations")?;
     for s in &r.samples {
-        writeln!(f, "{},{:.6e},{}", s.t, s.solve_time, s.iterations)?;
+        writeln!(f, "{},{:.6e},{}", round_t(s.t), s.solve_time, s.iterations)?;
     }
     f.flush()?;
     let svg = out.join(FILES[2]);
