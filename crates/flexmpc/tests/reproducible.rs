@@ -177,3 +177,31 @@ fn ocp_export_is_reproducible() {
     assert_same(&dir.join("a"), &dir.join("b"), false);
     assert!(files(&dir.join("a")).contains_key("ocp.json"));
 }
+
+/// `flexmpc simulate` (time series and plot) and `flexmpc modes` (mode figures at three
+/// angles) hold no measured time: their folders are identical twice, without any flag.
+#[test]
+fn simulate_and_modes_are_reproducible() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("reproducible-simulate");
+    let _ = std::fs::remove_dir_all(&dir);
+    for name in ["a", "b"] {
+        let sim: Vec<&str> = vec!["simulate", "--duration", "0.2"];
+        run(&sim, &root.join("scenes/l-frame.toml"), "--out", &dir.join(name).join("sim"));
+        run(
+            &["modes"],
+            &root.join("scenes/paper-2d-modes.toml"),
+            "--out",
+            &dir.join(name).join("modes"),
+        );
+    }
+    let (fa, fb) = (files(&dir.join("a")), files(&dir.join("b")));
+    assert!(
+        fa.contains_key("sim/timeseries.csv") && fa.contains_key("sim/plot.svg"),
+        "{:?}",
+        fa.keys()
+    );
+    assert!(fa.contains_key("modes/angle-45/shapes.svg"), "{:?}", fa.keys());
+    assert_same(&dir.join("a"), &dir.join("b"), false);
+    assert_eq!(fa.len(), fb.len());
+}
