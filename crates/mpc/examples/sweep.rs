@@ -40,6 +40,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Ok(v) = std::env::var("MPC_JLIM") {
         c.plan_joint_limit_deg = if v == "off" { None } else { Some(v.parse()?) };
     }
+    if let Ok(v) = std::env::var("MPC_HOLD") {
+        c.fallback_hold = v.parse()?;
+    }
     if let Ok(v) = std::env::var("MPC_RETRY_LM") {
         c.retry_levenberg_marquardt = v.parse()?;
     }
@@ -67,11 +70,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let s = &r.summary;
         println!(
             "{} {} {} w0={:.3} stab={} V={:.3e} joint={:.1}deg orient={:.2}/{:.1}deg rigid={:.3e} \
-             worst={:.3}s median={:.3}s failed1={} relaxed={} fallback={} jlim={} planj={:.1} t_end={} err={:?} wall={:.1}s",
+             worst={:.3}s median={:.3}s failed1={} relaxed={} fallback={} held={} jlim={} planj={:.1} t_end={} err={:?} wall={:.1}s",
             dim, s.controller, s.plant, s.omega0, s.stabilised, s.v_ratio_final,
             s.max_joint_angle_deg, s.orientation_error_deg, s.max_orientation_deg,
             s.rigid_rate_ratio, s.solve_time_worst_s, s.solve_time_median_s,
-            s.failed_first_attempts, s.relaxed_samples, s.fallback_samples, s.joint_limit_samples,
+            s.failed_first_attempts, s.relaxed_samples, s.fallback_samples, s.held_samples, s.joint_limit_samples,
             s.max_plan_joint_angle_deg, s.t_end, s.error,
             r.wall_time_s
         );

@@ -74,6 +74,9 @@ pub struct RunSummary {
     pub relaxed_samples: usize,
     /// Samples where the linear MPC plan was applied after NMPC failure.
     pub fallback_samples: usize,
+    /// Samples on the linear MPC plan within `ControllerSettings::fallback_hold` samples of a
+    /// fallback (NMPC not tried).
+    pub held_samples: usize,
     /// Samples where at least one NMPC plan was rejected for leaving the model's range
     /// (`ControllerSettings::plan_joint_limit_deg`).
     pub joint_limit_samples: usize,
@@ -440,6 +443,7 @@ fn summarise(
             .count(),
         relaxed_samples: samples.iter().filter(|s| s.strategy == Strategy::Relaxed).count(),
         fallback_samples: samples.iter().filter(|s| s.strategy == Strategy::Fallback).count(),
+        held_samples: samples.iter().filter(|s| s.strategy == Strategy::Held).count(),
         joint_limit_samples: samples.iter().filter(|s| s.joint_limit_rejections > 0).count(),
         max_plan_joint_angle_deg: samples
             .iter()

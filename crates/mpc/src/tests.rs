@@ -329,14 +329,13 @@ fn plant_at_rest_in_the_reference_has_zero_cost() {
     assert!(setup.weights.state_cost(&q).abs() <= 1e-24);
 }
 
-/// With the absolute control grid (option) every plan starts on the grid `kΔt` at or after
+/// With the absolute control grid (the default) every plan starts on the grid `kΔt` at or after
 /// its sample, the applied control changes only on that grid, and a sample on the grid starts
 /// its plan there.
 #[test]
 fn absolute_grid_switches_only_on_the_control_grid() {
     let mut sc = setup_2d().scenario.clone();
-    assert_eq!(sc.mpc.control_grid, ControlGrid::Sample);
-    sc.mpc.control_grid = ControlGrid::Absolute;
+    assert_eq!(sc.mpc.control_grid, ControlGrid::Absolute);
     sc.duration = 2.0;
     let setup = Setup::new(&sc).unwrap();
     let r =
