@@ -13,12 +13,13 @@ use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 
 const USAGE: &str = "\
-usage: cargo xtask verify [FILTER] [--quick | --full] [--json]
+usage: cargo xtask verify [FILTER] [--quick | --full] [--json] [--list] [--write-docs]
 
   FILTER   run only the cases whose name contains FILTER (e.g. intrinsic-beam/)
   --quick  only the quick tier (seconds per case; what CI runs)
   --full   every case (the default)
   --json   print the report as a JSON array of {case, metric, value, tolerance, pass}
+  --list   list the selected cases and their tier without running them
   --write-docs  also write the report to docs/verification.md (command, date, machine, run time)
 
 Progress: one line per case on stderr, `[k/n] case … done in X s (elapsed, failed so far)`
@@ -52,6 +53,7 @@ fn verify(args: &[String]) -> Result<()> {
     let mut quick = false;
     let mut json = false;
     let mut write_docs = false;
+    let mut list = false;
     let started = std::time::Instant::now();
     for arg in args {
         match arg.as_str() {
@@ -59,6 +61,7 @@ fn verify(args: &[String]) -> Result<()> {
             "--full" => quick = false,
             "--json" => json = true,
             "--write-docs" => write_docs = true,
+            "--list" => list = true,
             "-h" | "--help" => {
                 println!("{USAGE}");
                 return Ok(());
@@ -76,6 +79,14 @@ fn verify(args: &[String]) -> Result<()> {
         .filter(|c| filter.is_none_or(|f| c.name.contains(f)))
         .filter(|c| !quick || c.tier == Tier::Quick)
         .collect();
+    if list {
+        for c in &cases {
+            println!("{:<6} {}", if c.tier == Tier::Quick { "quick" } else { "full" }, c.name);
+        }
+        let quick_n = cases.iter().filter(|c| c.tier == Tier::Quick).count();
+        println!("{} case(s): {quick_n} quick, {} full only", cases.len(), cases.len() - quick_n);
+        return Ok(());
+    }
     if cases.is_empty() && filter.is_none() {
         println!("no verification case registered yet (quick tier only: {quick})");
         return Ok(());
