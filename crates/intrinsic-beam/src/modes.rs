@@ -520,7 +520,7 @@ mod tests {
 
     /// Free ends add exactly massless directions (alternating end rotation): the free–free
     /// Euler–Bernoulli beam has `2N + 2` modes, of which exactly 3 rigid (ω at round-off,
-    /// measured ≤ 1e-17 ω_max), the first elastic one at second order; spatial clamped: `4N`
+    /// measured ≤ 5e-17 ω_max), the first elastic one at second order; spatial clamped: `4N`
     /// (v1, v2, v3, ω1 per node, less the two shear constraints per element).
     #[test]
     fn euler_bernoulli_mode_counts_with_free_ends() {
