@@ -144,10 +144,17 @@ fn sweep_case_on(
     time_goal: bool,
     plant: PlantKind,
 ) -> CaseOutcome {
+    let mut c = ControllerSettings::of(kind);
+    if plant == PlantKind::Rom {
+        // the joint-angle limit guards against the FE plant leaving the range where the
+        // 0°-mode model predicts it; with the model itself as the plant there is no such
+        // range (measured: with the limit the LMPC fallback costs ω0 = 2, orientation 23%)
+        c.plan_joint_limit_deg = None;
+    }
     let sc = if three_d { Scenario::paper_3d(ELEMENTS) } else { Scenario::paper_2d(ELEMENTS) }
         .map_err(err)?;
     let setup = Setup::new(&sc).map_err(err)?;
-    let results = sweep(&setup, omegas, &ControllerSettings::of(kind), plant, &|| {});
+    let results = sweep(&setup, omegas, &c, plant, &|| {});
     let mut out = Vec::new();
     let mut worst = 0.0f64;
     let mut wall = 0.0f64;
@@ -176,7 +183,8 @@ fn sweep_2d_nmpc() -> CaseOutcome {
 }
 
 /// The NMPC with the modal model itself as the plant (no model mismatch): separates the
-/// controller (sampling, control grid, SQP) from the FE plant / model mismatch.
+/// controller (sampling, control grid, SQP) from the FE plant / model mismatch; without the
+/// joint-angle limit, which is about that mismatch.
 fn sweep_2d_nmpc_rom() -> CaseOutcome {
     sweep_case_on(false, ControllerKind::Nmpc, &OMEGAS_2D, false, PlantKind::Rom)
 }

@@ -480,17 +480,28 @@ fn plans_outside_the_joint_limit_fall_back_to_the_lmpc_plan() {
         ControllerSettings { plan_joint_limit_deg: Some(2.0 * planned), ..Default::default() };
     assert_eq!(step(&loose).u, free.u);
 
+    // closed loops of 3 samples: without the hold every sample is rejected and falls back;
+    // with the hold the samples after the fallback are held on the LMPC plan (NMPC not tried)
     let mut sc = s.clone();
-    sc.duration = 0.4;
+    sc.duration = 0.6;
     let short = Setup::new(&sc).unwrap();
-    let run = run(&short, 0.5, &tight, PlantKind::Rom).unwrap();
-    assert_eq!(run.summary.joint_limit_samples, run.samples.len());
-    assert_eq!(run.summary.fallback_samples, run.samples.len());
-    assert!(run.summary.max_plan_joint_angle_deg > 0.0);
+    let no_hold = ControllerSettings { fallback_hold: 0, ..tight.clone() };
+    let r = run(&short, 0.5, &no_hold, PlantKind::Rom).unwrap();
+    assert_eq!(r.samples.len(), 3);
+    assert_eq!(r.summary.joint_limit_samples, 3);
+    assert_eq!(r.summary.fallback_samples, 3);
+    assert!(r.summary.max_plan_joint_angle_deg > 0.0);
+    let hold = ControllerSettings { fallback_hold: 1, ..tight };
+    let r = run(&short, 0.5, &hold, PlantKind::Rom).unwrap();
+    let strategies: Vec<Strategy> = r.samples.iter().map(|s| s.strategy).collect();
+    assert_eq!(strategies, [Strategy::Fallback, Strategy::Held, Strategy::Fallback]);
+    assert_eq!(r.summary.held_samples, 1);
+    assert_eq!(r.samples[1].first_status, "Held");
 }
 
 #[test]
 fn joint_limit_validation_names_the_field() {
+    assert_eq!(ControllerSettings::default().plan_joint_limit_deg, DEFAULT_PLAN_JOINT_LIMIT);
     for bad in [0.0, -1.0, 181.0, f64::NAN] {
         let c = ControllerSettings { plan_joint_limit_deg: Some(bad), ..Default::default() };
         assert!(c.validate().unwrap_err().to_string().contains("plan_joint_limit_deg"), "{bad}");
