@@ -224,7 +224,7 @@ fn massive_route(
 /// singular values down to `≈ 0.393/N²` of its largest (clamped–free, measured 3.93e-3,
 /// 3.93e-5, 9.82e-6, 2.45e-6 at 10, 100, 200, 400 elements) beside exact zeros (a free end's
 /// alternating rotation). The former test on the eigenvalues of `ZᵀB1Z` (their squares,
-/// `≈ 0.154/N⁴`) against `1e-10` condensed that genuine direction from ≈ 198 elements on
+/// `≈ 0.154/N⁴`) against `1e-10` condensed that genuine direction from 199 elements on
 /// (`2N − 1` modes, the top slaved-rotation mode lost) and lost the first frequency from 265
 /// (`N²e₁` −0.61 instead of −0.265; the dense route's 6.7e-5 at 400 elements). The new cut
 /// (`RANK_TOLERANCE` on singular values) holds to `N ≈ 6 · 10⁴`. The massless coordinates `b` are eliminated by least squares on the strain map
@@ -478,8 +478,8 @@ mod tests {
     /// Euler–Bernoulli cantilever (rigid shear, massless rotation; `L = EI = m = 1`): bending
     /// modes 1–3 against `(β_n L)²` at second order, 10…400 elements, and `2N` modes with none
     /// rigid. The former massless test (eigenvalues of `ZᵀB1Z`, i.e. squared singular values
-    /// `≈ 0.154/N⁴` of the largest, against 1e-10) returned `2N − 1` modes from about 200
-    /// elements and `N²e₁` = −0.61 (265), +10.8 (400) instead of −0.265.
+    /// `≈ 0.154/N⁴` of the largest, against 1e-10) returned `2N − 1` modes from 199
+    /// elements and `N²e₁` = −0.61 (265), +10.5 (400) instead of −0.265.
     #[test]
     fn euler_bernoulli_cantilever_second_order_to_400_elements() {
         let exact = bending(Supports::ClampedFree, 1.0, 1.0, 1.0, 3);
