@@ -82,16 +82,17 @@ pub struct ControllerSettings {
     /// retry) whose predicted joint angle between links exceeds this (deg) at any of its
     /// nodes is treated as a failed attempt (→ relaxed retry → linear MPC fallback), like a
     /// solver failure. Needs the joint geometry ([`Controller::set_joint_monitor`]; the closed
-    /// loop sets it); `None`: no check. [20°: 2D NMPC on the FE plant, paper weights, the
-    /// issue's criterion met at every ω0 = 0.25…2 with 15° and 20°, not with 25° (✗ at 1.0,
-    /// 1.5) nor without the check (✗ from 1.0, elbow 56–240°); see docs/mpc.md]
+    /// loop sets it); `None`: no check. [20°: 2D NMPC on the FE plant, paper weights, with
+    /// the hold, the criterion met at every ω0 = 0.25…2 with 15° and 20°, not with 25°
+    /// (✗ at 1.0, 1.5) nor without the check (✗ from 1.0, elbow 56–240°); docs/mpc.md]
     pub plan_joint_limit_deg: Option<f64>,
     /// After a fallback to the linear MPC plan, the next `fallback_hold` samples apply the
     /// linear MPC plan directly (strategy [`Strategy::Held`]) before the NMPC is tried again:
     /// a failure or an out-of-range plan means the state is where the model is not trusted,
     /// and switching back and forth between the two controllers' plans every sample excites
     /// the structure [5 samples = 1 s: with 0, the 2D NMPC on the FE plant fails the
-    /// criterion at ω0 = 1.25, 2.0 (limit 20°), with 5 it meets it at every ω0].
+    /// criterion at ω0 = 1.25, 2.0 (limit 20°), with 3 or 5 it meets it at every ω0, with 10
+    /// it fails at 1.5 and 1.75].
     pub fallback_hold: usize,
 }
 
