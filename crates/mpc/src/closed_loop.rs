@@ -252,8 +252,25 @@ pub fn run(
                 (Some(p), true) => {
                     // next time on the absolute grid kΔt (t itself when on it)
                     let g = ((t / dt_plan - 1e-9).ceil() * dt_plan).max(t);
-                    let x = ctrl.predict(&obs.q, p.piece(t, dt_plan), g - t)?;
-                    ctrl.step_from(t, g, &x)?
+                    // the measured state predicted to the grid time under the control in
+                    // force; when that prediction diverges (a state far outside the model's
+                    // range under saturated inputs, e.g. a failing 3D LMPC) the run stops
+                    // there like on a plant failure, with its results so far
+                    match ctrl.predict(&obs.q, p.piece(t, dt_plan), g - t) {
+                        Ok(x) => ctrl.step_from(t, g, &x)?,
+                        Err(e) => {
+                            error = Some(format!("prediction to the grid time {g}: {e}"));
+                            records.push(Record {
+                                t,
+                                v_state: setup.weights.state_cost(&obs.q),
+                                u: u.clone(),
+                                joint_angles: obs.joint_angles,
+                                tip: obs.tip,
+                                q: obs.q,
+                            });
+                            break;
+                        }
+                    }
                 }
                 _ => ctrl.step(t, &obs.q)?,
             };

@@ -414,18 +414,24 @@ impl Controller {
                 ));
             }
         }
-        // failure: apply the linear plan and restart the NMPC from it
-        self.nmpc_from_lmpc();
-        let st = *self.lmpc.stats();
-        let fallback = self.settings.fallback_to_lmpc;
-        let u: Vec<f64> = if fallback {
-            self.lmpc.first_control().iter().copied().collect()
+        // failure: apply the linear plan and restart the NMPC from it; without the fallback
+        // (option) the NMPC's own last iterate is applied and kept as the next warm start
+        // (before, the NMPC iterate was overwritten by the linear plan first, so that the
+        // option applied the linear plan all the same)
+        // (a non-finite iterate is never applied)
+        let own: Vec<f64> =
+            self.nmpc.as_ref().map_or(Vec::new(), |n| n.first_control().iter().copied().collect());
+        let fallback =
+            self.settings.fallback_to_lmpc || own.is_empty() || own.iter().any(|v| !v.is_finite());
+        let (u, st) = if fallback {
+            self.nmpc_from_lmpc();
+            (self.lmpc.first_control().iter().copied().collect(), *self.lmpc.stats())
         } else {
-            self.nmpc.as_ref().map_or(Vec::new(), |n| n.first_control().iter().copied().collect())
+            (own, first)
         };
         Ok(SampleReport {
             t,
-            status: status_name(if fallback { st.status } else { first.status }),
+            status: status_name(st.status),
             first_status: status_name(first.status),
             strategy: Strategy::Fallback,
             iterations,

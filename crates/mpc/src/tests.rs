@@ -412,3 +412,57 @@ fn predictor_is_consistent() {
     assert!(e < 1e-5 * qmax, "split prediction differs by {e}");
     assert!(n.predict(&q, &u, -1.0).is_err());
 }
+
+/// With the absolute grid a sample's state is predicted to the grid time by the controller's
+/// model; when that prediction diverges (here: the 3D LMPC far outside its range at a large
+/// disturbance, inputs saturated) the run ends there with its results so far and the reason
+/// in `error`, like a plant failure, instead of returning `Err` and losing the run (issue 6:
+/// the 3D sweeps reported nothing for such runs).
+#[test]
+fn diverging_prediction_ends_the_run_with_its_results() {
+    let mut sc = setup_3d().scenario.clone();
+    sc.mpc.control_grid = ControlGrid::Absolute;
+    let setup = Setup::new(&sc).unwrap();
+    let c = ControllerSettings::of(ControllerKind::Lmpc);
+    let r = run(&setup, 3.0, &c, PlantKind::Rom).unwrap();
+    let s = &r.summary;
+    let e = s.error.as_deref().unwrap_or_default();
+    assert!(e.contains("prediction to the grid time"), "{s:?}");
+    assert!(!s.stabilised);
+    assert!(s.t_end < sc.duration, "{s:?}");
+    assert_eq!(r.records.last().map(|x| x.t), Some(s.t_end));
+    assert!(r.records.iter().all(|x| x.q.iter().all(|v| v.is_finite())));
+}
+
+/// When every NMPC attempt fails, the default applies the linear MPC's control; with
+/// `fallback_to_lmpc = false` (option) the NMPC's own last iterate is applied instead (it used
+/// to be overwritten by the linear plan first, so the option changed nothing).
+#[test]
+fn without_fallback_the_nmpc_iterate_is_applied() {
+    let setup = setup_2d();
+    let s = &setup.scenario;
+    let mut x0: Vec<f64> = setup.weights.x_ref.iter().copied().collect();
+    x0[0] = 1.5; // a fast rigid rotation: one SQP iteration is far from converged
+    let step = |fallback: bool, kind: ControllerKind| {
+        let c = ControllerSettings {
+            kind,
+            max_iterations: 1,
+            accept_violation: 1e-300,
+            retry_relaxation: None,
+            fallback_to_lmpc: fallback,
+            ..ControllerSettings::default()
+        };
+        let model = RomDynamics::new(&setup.rom).unwrap();
+        Controller::new(model, &setup.weights, &s.mpc, &c).unwrap().step(0.0, &x0).unwrap()
+    };
+    let lmpc = step(true, ControllerKind::Lmpc);
+    let with = step(true, ControllerKind::Nmpc);
+    let without = step(false, ControllerKind::Nmpc);
+    assert_eq!(with.strategy, crate::Strategy::Fallback, "{with:?}");
+    assert_eq!(without.strategy, crate::Strategy::Fallback, "{without:?}");
+    assert_eq!(with.u, lmpc.u);
+    let d = without.u.iter().zip(&lmpc.u).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    // one SQP step from the linear plan moves the first control by O(0.1) at this rate
+    assert!(d > 1e-6, "NMPC iterate {:?} equals the linear plan {:?}", without.u, lmpc.u);
+    assert!(without.u.iter().all(|u| u.is_finite() && u.abs() <= s.mpc.u_max + 1e-9));
+}
