@@ -3,7 +3,8 @@
 //! against the root link's chord angle and the angle carried by the rigid quaternion modes
 //! alone, the per-sample strategy, the one-sample prediction error of the controller's model
 //! against the plant (projected), and the end state's cost per mode.
-//! `diag3d [nmpc|lmpc] [fe|rom] [ω0]` (env `MPC_GRID=absolute` for the option).
+//! `diag3d [nmpc|lmpc] [fe|rom] [ω0]` (env `MPC_GRID=absolute` for the option, `MPC_PURE` for
+//! the NMPC without retry and fallback).
 use mpc::{
     run, Controller, ControllerKind, ControllerSettings, PlantKind, RomDynamics, Scenario, Setup,
 };
@@ -47,7 +48,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             (0..nxi).filter(|&c| cols(c)).map(|c| qm.phi_xi[(4 * n + k, c)] * q[ox + c]).sum()
         })
     };
-    let c = ControllerSettings::of(kind);
+    let mut c = ControllerSettings::of(kind);
+    if std::env::var("MPC_PURE").is_ok() {
+        // no retry from the linear plan and no fallback to it: the NMPC's own iterate
+        c.retry_relaxation = None;
+        c.fallback_to_lmpc = false;
+    }
     let r = run(&setup, omega0, &c, plant)?;
     let v0 = r.records[0].v_state;
     let ctrl = Controller::new(RomDynamics::new(rom)?, w, st, &c)?;

@@ -466,3 +466,44 @@ fn without_fallback_the_nmpc_iterate_is_applied() {
     assert!(d > 1e-6, "NMPC iterate {:?} equals the linear plan {:?}", without.u, lmpc.u);
     assert!(without.u.iter().all(|u| u.is_finite() && u.abs() <= s.mpc.u_max + 1e-9));
 }
+
+/// The chord orientation of a link bent into a circular arc: the root node turns by the
+/// arc's full angle 2α but the chord only by α (the chord of an arc bisects its tangents), so
+/// the chord metric separates the link's direction from its root slope; a rigidly rotated
+/// straight link gives the rotation angle itself. Bad input is an error naming the field.
+#[test]
+fn chord_orientation_of_a_bent_and_a_rotated_link() {
+    let n = 21;
+    let straight: Vec<[f64; 3]> = (0..n).map(|k| [k as f64 / (n - 1) as f64, 0.0, 0.0]).collect();
+    // arc of unit length and total turning 2α in the e1–e3 plane, tangent e1 at the tip
+    // end, so the root tangent is turned by 2α and the chord by α
+    let alpha = 0.3f64;
+    let radius = 1.0 / (2.0 * alpha);
+    let arc: Vec<[f64; 3]> = (0..n)
+        .map(|k| {
+            let phi = 2.0 * alpha * (1.0 - k as f64 / (n - 1) as f64);
+            [
+                radius * (2.0 * alpha - phi).sin(),
+                0.0,
+                radius * (1.0 - phi.cos()) - radius * (1.0 - (2.0 * alpha).cos()),
+            ]
+        })
+        .collect();
+    let theta = 0.5f64;
+    let rotated: Vec<[f64; 3]> =
+        straight.iter().map(|p| [p[0] * theta.cos(), p[0] * theta.sin(), 0.0]).collect();
+    let snap =
+        |t: f64, p: &Vec<[f64; 3]>| Snapshot { t, positions: vec![p.clone(), vec![[0.0; 3]; 2]] };
+    let s = vec![snap(0.0, &straight), snap(0.25, &rotated), snap(0.5, &arc)];
+    let c = chord_orientation(&s, 0).unwrap();
+    // chord of the arc: turned by α about e2 (exact geometry; round-off only)
+    assert!((c.final_deg - alpha.to_degrees()).abs() < 1e-9, "{c:?}");
+    assert!((c.max_deg - theta.to_degrees()).abs() < 1e-9, "{c:?}");
+    assert_eq!(c.t_final, 0.5);
+    assert!(!c.within(0.2) && c.within(0.7));
+    assert!(chord_orientation(&[], 0).is_err());
+    let e = chord_orientation(&s, 5).unwrap_err().to_string();
+    assert!(e.contains("beam"), "{e}");
+    let degenerate = vec![snap(0.0, &vec![[0.0; 3]; n])];
+    assert!(chord_orientation(&degenerate, 0).unwrap_err().to_string().contains("chord length"));
+}
