@@ -2,7 +2,8 @@
 //! each input alone (amplitude `A` for 0.2 s, then 0.2 s free) from rest, and free motion
 //! after the disturbance ω0, replayed on the FE plant and on the modal model; prints the
 //! rigid and elastic velocity coordinates of both (projected FE state) and the joint angles.
-//! `inputs3d [A] [ω0]`.
+//! `inputs3d [A] [ω0]`; env `MPC_U=u1,…` (a given input after the disturbance), `MPC_MODES=n`
+//! (modes per elastic family), `MPC_GJ=k` (torsional stiffness), `MPC_DT=h` (FE time step).
 use mpc::{open_loop, PlantKind, Scenario, Setup};
 
 fn norm(v: &[f64]) -> f64 {
@@ -25,6 +26,23 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             bending_e3: n,
             mixed: 0,
         });
+    }
+    // `MPC_GJ=k`: torsional stiffness k instead of the paper's 0.05 (suspect of the mismatch)
+    if let Ok(v) = std::env::var("MPC_GJ") {
+        let gj: f64 = v.parse()?;
+        let d2 =
+            nalgebra::Matrix6::from_diagonal(&nalgebra::Vector6::new(1.0, 0.0, 0.0, 1.0, 1.0, 1.0))
+                * 1e-4;
+        let section = intrinsic_beam::Section::from_diagonals(
+            [1.0, 1.0, 1.0, 2e-4, 1e-4, 1e-4],
+            [1000.0, 1e5, 1e5, gj, 1.0, 2.0],
+        )?
+        .with_damping(nalgebra::Matrix6::zeros(), nalgebra::Matrix6::zeros(), d2)?;
+        scenario.structure = multibody_constraints::samples::paper_3d(section, 50, 0.0)?;
+    }
+    // `MPC_DT=h`: FE plant time step h instead of 1e-3 (time convergence of the plant)
+    if let Ok(v) = std::env::var("MPC_DT") {
+        scenario.plant.dt = v.parse()?;
     }
     let setup = Setup::new(&scenario)?;
     let (nr, m) = (setup.rom.n_rigid(), setup.rom.n_modes());
