@@ -3,7 +3,7 @@
 //! after the disturbance ω0, replayed on the FE plant and on the modal model; prints the
 //! rigid and elastic velocity coordinates of both (projected FE state) and the joint angles.
 //! `inputs3d [A] [ω0]`; env `MPC_U=u1,…` (a given input after the disturbance), `MPC_MODES=n`
-//! (modes per elastic family), `MPC_GJ=k` (torsional stiffness), `MPC_DT=h` (FE time step).
+//! (modes per elastic family), `MPC_GJ=k` (torsional stiffness), `MPC_DT=h` (FE time step), `MPC_N=n` (elements per link).
 use mpc::{open_loop, PlantKind, Scenario, Setup};
 
 fn norm(v: &[f64]) -> f64 {
@@ -14,7 +14,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let a: Vec<String> = std::env::args().collect();
     let amp: f64 = a.get(1).map_or(Ok(1.0), |s| s.parse())?;
     let omega0: f64 = a.get(2).map_or(Ok(1.0), |s| s.parse())?;
-    let mut scenario = Scenario::paper_3d(50)?;
+    // `MPC_N=n`: n elements per link instead of the paper's 50
+    let n_el: usize = std::env::var("MPC_N").map_or(Ok(50), |v| v.parse())?;
+    let mut scenario = Scenario::paper_3d(n_el)?;
     // `MPC_MODES=n`: n modes of each elastic family instead of the paper's 4
     if let Ok(v) = std::env::var("MPC_MODES") {
         let n: usize = v.parse()?;
@@ -38,7 +40,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             [1000.0, 1e5, 1e5, gj, 1.0, 2.0],
         )?
         .with_damping(nalgebra::Matrix6::zeros(), nalgebra::Matrix6::zeros(), d2)?;
-        scenario.structure = multibody_constraints::samples::paper_3d(section, 50, 0.0)?;
+        scenario.structure = multibody_constraints::samples::paper_3d(section, n_el, 0.0)?;
     }
     // `MPC_DT=h`: FE plant time step h instead of 1e-3 (time convergence of the plant)
     if let Ok(v) = std::env::var("MPC_DT") {
