@@ -69,7 +69,8 @@ pub struct ControllerSettings {
     pub retry_relaxation: Option<f64>,
     /// Levenberg–Marquardt term of the retry [1e-3].
     pub retry_levenberg_marquardt: f64,
-    /// When every NMPC attempt fails, apply the linear MPC plan [true].
+    /// When every NMPC attempt fails, apply the linear MPC plan [true]; `false`: apply the
+    /// NMPC's own last (unconverged) iterate and warm-start the next sample from it.
     pub fallback_to_lmpc: bool,
 }
 
@@ -415,10 +416,9 @@ impl Controller {
             }
         }
         // failure: apply the linear plan and restart the NMPC from it; without the fallback
-        // (option) the NMPC's own last iterate is applied and kept as the next warm start
-        // (before, the NMPC iterate was overwritten by the linear plan first, so that the
-        // option applied the linear plan all the same)
-        // (a non-finite iterate is never applied)
+        // (option) the NMPC's own last iterate is applied and kept as the next warm start,
+        // unless it is not finite (before, the NMPC iterate was overwritten by the linear
+        // plan first, so that the option applied the linear plan all the same)
         let own: Vec<f64> =
             self.nmpc.as_ref().map_or(Vec::new(), |n| n.first_control().iter().copied().collect());
         let fallback =
