@@ -60,6 +60,11 @@ pub fn cases() -> Vec<Case> {
             run: block_vs_sparse,
         },
         Case { name: "intrinsic-beam/midpoint-vs-rk4", tier: Tier::Quick, run: midpoint_vs_rk4 },
+        Case {
+            name: "intrinsic-beam/euler-bernoulli-dense-modes",
+            tier: Tier::Quick,
+            run: euler_bernoulli_dense_modes,
+        },
         Case { name: "intrinsic-beam/bad-input", tier: Tier::Quick, run: bad_input },
     ]
 }
@@ -279,6 +284,60 @@ fn midpoint_vs_rk4() -> CaseOutcome {
 }
 
 /// Each bad input must give an `Err` (not a panic, not a silent NaN).
+/// The dense single-beam modes route on the Euler–Bernoulli section (rigid shear, massless
+/// rotation), clamped–free, `L = EI = m = 1`, 10…400 elements: bending modes 1–3 against
+/// `(β_n L)²` (1.8751, 4.6941, 7.8548) at second order, and the mode count `2N`. The former
+/// squared massless test returned `2N − 1` modes from 199 elements and `N²e₁` = +10.5 at 400
+/// (relative error 6.7e-5 instead of 1.66e-6).
+fn euler_bernoulli_dense_modes() -> CaseOutcome {
+    use intrinsic_beam::modes::closed_form::bending;
+    use intrinsic_beam::modes::{family, linear_modes};
+    let exact = bending(Supports::ClampedFree, 1.0, 1.0, 1.0, 3);
+    // e_j ≈ C_j h² + D_j h⁴: C_j measured on the fine meshes (modal-rom's independent
+    // constrained route: −0.26518, −0.2428, 0.6048); |N²e_j − C_j| ≤ K_j/N² + 2e-3 with K_j
+    // twice the h⁴ deviation at 10 elements and 2e-3 the round-off allowance N² ε ω_max/ω_j
+    // (ω_max ≈ 5 N³): the metric is the largest ratio of deviation to that bound (≤ 1).
+    let c = [-0.26518, -0.24286, 0.60463];
+    let k4 = [0.02, 3.0, 26.0];
+    let meshes = [10usize, 20, 50, 100, 200, 400];
+    let (mut worst, mut count_off, mut e400) = (0f64, 0usize, 0f64);
+    for &n in &meshes {
+        let beam = Beam::new(
+            intrinsic_beam::samples::euler_bernoulli_section(),
+            Mesh::uniform(1.0, n).map_err(err)?,
+            Components::Planar,
+        )
+        .map_err(err)?;
+        let p = BeamProblem::new(beam, EndCondition::Clamped, EndCondition::Free, Loads::none())
+            .map_err(err)?;
+        let modes = linear_modes(&p).map_err(err)?;
+        count_off += usize::from(modes.len() != 2 * n);
+        let bend: Vec<f64> = modes
+            .iter()
+            .filter(|m| m.omega > 1e-3 && family(&p.beam, m) == Family::BendingE2)
+            .take(3)
+            .map(|m| m.omega)
+            .collect();
+        if bend.len() < 3 {
+            return Err(format!("{n} elements: {} bending modes", bend.len()));
+        }
+        let n2 = (n * n) as f64;
+        for j in 0..3 {
+            let e = bend[j] / exact[j] - 1.0;
+            worst = worst.max((n2 * e - c[j]).abs() / (k4[j] / n2 + 2e-3));
+            if j == 0 && n == 400 {
+                e400 = e.abs();
+            }
+        }
+    }
+    Ok(vec![
+        Metric::at_most("max |N²e_j − C_j| / (K_j/N² + 2e-3), modes 1–3, 10–400 el.", worst, 1.0),
+        // C₁h² = 1.657e-6 at 400 elements; 2e-6 leaves the round-off allowance
+        Metric::at_most("ω1 rel. error at 400 elements", e400, 2e-6),
+        Metric::at_most("meshes with a mode count other than 2N", count_off as f64, 0.0),
+    ])
+}
+
 fn bad_input() -> CaseOutcome {
     let mesh = Mesh::uniform(1.0, 4).map_err(err)?;
     let base = intrinsic_beam::samples::slender_section();

@@ -13,15 +13,21 @@ use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 
 const USAGE: &str = "\
-usage: cargo xtask verify [FILTER] [--quick | --full] [--json]
+usage: cargo xtask verify [FILTER] [--quick | --full] [--json] [--list] [--write-docs]
 
   FILTER   run only the cases whose name contains FILTER (e.g. intrinsic-beam/)
   --quick  only the quick tier (seconds per case; what CI runs)
   --full   every case (the default)
   --json   print the report as a JSON array of {case, metric, value, tolerance, pass}
+  --list   list the selected cases and their tier without running them
   --write-docs  also write the report to docs/verification.md (command, date, machine, run time)
 
-Reports are also written to target/verify/report.md and target/verify/report.json.
+Progress: one line per case on stderr, `[k/n] case … done in X s (elapsed, failed so far)`
+(on a terminal the running case is shown until it finishes).
+Reports are written to target/verify/: report.md (command, date, machine, run time, the
+table, cases by run time), report.json (the rows) and summary.json (tier, filter, counts,
+wall and CPU time, per-case times); they are rewritten after every case, so an interrupted
+run leaves the finished cases (summary.json then has complete = false).
 The exit code is non-zero if any case fails.
 
 Also: cargo xtask stress [FILTER] [--quick], cargo xtask fuzz [--cases N] [--seed S] [--show I]
@@ -47,6 +53,7 @@ fn verify(args: &[String]) -> Result<()> {
     let mut quick = false;
     let mut json = false;
     let mut write_docs = false;
+    let mut list = false;
     let started = std::time::Instant::now();
     for arg in args {
         match arg.as_str() {
@@ -54,6 +61,7 @@ fn verify(args: &[String]) -> Result<()> {
             "--full" => quick = false,
             "--json" => json = true,
             "--write-docs" => write_docs = true,
+            "--list" => list = true,
             "-h" | "--help" => {
                 println!("{USAGE}");
                 return Ok(());
@@ -71,6 +79,14 @@ fn verify(args: &[String]) -> Result<()> {
         .filter(|c| filter.is_none_or(|f| c.name.contains(f)))
         .filter(|c| !quick || c.tier == Tier::Quick)
         .collect();
+    if list {
+        for c in &cases {
+            println!("{:<6} {}", if c.tier == Tier::Quick { "quick" } else { "full" }, c.name);
+        }
+        let quick_n = cases.iter().filter(|c| c.tier == Tier::Quick).count();
+        println!("{} case(s): {quick_n} quick, {} full only", cases.len(), cases.len() - quick_n);
+        return Ok(());
+    }
     if cases.is_empty() && filter.is_none() {
         println!("no verification case registered yet (quick tier only: {quick})");
         return Ok(());
@@ -81,21 +97,50 @@ fn verify(args: &[String]) -> Result<()> {
             filter.unwrap_or("")
         );
     }
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../target/verify");
+    std::fs::create_dir_all(&dir)?;
+    let run = RunInfo {
+        command: format!("cargo xtask verify {}", args.join(" ")).trim_end().to_string(),
+        tier: if quick { "quick" } else { "full" },
+        filter: filter.map(str::to_string),
+        date: date_utc(),
+        machine: machine(),
+        n_cases: cases.len(),
+    };
     let mut rows: Vec<Row> = Vec::new();
-    let progress = !json && std::io::stderr().is_terminal();
-    for case in &cases {
-        if progress {
-            eprint!("running {:<50}\r", case.name);
+    let mut times: Vec<(String, f64, usize, usize)> = Vec::new();
+    let terminal = std::io::stderr().is_terminal();
+    let n = cases.len();
+    eprintln!("{}: {n} case(s), {} tier", run.command, run.tier);
+    for (k, case) in cases.iter().enumerate() {
+        if terminal {
+            eprint!(
+                "[{}/{n}] {:<50} running… (elapsed {})\r",
+                k + 1,
+                case.name,
+                hms(started.elapsed().as_secs_f64())
+            );
             let _ = std::io::stderr().flush();
         }
-        rows.extend(run_case(case));
+        let case_rows = run_case(case);
+        let seconds = case_rows.first().map_or(0.0, |r| r.seconds);
+        let failed = case_rows.iter().filter(|r| !r.metric.pass()).count();
+        times.push((case.name.to_string(), seconds, case_rows.len(), failed));
+        rows.extend(case_rows);
+        let failed_total = rows.iter().filter(|r| !r.metric.pass()).count();
+        eprintln!(
+            "[{}/{n}] {:<50} {:>8.2} s, {} metric(s){} (elapsed {}, {failed_total} failed so far)",
+            k + 1,
+            case.name,
+            seconds,
+            times.last().map_or(0, |t| t.2),
+            if failed > 0 { format!(", {failed} FAILED") } else { String::new() },
+            hms(started.elapsed().as_secs_f64())
+        );
+        write_reports(&dir, &run, &rows, &times, started.elapsed().as_secs_f64(), k + 1 == n)?;
     }
     let table = markdown_table(&rows);
     let report = json_report(&rows);
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../target/verify");
-    std::fs::create_dir_all(&dir)?;
-    std::fs::write(dir.join("report.md"), &table)?;
-    std::fs::write(dir.join("report.json"), serde_json::to_string_pretty(&report)?)?;
     if write_docs {
         write_verification_docs(args, &table, &rows, started.elapsed().as_secs_f64())?;
     }
@@ -103,15 +148,146 @@ fn verify(args: &[String]) -> Result<()> {
     if json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
-        if progress {
-            eprint!("{:<70}\r", "");
-        }
         println!("{table}");
-        println!("{} passed, {} failed", rows.len() - failed, failed);
+        println!(
+            "{} passed, {} failed; {} case(s) in {} wall, {:.1} s CPU; reports in {}",
+            rows.len() - failed,
+            failed,
+            n,
+            hms(started.elapsed().as_secs_f64()),
+            cpu_seconds().unwrap_or(f64::NAN),
+            dir.display()
+        );
     }
     if failed > 0 {
         bail!("{failed} verification metric(s) failed");
     }
+    Ok(())
+}
+
+/// What a verification run was: written at the top of the reports.
+struct RunInfo {
+    command: String,
+    tier: &'static str,
+    filter: Option<String>,
+    date: String,
+    machine: String,
+    n_cases: usize,
+}
+
+/// `h:mm:ss`.
+fn hms(seconds: f64) -> String {
+    let s = seconds.max(0.0).round() as u64;
+    format!("{}:{:02}:{:02}", s / 3600, (s / 60) % 60, s % 60)
+}
+
+/// CPU time (user + system, all threads) of this process so far, from `/proc/self/stat`
+/// (Linux; clock ticks of 1/100 s, the kernel's `USER_HZ`).
+fn cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // fields after the command name `(…)`: state is field 3, utime 14, stime 15
+    let rest = stat.rsplit_once(')')?.1;
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let utime: f64 = f.get(11)?.parse().ok()?;
+    let stime: f64 = f.get(12)?.parse().ok()?;
+    Some((utime + stime) / 100.0)
+}
+
+fn date_utc() -> String {
+    std::process::Command::new("date")
+        .args(["-u", "+%Y-%m-%d %H:%M UTC"])
+        .output()
+        .ok()
+        .and_then(|o| String::from_utf8(o.stdout).ok())
+        .map(|d| d.trim().to_string())
+        .unwrap_or_else(|| "(date unavailable)".into())
+}
+
+/// CPU model, hardware threads, OS and architecture.
+fn machine() -> String {
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|c| {
+            c.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split(':').nth(1))
+                .map(|m| m.trim().to_string())
+        })
+        .unwrap_or_else(|| std::env::consts::ARCH.to_string());
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    format!(
+        "{cpu} ({threads} hardware threads, {} {})",
+        std::env::consts::OS,
+        std::env::consts::ARCH
+    )
+}
+
+/// Writes `report.md`, `report.json` and `summary.json` of the rows so far into `dir`.
+fn write_reports(
+    dir: &std::path::Path,
+    run: &RunInfo,
+    rows: &[Row],
+    times: &[(String, f64, usize, usize)],
+    wall: f64,
+    complete: bool,
+) -> Result<()> {
+    let failed = rows.iter().filter(|r| !r.metric.pass()).count();
+    let cpu = cpu_seconds();
+    let load = std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .and_then(|l| l.split_whitespace().next().map(str::to_string))
+        .unwrap_or_else(|| "?".into());
+    let mut md = format!(
+        "# Verification report\n\n`{}` ({} tier{}), started {}, on {}.\n\n\
+         {}{} of {} case(s), {} metric(s): {} passed, {failed} failed. Run time {} wall \
+         ({wall:.0} s), {} CPU (user + system); load average at the last case {load}.\n\n",
+        run.command,
+        run.tier,
+        run.filter.as_ref().map(|f| format!(", filter `{f}`")).unwrap_or_default(),
+        run.date,
+        run.machine,
+        if complete { "" } else { "INCOMPLETE (still running or interrupted): " },
+        times.len(),
+        run.n_cases,
+        rows.len(),
+        rows.len() - failed,
+        hms(wall),
+        cpu.map_or_else(|| "?".to_string(), |c| format!("{c:.0} s")),
+    );
+    md.push_str(&markdown_table(rows));
+    md.push_str(
+        "\n## Cases by run time\n\n| case | time (s) | metrics | failed |\n|---|---|---|---|\n",
+    );
+    let mut sorted: Vec<&(String, f64, usize, usize)> = times.iter().collect();
+    sorted.sort_by(|a, b| b.1.total_cmp(&a.1));
+    for (name, secs, m, f) in sorted {
+        md.push_str(&format!("| {name} | {secs:.2} | {m} | {f} |\n"));
+    }
+    std::fs::write(dir.join("report.md"), md)?;
+    std::fs::write(dir.join("report.json"), serde_json::to_string_pretty(&json_report(rows))?)?;
+    let summary = serde_json::json!({
+        "command": run.command,
+        "tier": run.tier,
+        "filter": run.filter,
+        "started": run.date,
+        "machine": run.machine,
+        "complete": complete,
+        "cases_total": run.n_cases,
+        "cases_done": times.len(),
+        "metrics": rows.len(),
+        "passed": rows.len() - failed,
+        "failed": failed,
+        "wall_time_s": wall,
+        "cpu_time_s": cpu,
+        "load_average_1min": load.parse::<f64>().ok(),
+        "cases": times
+            .iter()
+            .map(|(name, secs, m, f)| serde_json::json!({
+                "case": name, "seconds": secs, "metrics": m, "failed": f
+            }))
+            .collect::<Vec<_>>(),
+    });
+    std::fs::write(dir.join("summary.json"), serde_json::to_string_pretty(&summary)?)?;
     Ok(())
 }
 
@@ -127,8 +303,8 @@ fn markdown_table(rows: &[Row]) -> String {
         };
         out.push_str(&format!(
             "| {} | {} | {:.3e} | {} {:.1e} | {} | {:.2} |\n",
-            r.case,
-            m.metric,
+            r.case.replace('|', "\\|"),
+            m.metric.replace('|', "\\|"),
             m.value,
             op,
             m.tolerance,
@@ -160,23 +336,8 @@ fn json_report(rows: &[Row]) -> serde_json::Value {
 /// `--write-docs`: docs/verification.md = a header (command, date, machine, run time) and the
 /// report table of this run.
 fn write_verification_docs(args: &[String], table: &str, rows: &[Row], seconds: f64) -> Result<()> {
-    let date = std::process::Command::new("date")
-        .args(["-u", "+%Y-%m-%d %H:%M UTC"])
-        .output()
-        .ok()
-        .and_then(|o| String::from_utf8(o.stdout).ok())
-        .map(|d| d.trim().to_string())
-        .unwrap_or_else(|| "(date unavailable)".into());
-    let cpu = std::fs::read_to_string("/proc/cpuinfo")
-        .ok()
-        .and_then(|c| {
-            c.lines()
-                .find(|l| l.starts_with("model name"))
-                .and_then(|l| l.split(':').nth(1))
-                .map(|m| m.trim().to_string())
-        })
-        .unwrap_or_else(|| std::env::consts::ARCH.to_string());
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let date = date_utc();
+    let machine = machine();
     let failed = rows.iter().filter(|r| !r.metric.pass()).count();
     // The same table as target/verify/report.md, with `|` inside metric names escaped so that
     // the page renders.
@@ -204,8 +365,8 @@ fn write_verification_docs(args: &[String], table: &str, rows: &[Row], seconds: 
         .collect();
     let text = format!(
         "# Verification\n\n\
-         Generated by `cargo xtask verify {}` on {date}, on {cpu} ({threads} hardware threads, \
-         {} {}); run time {seconds:.0} s wall (other jobs may have shared the machine). \
+         Generated by `cargo xtask verify {}` on {date}, on {machine}; run time {seconds:.0} s \
+         wall (other jobs may have shared the machine). \
          Do not edit: rerun the command to update it.\n\n\
          {} metrics: {} passed, {failed} failed.\n\n\
          Each row is one metric of a verification case `<crate>/<case>` (registered in \
@@ -216,8 +377,6 @@ fn write_verification_docs(args: &[String], table: &str, rows: &[Row], seconds: 
          The same table is written to `target/verify/report.md` and as JSON to \
          `target/verify/report.json`.\n\n{table}",
         args.join(" "),
-        std::env::consts::OS,
-        std::env::consts::ARCH,
         rows.len(),
         rows.len() - failed,
     );
@@ -225,4 +384,37 @@ fn write_verification_docs(args: &[String], table: &str, rows: &[Row], seconds: 
     std::fs::write(&path, text)?;
     eprintln!("wrote {}", path.display());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn clock_format() {
+        assert_eq!(hms(0.0), "0:00:00");
+        assert_eq!(hms(59.6), "0:01:00");
+        assert_eq!(hms(3725.4), "1:02:05");
+        assert_eq!(hms(-3.0), "0:00:00");
+    }
+
+    #[test]
+    fn cpu_time_is_read_on_linux() {
+        if cfg!(target_os = "linux") {
+            let c = cpu_seconds().expect("/proc/self/stat parses");
+            assert!(c.is_finite() && c >= 0.0, "{c}");
+        }
+    }
+
+    #[test]
+    fn markdown_escapes_bars_in_metric_names() {
+        let rows = vec![Row {
+            case: "a/b".into(),
+            metric: flexmpc_verification::Metric::at_most("max |x|", 1.0, 2.0),
+            seconds: 0.5,
+        }];
+        let t = markdown_table(&rows);
+        assert!(t.contains("max \\|x\\|"), "{t}");
+        assert_eq!(t.lines().nth(2).unwrap().matches(" | ").count(), 5, "{t}");
+    }
 }

@@ -63,6 +63,24 @@ pub fn control_of(scene: &Scene, overrides: &Overrides) -> Result<Control> {
     Ok(c)
 }
 
+/// How a run writes its outputs.
+#[derive(Clone, Copy, Debug)]
+pub struct OutputOptions {
+    /// No progress bar (`--quiet`, `--json`).
+    pub quiet: bool,
+    /// Write the measured timings ([`crate::timings::FILES`]); `false` (`--no-timings`)
+    /// leaves them out (and removes stale ones), so that two runs of the same inputs give
+    /// byte-identical output folders.
+    pub timings: bool,
+}
+
+impl Default for OutputOptions {
+    /// Progress bar shown, timings written.
+    fn default() -> Self {
+        Self { quiet: false, timings: true }
+    }
+}
+
 /// A progress indicator on stderr, only on a terminal and without `--quiet`.
 pub fn progress_bar(len: Option<u64>, quiet: bool, what: &str) -> indicatif::ProgressBar {
     use std::io::IsTerminal;
@@ -94,7 +112,9 @@ pub fn progress_bar(len: Option<u64>, quiet: bool, what: &str) -> indicatif::Pro
     bar
 }
 
-/// The summary of one run with the keys of issue 6 (plus the strategy counts and errors).
+/// The summary of one run with the keys of issue 6 (plus the strategy counts and errors) and
+/// its measured timings (`solve_time_*`, `wall_time_s`): what `--json` prints on stdout. The
+/// files get [`crate::timings::summary_without_timings`] instead.
 pub fn summary_json(r: &RunResult) -> serde_json::Value {
     let mut v = serde_json::to_value(&r.summary).unwrap_or(serde_json::Value::Null);
     if let serde_json::Value::Object(m) = &mut v {
@@ -143,14 +163,23 @@ pub struct MpcOutput {
     pub summary: PathBuf,
     /// `index.html`.
     pub report: PathBuf,
+    /// The timing files (empty with `--no-timings`).
+    pub timings: Vec<PathBuf>,
 }
 
 /// One closed loop of `scene` into `out`: `timeseries.csv`, `samples.json`,
-/// `snapshots.json`, `summary.json` and the report `index.html` with its figures.
-pub fn run_mpc(scene: &Scene, overrides: &Overrides, out: &Path, quiet: bool) -> Result<MpcOutput> {
+/// `snapshots.json`, `summary.json` and the report `index.html` with its figures — each a
+/// pure function of the inputs — and, with `opts.timings`, the measured timings
+/// (`timings.json`, `timings.csv`, `solve_times.svg`).
+pub fn run_mpc(
+    scene: &Scene,
+    overrides: &Overrides,
+    out: &Path,
+    opts: OutputOptions,
+) -> Result<MpcOutput> {
     let control = control_of(scene, overrides)?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let bar = progress_bar(None, quiet, "modes and reduced model");
+    let bar = progress_bar(None, opts.quiet, "modes and reduced model");
     let setup = Setup::new(&control.scenario)
         .with_context(|| format!("setting up the controller of {}", scene.file.display()))?;
     bar.set_message(format!(
@@ -166,13 +195,25 @@ pub fn run_mpc(scene: &Scene, overrides: &Overrides, out: &Path, quiet: bool) ->
     let csv = out.join("timeseries.csv");
     write_timeseries(&result, &csv)?;
     let samples = out.join("samples.json");
-    std::fs::write(&samples, serde_json::to_string_pretty(&result.samples)?)?;
+    std::fs::write(
+        &samples,
+        serde_json::to_string_pretty(&crate::timings::samples_without_timings(&result))?,
+    )?;
     std::fs::write(out.join("snapshots.json"), serde_json::to_string(&result.snapshots)?)?;
     let summary = out.join("summary.json");
-    std::fs::write(&summary, serde_json::to_string_pretty(&summary_json(&result))?)?;
-    let report = crate::report::write(scene, &control, &result, out)?;
+    std::fs::write(
+        &summary,
+        serde_json::to_string_pretty(&crate::timings::summary_without_timings(&result))?,
+    )?;
+    let timings = if opts.timings {
+        crate::timings::write_run(&result, control.scenario.mpc.sampling, out)?
+    } else {
+        crate::timings::remove(out)?;
+        Vec::new()
+    };
+    let report = crate::report::write(scene, &control, &result, out, opts.timings)?;
     bar.finish_and_clear();
-    Ok(MpcOutput { result, control, csv, samples, summary, report })
+    Ok(MpcOutput { result, control, csv, samples, summary, report, timings })
 }
 
 /// One run of a sweep.
@@ -195,6 +236,12 @@ pub struct SweepOutput {
     pub json: PathBuf,
     /// `cost.svg` (Fig. 6 style).
     pub plot: PathBuf,
+    /// `inputs.svg` (Fig. 10 style) and `snapshots.svg` (Figs. 7, 9 style).
+    pub figures: Vec<PathBuf>,
+    /// The timing files (empty with `--no-timings`).
+    pub timings: Vec<PathBuf>,
+    /// `index.html`: the sweep's report.
+    pub report: PathBuf,
 }
 
 /// Parses `--omega0`: a list `0.5,1,2` or a range `start:stop:step` (stop included).
@@ -227,14 +274,18 @@ pub fn parse_omegas(text: &str) -> Result<Vec<f64>> {
 }
 
 /// Every `omegas` × `kinds` closed loop of `scene`, in parallel (rayon's global pool), into
-/// `out`: `sweep.csv`, `sweep.json`, `cost.svg` and one `runs/<controller>-w<ω0>.csv` each.
+/// `out`: `sweep.csv`, `sweep.json`, `cost.svg` (Fig. 6), `inputs.svg` (Fig. 10),
+/// `snapshots.svg` (Figs. 7, 9) and per run `runs/<controller>-w<ω0>.csv` and
+/// `runs/<controller>-w<ω0>-snapshots.svg`, the report `index.html` — each a pure function of the inputs, in the
+/// order of the input (controllers outer, ω0 inner), whatever order the runs finish in — and,
+/// with `opts.timings`, `timings.json`, `timings.csv` and `solve_times.svg`.
 pub fn run_sweep(
     scene: &Scene,
     overrides: &Overrides,
     omegas: &[f64],
     kinds: &[ControllerKind],
     out: &Path,
-    quiet: bool,
+    opts: OutputOptions,
 ) -> Result<SweepOutput> {
     if omegas.is_empty() || kinds.is_empty() {
         bail!("a sweep needs at least one ω0 and one controller");
@@ -246,7 +297,7 @@ pub fn run_sweep(
         .with_context(|| format!("setting up the controller of {}", scene.file.display()))?;
     let jobs: Vec<(ControllerKind, f64)> =
         kinds.iter().flat_map(|&k| omegas.iter().map(move |&w| (k, w))).collect();
-    let bar = progress_bar(Some(jobs.len() as u64), quiet, "closed loops");
+    let bar = progress_bar(Some(jobs.len() as u64), opts.quiet, "closed loops");
     let done = AtomicUsize::new(0);
     let runs: Vec<SweepRun> = jobs
         .par_iter()
@@ -260,13 +311,15 @@ pub fn run_sweep(
         })
         .collect();
     bar.finish_and_clear();
+    let planar =
+        matches!(control.scenario.structure.components(), intrinsic_beam::Components::Planar);
     let csv = out.join("sweep.csv");
     let mut f = std::io::BufWriter::new(std::fs::File::create(&csv)?);
     writeln!(
         f,
         "controller,plant,omega0,stabilised,v_ratio_final,max_joint_angle_deg,\
-         orientation_error_deg,max_orientation_deg,rigid_rate_ratio,relaxed_samples,\
-         fallback_samples,solve_time_median_s,solve_time_worst_s,t_end,error"
+         orientation_error_deg,max_orientation_deg,rigid_rate_ratio,failed_first_attempts,\
+         relaxed_samples,fallback_samples,samples,t_end,error"
     )?;
     let mut summaries = Vec::new();
     for r in &runs {
@@ -275,7 +328,7 @@ pub fn run_sweep(
                 let s = &res.summary;
                 writeln!(
                     f,
-                    "{},{},{},{},{:.6e},{:.4},{:.4},{:.4},{:.6e},{},{},{:.6e},{:.6e},{},{}",
+                    "{},{},{},{},{:.6e},{:.4},{:.4},{:.4},{:.6e},{},{},{},{},{},{}",
                     s.controller,
                     s.plant,
                     s.omega0,
@@ -285,18 +338,21 @@ pub fn run_sweep(
                     s.orientation_error_deg,
                     s.max_orientation_deg,
                     s.rigid_rate_ratio,
+                    s.failed_first_attempts,
                     s.relaxed_samples,
                     s.fallback_samples,
-                    s.solve_time_median_s,
-                    s.solve_time_worst_s,
+                    res.samples.len(),
                     s.t_end,
                     s.error.as_deref().unwrap_or("").replace([',', '\n'], ";")
                 )?;
-                write_timeseries(
+                let stem = format!("{}-w{}", s.controller, s.omega0);
+                write_timeseries(res, &out.join("runs").join(format!("{stem}.csv")))?;
+                crate::report::snapshots_svg(
                     res,
-                    &out.join("runs").join(format!("{}-w{}.csv", s.controller, s.omega0)),
+                    planar,
+                    &out.join("runs").join(format!("{stem}-snapshots.svg")),
                 )?;
-                summaries.push(summary_json(res));
+                summaries.push(crate::timings::summary_without_timings(res));
             }
             Err(e) => {
                 writeln!(
@@ -322,7 +378,18 @@ pub fn run_sweep(
     std::fs::write(&json, serde_json::to_string_pretty(&summaries)?)?;
     let plot = out.join("cost.svg");
     crate::plot::sweep_cost(&plot, &scene.name, &runs)?;
-    Ok(SweepOutput { runs, csv, json, plot })
+    let inputs = out.join("inputs.svg");
+    crate::plot::sweep_inputs(&inputs, &scene.name, &runs)?;
+    let snapshots = out.join("snapshots.svg");
+    crate::report::sweep_snapshots_svg(&runs, planar, &snapshots)?;
+    let timings = if opts.timings {
+        crate::timings::write_sweep(&runs, control.scenario.mpc.sampling, out)?
+    } else {
+        crate::timings::remove(out)?;
+        Vec::new()
+    };
+    let report = crate::report::write_sweep(scene, &control, &runs, out, opts.timings)?;
+    Ok(SweepOutput { runs, csv, json, plot, figures: vec![inputs, snapshots], timings, report })
 }
 
 /// `flexmpc ocp`: solves the first sample's optimal control problem alone (from the projected

@@ -12,6 +12,8 @@
 //!   scene's `[scenario]` with the `mpc` crate, written as CSV/JSON.
 //! - [`report`]: the offline HTML report (`index.html` + SVG figures) of a closed loop.
 //! - [`plot`]: SVG plots (plotters).
+//! - [`timings`]: the measured timings, kept in their own files so that every other output
+//!   is a pure function of the inputs (`--no-timings` leaves them out).
 //!
 //! [`DEFAULT_SCENE`] is the paper's 2D NMPC example (`scenes/paper-2d-mpc.toml`), what
 //! `cargo run --release` runs without arguments.
@@ -46,6 +48,7 @@ pub mod plot;
 pub mod report;
 pub mod run;
 pub mod scene;
+pub mod timings;
 
 /// Path (relative to the repository root) of the default scene, used in messages and for the
 /// output folder `out/paper-2d-mpc`.

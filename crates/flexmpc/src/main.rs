@@ -9,7 +9,8 @@
 //! `flexmpc simulate <scene.toml>` runs the uncontrolled FE plant, `flexmpc modes` lists and
 //! plots the constrained modes, `flexmpc check` validates a scene. Global flags: `--quiet`
 //! (no progress, no extra prints), `--json` (machine-readable summary on stdout),
-//! `--threads N` (rayon pool).
+//! `--threads N` (rayon pool), `--no-timings` (no measured-time files: the outputs of two runs
+//! are byte-identical; without it only `timings.*` and `solve_times.svg` differ).
 
 use flexmpc::control::{self, Overrides};
 use flexmpc::{modes, run, scene};
@@ -42,6 +43,11 @@ struct Cli {
     /// Worker threads of the parallel runs (rayon pool; default: one per core).
     #[arg(long, global = true)]
     threads: Option<usize>,
+    /// Leave the measured timings out (`mpc`, `sweep`, `ocp`, default run): no
+    /// `timings.json`, `timings.csv`, `solve_times.svg` (stale ones are removed) and, for
+    /// `ocp`, no `solve_time_s`; two runs of the same inputs then write byte-identical files.
+    #[arg(long, global = true)]
+    no_timings: bool,
 }
 
 #[derive(Subcommand)]
@@ -142,6 +148,11 @@ fn default_out(scene: &Path) -> PathBuf {
     PathBuf::from("out").join(stem)
 }
 
+/// How runs write their files.
+fn output_options(cli: &Cli) -> control::OutputOptions {
+    control::OutputOptions { quiet: cli.quiet, timings: !cli.no_timings }
+}
+
 /// Whether human-readable lines go to stdout.
 fn chatty(cli: &Cli) -> bool {
     !cli.quiet && !cli.json
@@ -218,6 +229,12 @@ fn print_mpc(o: &control::MpcOutput, cli: &Cli) -> Result<()> {
         o.summary.display(),
         o.report.display()
     );
+    if o.timings.is_empty() {
+        println!("timings not written (--no-timings)");
+    } else {
+        let t: Vec<String> = o.timings.iter().map(|p| p.display().to_string()).collect();
+        println!("measured timings: {}", t.join(", "));
+    }
     Ok(())
 }
 
@@ -371,7 +388,7 @@ fn main() -> Result<()> {
                 duration: *duration,
             };
             let out = out.clone().unwrap_or_else(|| default_out(scene));
-            let o = control::run_mpc(&s, &ov, &out, cli.quiet)?;
+            let o = control::run_mpc(&s, &ov, &out, output_options(&cli))?;
             print_mpc(&o, &cli)?;
         }
         Some(Command::Ocp { scene, controller, omega0, export }) => {
@@ -381,17 +398,24 @@ fn main() -> Result<()> {
                 omega0: *omega0,
                 ..Default::default()
             };
-            let v = control::first_sample(&s, &ov, export.as_deref())?;
+            let mut v = control::first_sample(&s, &ov, export.as_deref())?;
+            if cli.no_timings {
+                if let Some(m) = v.as_object_mut() {
+                    m.remove("solve_time_s");
+                }
+            }
             if cli.json {
                 println!("{}", serde_json::to_string_pretty(&v)?);
             } else if !cli.quiet {
                 println!(
-                    "{} first sample, ω0 = {}: cost {:.6e}, {} iterations, {:.3} s, status {} ({})",
+                    "{} first sample, ω0 = {}: cost {:.6e}, {} iterations, {}, status {} ({})",
                     v["controller"].as_str().unwrap_or("?").to_uppercase(),
                     v["omega0"],
                     v["cost"].as_f64().unwrap_or(f64::NAN),
                     v["iterations"],
-                    v["solve_time_s"].as_f64().unwrap_or(f64::NAN),
+                    v["solve_time_s"]
+                        .as_f64()
+                        .map_or_else(|| "time not shown".to_string(), |t| format!("{t:.3} s")),
                     v["status"].as_str().unwrap_or("?"),
                     v["strategy"].as_str().unwrap_or("?")
                 );
@@ -433,7 +457,7 @@ fn main() -> Result<()> {
                 duration: *duration,
             };
             let out = out.clone().unwrap_or_else(|| default_out(scene).join("sweep"));
-            let o = control::run_sweep(&s, &ov, &omegas, &kinds, &out, cli.quiet)?;
+            let o = control::run_sweep(&s, &ov, &omegas, &kinds, &out, output_options(&cli))?;
             if cli.json {
                 let v: Vec<serde_json::Value> = o
                     .runs
@@ -486,11 +510,24 @@ fn main() -> Result<()> {
                     }
                 }
                 println!(
-                    "wrote {}, {}, {} (V(t)/V(0) per ω0), runs/*.csv",
+                    "wrote {}, {}, {} (V(t)/V(0) per ω0), {}, runs/*.csv, runs/*-snapshots.svg",
                     o.csv.display(),
                     o.json.display(),
-                    o.plot.display()
+                    o.plot.display(),
+                    o.figures
+                        .iter()
+                        .map(|p| p.display().to_string())
+                        .collect::<Vec<_>>()
+                        .join(", ")
                 );
+                if o.timings.is_empty() {
+                    println!("timings not written (--no-timings)");
+                } else {
+                    let t: Vec<String> =
+                        o.timings.iter().map(|p| p.display().to_string()).collect();
+                    println!("measured timings: {}", t.join(", "));
+                }
+                println!("report: {}", o.report.display());
             }
         }
         None => {
@@ -505,7 +542,7 @@ fn main() -> Result<()> {
                     s.description.trim()
                 );
             }
-            let o = control::run_mpc(&s, &Overrides::default(), &out, cli.quiet)?;
+            let o = control::run_mpc(&s, &Overrides::default(), &out, output_options(&cli))?;
             print_mpc(&o, &cli)?;
             if chatty(&cli) {
                 println!(

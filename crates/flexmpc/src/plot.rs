@@ -73,8 +73,8 @@ pub struct Axes {
     pub y: String,
     /// Logarithmic y axis (non-positive values are clipped to the smallest positive one).
     pub log_y: bool,
-    /// A dashed horizontal reference line and its label.
-    pub reference: Option<(f64, String)>,
+    /// Dashed horizontal reference lines and their labels (black, then grey).
+    pub references: Vec<(f64, String)>,
     /// Draw markers only (no lines).
     pub points: bool,
 }
@@ -93,6 +93,11 @@ const PALETTE: [RGBColor; 8] = [
 /// The `i`-th colour of the plots' palette.
 pub fn color(i: usize) -> RGBColor {
     PALETTE[i % PALETTE.len()]
+}
+
+/// Colour of the `k`-th reference line: black, then greys.
+fn reference_color(k: usize) -> RGBColor {
+    [RGBColor(0, 0, 0), RGBColor(130, 130, 130), RGBColor(190, 190, 190)][k % 3]
 }
 
 fn range_of(series: &[Series], f: impl Fn(&(f64, f64)) -> f64) -> (f64, f64) {
@@ -131,7 +136,7 @@ where
             .map(|(n, p)| (n.clone(), p.iter().copied().filter(|q| q.1 > 0.0).collect()))
             .collect();
         let (mut lo, mut hi) = range_of(&pos, |p| p.1);
-        if let Some((r, _)) = axes.reference {
+        for &(r, _) in &axes.references {
             if r > 0.0 {
                 lo = lo.min(r);
                 hi = hi.max(r);
@@ -159,20 +164,21 @@ where
                     PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
                 });
         }
-        if let Some((r, label)) = &axes.reference {
+        for (k, (r, label)) in axes.references.iter().enumerate() {
             if *r > 0.0 {
+                let c = reference_color(k);
                 chart
                     .draw_series(DashedLineSeries::new(
                         [(x0, *r), (x1, *r)],
                         6,
                         4,
-                        BLACK.stroke_width(1),
+                        c.stroke_width(1),
                     ))?
                     .label(label.clone())
-                    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
             }
         }
-        if series.len() > 1 || axes.reference.is_some() {
+        if series.len() > 1 || !axes.references.is_empty() {
             chart
                 .configure_series_labels()
                 .background_style(WHITE.mix(0.85))
@@ -181,7 +187,7 @@ where
         }
     } else {
         let (mut lo, mut hi) = range_of(series, |p| p.1);
-        if let Some((r, _)) = axes.reference {
+        for &(r, _) in &axes.references {
             lo = lo.min(r);
             hi = hi.max(r);
         }
@@ -209,18 +215,14 @@ where
                     });
             }
         }
-        if let Some((r, label)) = &axes.reference {
+        for (k, (r, label)) in axes.references.iter().enumerate() {
+            let c = reference_color(k);
             chart
-                .draw_series(DashedLineSeries::new(
-                    [(x0, *r), (x1, *r)],
-                    6,
-                    4,
-                    BLACK.stroke_width(1),
-                ))?
+                .draw_series(DashedLineSeries::new([(x0, *r), (x1, *r)], 6, 4, c.stroke_width(1)))?
                 .label(label.clone())
-                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
         }
-        if series.len() > 1 || axes.reference.is_some() {
+        if series.len() > 1 || !axes.references.is_empty() {
             chart
                 .configure_series_labels()
                 .background_style(WHITE.mix(0.85))
@@ -242,9 +244,21 @@ pub fn lines(path: &Path, size: (u32, u32), axes: &Axes, series: &[Series]) -> R
 
 /// Panels side by side (one per `(axes, series)`) into an SVG file.
 pub fn panels(path: &Path, size: (u32, u32), charts: &[(Axes, Vec<Series>)]) -> Result<()> {
+    grid(path, size, charts.len(), charts)
+}
+
+/// Panels on a grid of `cols` columns (`charts` row after row) into an SVG file.
+pub fn grid(
+    path: &Path,
+    size: (u32, u32),
+    cols: usize,
+    charts: &[(Axes, Vec<Series>)],
+) -> Result<()> {
+    let cols = cols.max(1);
+    let rows = charts.len().div_ceil(cols).max(1);
     let root = SVGBackend::new(path, size).into_drawing_area();
     root.fill(&WHITE)?;
-    let areas = root.split_evenly((1, charts.len().max(1)));
+    let areas = root.split_evenly((rows, cols));
     for ((axes, series), area) in charts.iter().zip(areas.iter()) {
         draw_lines(area, axes, series)?;
     }
@@ -267,12 +281,7 @@ pub fn steps(pts: &[(f64, f64)]) -> Vec<(f64, f64)> {
 /// Fig. 6 style: the scaled cost `V(t)/V(0)` (state part) against time, one curve per ω0,
 /// one panel per controller.
 pub fn sweep_cost(path: &Path, name: &str, runs: &[crate::control::SweepRun]) -> Result<()> {
-    let mut kinds: Vec<mpc::ControllerKind> = Vec::new();
-    for r in runs {
-        if !kinds.contains(&r.controller) {
-            kinds.push(r.controller);
-        }
-    }
+    let kinds = sweep_kinds(runs);
     let charts: Vec<(Axes, Vec<Series>)> = kinds
         .iter()
         .map(|k| {
@@ -294,7 +303,7 @@ pub fn sweep_cost(path: &Path, name: &str, runs: &[crate::control::SweepRun]) ->
                     x: "t (s)".into(),
                     y: "V/V(0)".into(),
                     log_y: true,
-                    reference: Some((0.1, "0.1 (criterion)".into())),
+                    references: vec![(0.1, "0.1 (criterion)".into())],
                     points: false,
                 },
                 series,
@@ -302,4 +311,50 @@ pub fn sweep_cost(path: &Path, name: &str, runs: &[crate::control::SweepRun]) ->
         })
         .collect();
     panels(path, (620 * charts.len().max(1) as u32, 460), &charts)
+}
+
+/// The controllers of a sweep in order of first appearance.
+pub fn sweep_kinds(runs: &[crate::control::SweepRun]) -> Vec<mpc::ControllerKind> {
+    let mut kinds: Vec<mpc::ControllerKind> = Vec::new();
+    for r in runs {
+        if !kinds.contains(&r.controller) {
+            kinds.push(r.controller);
+        }
+    }
+    kinds
+}
+
+/// Fig. 10 style: the inputs of every run of a sweep against time, one row of panels per
+/// controller, one panel per input, one curve per ω0 (each input held for τs).
+pub fn sweep_inputs(path: &Path, name: &str, runs: &[crate::control::SweepRun]) -> Result<()> {
+    let kinds = sweep_kinds(runs);
+    let inputs: Vec<String> = runs
+        .iter()
+        .find_map(|r| r.result.as_ref().ok())
+        .map_or_else(Vec::new, |r| r.input_names.clone());
+    let cols = inputs.len().max(1);
+    let mut charts: Vec<(Axes, Vec<Series>)> = Vec::new();
+    for k in &kinds {
+        for (i, input) in inputs.iter().enumerate() {
+            let series = runs
+                .iter()
+                .filter(|r| r.controller == *k)
+                .filter_map(|r| r.result.as_ref().ok())
+                .map(|res| {
+                    let pts: Vec<(f64, f64)> = res.records.iter().map(|x| (x.t, x.u[i])).collect();
+                    (format!("ω0 = {}", res.summary.omega0), steps(&pts))
+                })
+                .collect();
+            charts.push((
+                Axes {
+                    title: format!("{name}: {} — {input}", k.name().to_uppercase()),
+                    x: "t (s)".into(),
+                    y: "u (N, N·m)".into(),
+                    ..Default::default()
+                },
+                series,
+            ));
+        }
+    }
+    grid(path, (420 * cols as u32, 340 * kinds.len().max(1) as u32), cols, &charts)
 }

@@ -65,37 +65,85 @@ fn time_color(k: usize, n: usize) -> RGBColor {
     RGBColor((30.0 + 200.0 * f) as u8, 60, (220.0 - 190.0 * f) as u8)
 }
 
-/// Fig. 7 style: every snapshot of the deformed structure, coloured by time.
-fn snapshots_svg(result: &RunResult, planar: bool, path: &Path) -> Result<()> {
+/// Draws every snapshot of `result` in plane `(a, b)` into `area`, coloured by time.
+fn draw_snapshots<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    result: &RunResult,
+    (name, a, b): (&str, usize, usize),
+    title: &str,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let n = result.snapshots.len();
+    let axis = ["x", "y", "z"];
+    let ((ca, cb), w) = window(result, a, b);
+    let mut chart = ChartBuilder::on(area)
+        .caption(format!("{title} ({name} plane)"), ("sans-serif", 16))
+        .margin(10)
+        .x_label_area_size(30)
+        .y_label_area_size(45)
+        .build_cartesian_2d((ca - w)..(ca + w), (cb - w)..(cb + w))?;
+    chart.configure_mesh().x_desc(axis[a]).y_desc(axis[b]).draw()?;
+    for (k, s) in result.snapshots.iter().enumerate() {
+        let c = time_color(k, n);
+        let width = if k == 0 || k + 1 == n { 3 } else { 1 };
+        for beam in &s.positions {
+            chart.draw_series(LineSeries::new(
+                beam.iter().map(|p| (p[a], p[b])),
+                c.stroke_width(width),
+            ))?;
+        }
+    }
+    Ok(())
+}
+
+/// Fig. 7 style: every snapshot of the deformed structure, coloured by time, one panel per
+/// plane.
+pub fn snapshots_svg(result: &RunResult, planar: bool, path: &Path) -> Result<()> {
     let pl = planes(planar);
     let root = SVGBackend::new(path, (560 * pl.len() as u32, 560)).into_drawing_area();
     root.fill(&WHITE)?;
     let areas = root.split_evenly((1, pl.len()));
-    let n = result.snapshots.len();
-    let axis = ["x", "y", "z"];
-    for ((name, a, b), area) in pl.iter().zip(areas.iter()) {
-        let ((ca, cb), w) = window(result, *a, *b);
-        let mut chart = ChartBuilder::on(area)
-            .caption(
-                format!(
-                    "snapshots every {:.2} s ({name} plane), blue → red",
-                    result.snapshots.get(1).map_or(0.0, |s| s.t)
-                ),
-                ("sans-serif", 16),
-            )
-            .margin(10)
-            .x_label_area_size(30)
-            .y_label_area_size(45)
-            .build_cartesian_2d((ca - w)..(ca + w), (cb - w)..(cb + w))?;
-        chart.configure_mesh().x_desc(axis[*a]).y_desc(axis[*b]).draw()?;
-        for (k, s) in result.snapshots.iter().enumerate() {
-            let c = time_color(k, n);
-            let width = if k == 0 || k + 1 == n { 3 } else { 1 };
-            for beam in &s.positions {
-                chart.draw_series(LineSeries::new(
-                    beam.iter().map(|p| (p[*a], p[*b])),
-                    c.stroke_width(width),
-                ))?;
+    let title = format!(
+        "snapshots every {:.2} s, blue → red",
+        result.snapshots.get(1).map_or(0.0, |s| s.t)
+    );
+    for (plane, area) in pl.iter().zip(areas.iter()) {
+        draw_snapshots(area, result, *plane, &title)?;
+    }
+    root.present()?;
+    Ok(())
+}
+
+/// Figs. 7 and 9 style for a sweep: the snapshots of every run, one row per controller, one
+/// panel per ω0, in the first plane of the structure (`x–z` planar, `x–y` spatial; each run's
+/// `runs/<controller>-w<ω0>-snapshots.svg` has every plane).
+pub fn sweep_snapshots_svg(
+    runs: &[crate::control::SweepRun],
+    planar: bool,
+    path: &Path,
+) -> Result<()> {
+    let kinds = plot::sweep_kinds(runs);
+    let cols = runs.len().div_ceil(kinds.len().max(1)).max(1);
+    let root = SVGBackend::new(path, (300 * cols as u32, 320 * kinds.len().max(1) as u32))
+        .into_drawing_area();
+    root.fill(&WHITE)?;
+    let areas = root.split_evenly((kinds.len().max(1), cols));
+    let plane = planes(planar)[0];
+    for (row, k) in kinds.iter().enumerate() {
+        for (col, r) in runs.iter().filter(|r| r.controller == *k).enumerate() {
+            let Some(area) = areas.get(row * cols + col) else { continue };
+            let title = format!("{} ω0 = {}", k.name().to_uppercase(), r.omega0);
+            match &r.result {
+                Ok(res) => draw_snapshots(area, res, plane, &title)?,
+                Err(_) => {
+                    area.draw(&Text::new(
+                        format!("{title}: failed"),
+                        (10, 20),
+                        ("sans-serif", 14).into_font(),
+                    ))?;
+                }
             }
         }
     }
@@ -179,6 +227,25 @@ fn animation_svg(result: &RunResult, planar: bool, path: &Path) -> Result<()> {
     Ok(())
 }
 
+/// The page head and its style sheet (no external resources).
+fn head(h: &mut String, title: &str) {
+    let _ = writeln!(
+        h,
+        r#"<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>{}</title>
+<style>
+body {{ font-family: sans-serif; max-width: 1250px; margin: 1em auto; padding: 0 1em; color: #222; }}
+table {{ border-collapse: collapse; margin: 0.5em 0 1em; }}
+th, td {{ border: 1px solid #bbb; padding: 3px 8px; text-align: left; }}
+th {{ background: #f0f0f0; }}
+figure {{ margin: 1em 0; }} img {{ max-width: 100%; border: 1px solid #ddd; }}
+figcaption {{ color: #555; font-size: 0.9em; }}
+.ok {{ color: #161; font-weight: bold; }} .fail {{ color: #a11; font-weight: bold; }}
+</style></head><body>"#,
+        esc(title)
+    );
+}
+
 fn row(html: &mut String, key: &str, value: &str) {
     let _ = writeln!(html, "<tr><th>{}</th><td>{}</td></tr>", esc(key), esc(value));
 }
@@ -194,8 +261,17 @@ fn figure(html: &mut String, src: &str, caption: &str) {
 }
 
 /// Writes the figures and `index.html` of `result` into `out`; returns the path of
-/// `index.html`.
-pub fn write(scene: &Scene, control: &Control, result: &RunResult, out: &Path) -> Result<PathBuf> {
+/// `index.html`. Every file written is a pure function of the inputs: no measured time is
+/// embedded. With `timings`, the report links to the timing files (`timings.json`,
+/// `timings.csv`, `solve_times.svg`, written by [`crate::timings::write_run`]); without, it
+/// says they were not recorded.
+pub fn write(
+    scene: &Scene,
+    control: &Control,
+    result: &RunResult,
+    out: &Path,
+    timings: bool,
+) -> Result<PathBuf> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let sc = &control.scenario;
     let structure = &sc.structure;
@@ -218,7 +294,7 @@ pub fn write(scene: &Scene, control: &Control, result: &RunResult, out: &Path) -
             x: "t (s)".into(),
             y: "V/V(0)".into(),
             log_y: true,
-            reference: Some((0.1, "0.1 (criterion)".into())),
+            references: vec![(0.1, "0.1 (criterion)".into())],
             points: false,
         },
         &[(control.controller.kind.name().to_uppercase(), cost)],
@@ -267,21 +343,6 @@ pub fn write(scene: &Scene, control: &Control, result: &RunResult, out: &Path) -
         },
         &angles,
     )?;
-    // solve time per sample against τs
-    let solve: Vec<(f64, f64)> = result.samples.iter().map(|s| (s.t, s.solve_time)).collect();
-    plot::lines(
-        &out.join("solve_times.svg"),
-        (900, 420),
-        &Axes {
-            title: "solve time per sample".into(),
-            x: "t (s)".into(),
-            y: "solve time (s)".into(),
-            log_y: true,
-            reference: Some((sc.mpc.sampling, format!("τs = {} s", sc.mpc.sampling))),
-            points: false,
-        },
-        &[("solve time".into(), solve)],
-    )?;
     // snapshots (Fig. 7) and their animation
     snapshots_svg(result, planar, &out.join("snapshots.svg"))?;
     animation_svg(result, planar, &out.join("animation.svg"))?;
@@ -289,26 +350,17 @@ pub fn write(scene: &Scene, control: &Control, result: &RunResult, out: &Path) -
     let s = &result.summary;
     let title = format!("flexmpc: {}", scene.name);
     let mut h = String::new();
-    let _ = writeln!(
-        h,
-        r#"<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><title>{}</title>
-<style>
-body {{ font-family: sans-serif; max-width: 1250px; margin: 1em auto; padding: 0 1em; color: #222; }}
-table {{ border-collapse: collapse; margin: 0.5em 0 1em; }}
-th, td {{ border: 1px solid #bbb; padding: 3px 8px; text-align: left; }}
-th {{ background: #f0f0f0; }}
-figure {{ margin: 1em 0; }} img {{ max-width: 100%; border: 1px solid #ddd; }}
-figcaption {{ color: #555; font-size: 0.9em; }}
-.ok {{ color: #161; font-weight: bold; }} .fail {{ color: #a11; font-weight: bold; }}
-</style></head><body>"#,
-        esc(&title)
-    );
+    head(&mut h, &title);
     let _ = writeln!(h, "<h1>{}</h1>\n<p>{}</p>", esc(&title), esc(scene.description.trim()));
     let _ = writeln!(
         h,
         r#"<p id="figure-status">figures: script did not run</p>
-<p>Files: <a href="timeseries.csv">timeseries.csv</a>, <a href="samples.json">samples.json</a> (per-sample solver log), <a href="summary.json">summary.json</a>, <a href="snapshots.json">snapshots.json</a>.</p>"#
+<p>Files: <a href="timeseries.csv">timeseries.csv</a>, <a href="samples.json">samples.json</a> (per-sample solver log), <a href="summary.json">summary.json</a>, <a href="snapshots.json">snapshots.json</a>{}.</p>"#,
+        if timings {
+            r#"; measured timings: <a href="timings.json">timings.json</a>, <a href="timings.csv">timings.csv</a>"#
+        } else {
+            ""
+        }
     );
 
     // closed-loop summary
@@ -334,13 +386,6 @@ figcaption {{ color: #555; font-size: 0.9em; }}
         ),
         ("rigid rate at T / at 0", format!("{:.3e}", s.rigid_rate_ratio)),
         (
-            "solve time per sample: median / worst (s)",
-            format!(
-                "{:.4} / {:.4} (τs = {} s)",
-                s.solve_time_median_s, s.solve_time_worst_s, sc.mpc.sampling
-            ),
-        ),
-        (
             "samples: total / failed first attempts / relaxed / LMPC fallback",
             format!(
                 "{} / {} / {} / {}",
@@ -352,7 +397,6 @@ figcaption {{ color: #555; font-size: 0.9em; }}
         ),
         ("time reached (s)", format!("{}", s.t_end)),
         ("stopped early because", s.error.clone().unwrap_or_else(|| "—".into())),
-        ("wall time of the loop, plant included (s)", format!("{:.2}", result.wall_time_s)),
     ] {
         row(&mut h, k, &v);
     }
@@ -372,11 +416,27 @@ figcaption {{ color: #555; font-size: 0.9em; }}
     figure(&mut h, "inputs.svg", "Control inputs, each held for τs (paper Fig. 10).");
     figure(&mut h, "angles.svg", "Joint angles (supports: the root link's orientation).");
     let _ = writeln!(h, "<h2>Solve time per sample</h2>");
-    figure(
-        &mut h,
-        "solve_times.svg",
-        "Wall time of each sample's solve (all attempts) against the sampling time τs.",
-    );
+    if timings {
+        let _ = writeln!(
+            h,
+            r#"<p>Measured wall-clock times (they change from run to run, so they are kept in their own files: <a href="timings.json">timings.json</a> has the median and worst solve time and the loop's wall time, <a href="timings.csv">timings.csv</a> each sample's; every other file of this folder is reproducible).</p>"#
+        );
+        figure(
+            &mut h,
+            "solve_times.svg",
+            &format!(
+                "Wall time of each sample's solve (all attempts) against the sampling time τs = {} s and the {} ms goal.",
+                sc.mpc.sampling,
+                crate::timings::SOLVE_TIME_GOAL_S * 1e3
+            ),
+        );
+    } else {
+        let _ = writeln!(
+            h,
+            "<p>Timings were not recorded (<code>--no-timings</code>): this folder is a pure \
+             function of the inputs.</p>"
+        );
+    }
 
     // scene summary
     let _ = writeln!(h, "<h2>Scene</h2><table>");
@@ -509,6 +569,108 @@ window.addEventListener('load', function () {{
 </script>
 </body></html>"#
     );
+    let path = out.join("index.html");
+    std::fs::write(&path, h).with_context(|| format!("writing {}", path.display()))?;
+    Ok(path)
+}
+
+/// Writes the sweep's `index.html` into `out` (next to the figures written by
+/// [`crate::control::run_sweep`]): one table row per run and the figures — scaled cost
+/// (Figs. 6, 8), snapshots (Figs. 7, 9), inputs (Fig. 10) and, with `timings`, the solve time
+/// per sample (linked, no measured number in the page). Returns its path.
+pub fn write_sweep(
+    scene: &Scene,
+    control: &Control,
+    runs: &[crate::control::SweepRun],
+    out: &Path,
+    timings: bool,
+) -> Result<PathBuf> {
+    let title = format!("flexmpc sweep: {}", scene.name);
+    let mut h = String::new();
+    head(&mut h, &title);
+    let _ = writeln!(h, "<h1>{}</h1>\n<p>{}</p>", esc(&title), esc(scene.description.trim()));
+    let _ = writeln!(
+        h,
+        r#"<p>{} closed loops on the {} plant ({} s each, τs = {} s). Files: <a href="sweep.csv">sweep.csv</a>, <a href="sweep.json">sweep.json</a>, per run <code>runs/&lt;controller&gt;-w&lt;ω0&gt;.csv</code> and <code>-snapshots.svg</code>{}.</p>"#,
+        runs.len(),
+        control.plant.name(),
+        control.scenario.duration,
+        control.scenario.mpc.sampling,
+        if timings {
+            r#"; measured timings: <a href="timings.json">timings.json</a>, <a href="timings.csv">timings.csv</a>"#
+        } else {
+            ""
+        }
+    );
+    let _ = writeln!(
+        h,
+        "<h2>Runs</h2><table><tr><th>controller</th><th>ω0 (rad/s)</th><th>stabilised</th>\
+         <th>V(T)/V(0)</th><th>largest joint angle (deg)</th><th>orientation error / largest \
+         (deg)</th><th>rigid rate ratio</th><th>relaxed / fallback samples</th><th>stopped \
+         early</th><th>time series</th></tr>"
+    );
+    for r in runs {
+        match &r.result {
+            Ok(res) => {
+                let s = &res.summary;
+                let stem = format!("{}-w{}", s.controller, s.omega0);
+                let _ = writeln!(
+                    h,
+                    r#"<tr><td>{}</td><td>{}</td><td class="{}">{}</td><td>{:.3e}</td><td>{:.1}</td><td>{:.2} / {:.1}</td><td>{:.2e}</td><td>{} / {}</td><td>{}</td><td><a href="runs/{stem}.csv">csv</a>, <a href="runs/{stem}-snapshots.svg">snapshots</a></td></tr>"#,
+                    esc(&s.controller),
+                    s.omega0,
+                    if s.stabilised { "ok" } else { "fail" },
+                    if s.stabilised { "yes" } else { "no" },
+                    s.v_ratio_final,
+                    s.max_joint_angle_deg,
+                    s.orientation_error_deg,
+                    s.max_orientation_deg,
+                    s.rigid_rate_ratio,
+                    s.relaxed_samples,
+                    s.fallback_samples,
+                    esc(&s
+                        .error
+                        .as_ref()
+                        .map_or("—".to_string(), |e| format!("at {} s: {e}", s.t_end))),
+                );
+            }
+            Err(e) => {
+                let _ = writeln!(
+                    h,
+                    r#"<tr><td>{}</td><td>{}</td><td class="fail">failed</td><td colspan="7">{}</td></tr>"#,
+                    r.controller.name(),
+                    r.omega0,
+                    esc(e)
+                );
+            }
+        }
+    }
+    let _ = writeln!(h, "</table>");
+    let _ = writeln!(h, "<h2>Cost</h2>");
+    figure(&mut h, "cost.svg", "State part of the cost, V(t)/V(0), per ω0 (paper Figs. 6, 8).");
+    let _ = writeln!(h, "<h2>Snapshots</h2>");
+    figure(&mut h, "snapshots.svg", "Deformed structure every snapshot interval, blue (t = 0) to red (end), per run (paper Figs. 7, 9).");
+    let _ = writeln!(h, "<h2>Inputs</h2>");
+    figure(&mut h, "inputs.svg", "Control inputs per ω0, each held for τs (paper Fig. 10).");
+    let _ = writeln!(h, "<h2>Solve time per sample</h2>");
+    if timings {
+        figure(
+            &mut h,
+            "solve_times.svg",
+            &format!(
+                "Measured wall time of each sample's solve against τs = {} s and the {} ms goal (timings.json, timings.csv).",
+                control.scenario.mpc.sampling,
+                crate::timings::SOLVE_TIME_GOAL_S * 1e3
+            ),
+        );
+    } else {
+        let _ = writeln!(
+            h,
+            "<p>Timings were not recorded (<code>--no-timings</code>): this folder is a pure \
+             function of the inputs.</p>"
+        );
+    }
+    let _ = writeln!(h, "<p>Written by flexmpc {}.</p>\n</body></html>", env!("CARGO_PKG_VERSION"));
     let path = out.join("index.html");
     std::fs::write(&path, h).with_context(|| format!("writing {}", path.display()))?;
     Ok(path)

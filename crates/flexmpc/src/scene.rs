@@ -278,7 +278,7 @@ pub struct KindsSpec {
 #[serde(deny_unknown_fields)]
 pub struct ModesSpec {
     /// Number of modes (rigid ones included) listed and plotted by `flexmpc modes` and in
-    /// the report [8]; ≥ 1. `--modes` overrides.
+    /// the report (default 8); ≥ 1. `--modes` overrides.
     pub count: Option<usize>,
     /// Reference angles (degrees, finite) of the structure's first joint at which
     /// `flexmpc modes` computes the modes, e.g. `[0, 45, 90]` (paper Figs. 4–5) [the angle of
@@ -305,37 +305,37 @@ pub struct WeightsSpec {
     pub kx1: Option<f64>,
     /// `k_x2`, weight of the strain coordinates `q2` (≥ 0) [0.01].
     pub kx2: Option<f64>,
-    /// `k_Δξ`, weight of the quaternion jump across the joints (36) (≥ 0) [2].
+    /// `k_Δξ`, weight of the quaternion jump across the joints (36) (≥ 0) (default 2).
     pub k_dxi: Option<f64>,
     /// `k_u`, `R = k_u I` (> 0) [0.1].
     pub ku: Option<f64>,
-    /// `Kξ` entries of the shifting-equilibrium and rigid modes' quaternion modes (≥ 0) [1].
+    /// `Kξ` entries of the shifting-equilibrium and rigid modes' quaternion modes (≥ 0) (default 1).
     pub k_xi_rigid: Option<f64>,
     /// `Kξ` entries of the elastic modes' quaternion modes (≥ 0) [0.01].
     pub k_xi_elastic: Option<f64>,
-    /// Input bound `|u_i| ≤ u_max` (N or N·m, > 0) [5].
+    /// Input bound `|u_i| ≤ u_max` (N or N·m, > 0) (default 5).
     pub u_max: Option<f64>,
 }
 
-/// `[controller]`: which MPC and its solver settings (defaults in brackets, those of
+/// `[controller]`: which MPC and its solver settings (the defaults are those of
 /// `mpc::ControllerSettings`).
 #[derive(Debug, Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 pub struct ControllerSpec {
     /// `nmpc` (SQP on the augmented modal model) or `lmpc` (one QP on the model linearised
-    /// at the reference) [nmpc]. `--controller` overrides.
+    /// at the reference) (default nmpc). `--controller` overrides.
     pub kind: Option<String>,
     /// One SQP iteration per sample from the shifted plan instead of iterating to the KKT
     /// tolerance [false].
     pub real_time_iteration: Option<bool>,
-    /// SQP iteration limit per sample (≥ 1) [10].
+    /// SQP iteration limit per sample (≥ 1) (default 10).
     pub max_iterations: Option<usize>,
     /// KKT tolerance of the SQP (> 0) [1e-4].
     pub kkt_tolerance: Option<f64>,
     /// An iteration-limit plan is accepted when its shooting defects are at most this
     /// (> 0) [1e-2].
     pub accept_violation: Option<f64>,
-    /// Levenberg–Marquardt term of the first SQP attempt (≥ 0) [0].
+    /// Levenberg–Marquardt term of the first SQP attempt (≥ 0) (default 0).
     pub levenberg_marquardt: Option<f64>,
     /// On failure, retry from the linear MPC plan with the paper's sub-relaxation [true].
     pub retry: Option<bool>,
@@ -348,7 +348,7 @@ pub struct ControllerSpec {
     /// Integrator in each shooting interval: `lawson-rk4`, `rk4` or `implicit-midpoint`
     /// [lawson-rk4].
     pub integrator: Option<String>,
-    /// Integrator substeps per shooting interval `τp/Nc` (≥ 1) [16].
+    /// Integrator substeps per shooting interval `τp/Nc` (≥ 1) (default 16).
     pub substeps: Option<usize>,
     /// Weights of the cost, the paper's by default.
     pub weights: Option<Spanned<WeightsSpec>>,
@@ -360,12 +360,12 @@ pub struct ControllerSpec {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ScenarioSpec {
-    /// Disturbance magnitude `ω0` (rad/s, finite) [1]. `--omega0` overrides.
+    /// Disturbance magnitude `ω0` (rad/s, finite) (default 1). `--omega0` overrides.
     pub omega0: Option<f64>,
     /// Axis of the initial rigid rotation (global, non-zero): the initial rate is
     /// `ω0 · axis`, not normalised (the paper's 3D case: `[0, 1, 1]`, magnitude `√2 ω0`).
     pub axis: [f64; 3],
-    /// Centre of the initial rigid rotation (global, m) [origin].
+    /// Centre of the initial rigid rotation (global, m) (default origin).
     pub center: Option<[f64; 3]>,
     /// Support whose angle measures the root link's orientation [the first support].
     pub root: Option<String>,
@@ -375,19 +375,19 @@ pub struct ScenarioSpec {
     /// Sampling time `τs` (s, in (0, horizon], a multiple of `output_interval`): each control
     /// is held for `τs` [0.2].
     pub sampling: Option<f64>,
-    /// Prediction horizon `τp` (s, > 0) [6].
+    /// Prediction horizon `τp` (s, > 0) (default 6).
     pub horizon: Option<f64>,
-    /// Number `Nc` of piecewise-constant control intervals over `τp` (≥ 1) [24].
+    /// Number `Nc` of piecewise-constant control intervals over `τp` (≥ 1) (default 24).
     pub intervals: Option<usize>,
     /// Plant: `fe` (the constrained FE model, the paper's) or `rom` (the modal model
-    /// itself, fast studies) [fe]. `--plant` overrides.
+    /// itself, fast studies) (default fe). `--plant` overrides.
     pub plant: Option<String>,
     /// Interval of the recorded time series (s, a multiple of `[run] dt`) [0.05].
     pub output_interval: Option<f64>,
     /// Interval of the snapshots of the deformed structure (s, a multiple of
     /// `output_interval`) [0.25].
     pub snapshot_interval: Option<f64>,
-    /// Lawson RK4 steps per output interval when the plant is `rom` (≥ 1) [16].
+    /// Lawson RK4 steps per output interval when the plant is `rom` (≥ 1) (default 16).
     pub rom_plant_substeps: Option<usize>,
 }
 
@@ -501,7 +501,7 @@ pub struct Scene {
     pub description: String,
     /// Scene name: the file stem (output folders are `out/<name>`).
     pub name: String,
-    /// Modes listed and plotted by `flexmpc modes` and the report (`[modes] count`) [8].
+    /// Modes listed and plotted by `flexmpc modes` and the report (`[modes] count`) (default 8).
     pub mode_count: usize,
     /// Reference angles (deg) for `flexmpc modes` (`[modes] angles`; empty: the scene's).
     pub mode_angles: Vec<f64>,

@@ -134,11 +134,19 @@ fn mpc_short_run_writes_csv_solver_log_and_report() {
     let samples = samples.as_array().unwrap();
     assert_eq!(samples.len(), 5, "one solve per τs = 0.2 s over 1 s");
     for s in samples {
-        for k in ["t", "status", "strategy", "iterations", "solve_time", "u"] {
+        for k in ["t", "status", "strategy", "iterations", "u"] {
             assert!(s.get(k).is_some(), "sample lacks `{k}`: {s}");
         }
+        assert!(s.get("solve_time").is_none(), "measured times go to timings.json: {s}");
         assert!(s["u"].as_array().unwrap().iter().all(|u| u.as_f64().unwrap().abs() <= 5.0));
     }
+    // the solve times per sample are in the timing files
+    let timings: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("timings.json")).unwrap()).unwrap();
+    assert_eq!(timings["samples"].as_array().unwrap().len(), 5);
+    assert_eq!(timings["sampling_s"].as_f64(), Some(0.2));
+    let worst = timings["solve_time_worst_s"].as_f64().unwrap();
+    assert_eq!(v["solve_time_worst_s"].as_f64(), Some(worst), "stdout and timings.json agree");
     for f in ["index.html", "cost.svg", "inputs.svg", "snapshots.svg", "summary.json"] {
         assert!(out.join(f).exists(), "{f} missing");
     }
@@ -171,6 +179,14 @@ fn sweep_two_omegas_in_parallel() {
     let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
     assert_eq!(csv.lines().count(), 3);
     assert!(out.join("cost.svg").exists() && out.join("runs/lmpc-w0.25.csv").exists());
+    // Fig. 10 (inputs), Figs. 7/9 (snapshots), solve time per sample against τs
+    for f in ["inputs.svg", "snapshots.svg", "solve_times.svg", "runs/lmpc-w0.75-snapshots.svg"] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+    let solve = std::fs::read_to_string(out.join("solve_times.svg")).unwrap();
+    assert!(solve.contains("τs = 0.2 s") && solve.contains("goal 50 ms"), "reference lines");
+    let t = std::fs::read_to_string(out.join("timings.csv")).unwrap();
+    assert_eq!(t.lines().count(), 3, "header + one row per run: {t}");
 }
 
 /// `--quiet`: nothing on stdout or stderr for a successful run.

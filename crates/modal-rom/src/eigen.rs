@@ -18,8 +18,11 @@
 //! ```
 //!
 //! and massless rows (`B1 = 0`) add the constraint `(K φ1)_massless = 0`. All constraints are
-//! absorbed into a null-space basis `Z` (32). With `ZᵀB1Z = L1 L1ᵀ` and `B2 = L2 L2ᵀ`
-//! (Cholesky), `L1⁻¹ ZᵀKZ L1⁻ᵀ = MᵀM` with `M = L2⁻¹ Dᵀ Z L1⁻ᵀ`, so the frequencies are the
+//! absorbed into a null-space basis `Z` (32): the velocity and rigid rows by an SVD, the
+//! massless directions (null space of `F Z`, `FᵀF = B1`, decided on singular values) by static
+//! condensation, a least-squares solve on the strain map `L2⁻¹DᵀZ` (see `condense_massless`).
+//! With `ZᵀB1Z = L1 L1ᵀ` and `B2 = L2 L2ᵀ` (Cholesky; for a block with massless coordinates,
+//! `L1ᵀ` is the QR factor of `F Z`), `L1⁻¹ ZᵀKZ L1⁻ᵀ = MᵀM` with `M = L2⁻¹ Dᵀ Z L1⁻ᵀ`, so the frequencies are the
 //! singular values of `M` (faer SVD): `M v = ω u`, `φ1 = Z L1⁻ᵀ v`, `φ2 = L2⁻ᵀ u`. Working
 //! with `M` instead of `K` avoids squaring its condition number (shear stiffness over h²,
 //! rotary inertia 1e-5: cond(K) ≈ 1e8–1e10 for the paper's scenes): `φ1` is `B1`-orthonormal
@@ -41,17 +44,24 @@ use faer::{Mat, MatRef, Side};
 #[derive(Clone, Debug, PartialEq)]
 pub struct EigenSettings {
     /// An eigenvalue `ω²` is a rigid-body mode when `ω² ≤ rigid_tolerance · max ω²`.
-    /// Default `1e-10` (round-off gives `|ω²| ≈ 1e-16 · max ω²`; the lowest elastic mode of
-    /// the paper's scenes sits near `1e-7 · max ω²` at 2×50 elements). Range `(0, 1e-4]`.
+    /// Default `1e-24`, i.e. `ω ≤ 1e-12 ω_max`. The frequencies are singular values (SVD
+    /// route), so a rigid mode comes out at round-off `ω ≈ 1e-16 ω_max` (measured
+    /// `ω² ≤ 5e-32 max ω²`, free–free beams up to 400 elements). The lowest elastic mode sits
+    /// near `1e-7 · max ω²` for the paper's sections at any mesh, but an Euler–Bernoulli
+    /// section (rigid shear, massless rotation) has `max ω² ∝ N⁶` (slaved node rotations) and
+    /// its first bending mode near `0.5 N⁻⁶ · max ω²` (clamped) or `77 N⁻⁶` (free–free):
+    /// a looser default (the former `1e-10`) turned its low bending modes into "rigid" ones
+    /// from about 42 elements on. `1e-24` holds to about 9000 elements. Range `(0, 1e-4]`.
     pub rigid_tolerance: f64,
-    /// Relative singular-value cut-off for constraint rank and massless directions.
-    /// Default `1e-10`. Range `(0, 1e-3]`.
+    /// Relative singular-value cut-off for constraint rank and massless directions (singular
+    /// values of `F Z`, `FᵀF = B1`: an Euler–Bernoulli section's clamped slaved rotations reach
+    /// `≈ 0.74/N²`, exact massless directions round-off). Default `1e-10`. Range `(0, 1e-3]`.
     pub rank_tolerance: f64,
 }
 
 impl Default for EigenSettings {
     fn default() -> Self {
-        EigenSettings { rigid_tolerance: 1e-10, rank_tolerance: 1e-10 }
+        EigenSettings { rigid_tolerance: 1e-24, rank_tolerance: 1e-10 }
     }
 }
 
@@ -351,6 +361,127 @@ impl UnionFind {
     }
 }
 
+/// `F` with `FᵀF = B1` (rows: the massive directions of `B1`): `diag(√b_ii)` rows for a
+/// diagonal `B1` (exact), else `Λ^½Uᵀ` from its eigen decomposition, dropping eigenvalues
+/// `≤ tol · λ_max` (its own null space).
+fn mass_factor(b1: &Mat<f64>, tol: f64) -> Result<Mat<f64>> {
+    let n = b1.nrows();
+    let diagonal = (0..n).all(|j| (0..n).all(|i| i == j || b1[(i, j)] == 0.0));
+    if diagonal {
+        let rows: Vec<usize> = (0..n).filter(|&i| b1[(i, i)] > 0.0).collect();
+        let mut f = Mat::<f64>::zeros(rows.len(), n);
+        for (r, &i) in rows.iter().enumerate() {
+            f[(r, i)] = b1[(i, i)].sqrt();
+        }
+        return Ok(f);
+    }
+    let eig = b1.self_adjoint_eigen(Side::Lower).map_err(|e| ModalError::Numerical {
+        stage: "eigen of the mass block B1".into(),
+        reason: format!("{e:?}"),
+    })?;
+    let s = eig.S().column_vector();
+    let smax = (0..n).map(|i| s[i]).fold(0.0f64, f64::max);
+    let keep: Vec<usize> = (0..n).filter(|&i| s[i] > tol * smax).collect();
+    let u = eig.U();
+    Ok(Mat::from_fn(keep.len(), n, |r, j| s[keep[r]].sqrt() * u[(j, keep[r])]))
+}
+
+/// Static condensation of the massless directions of the constrained space `Z`
+/// (theory.md §4: massless rows add `(Kφ1)_massless = 0`), for blocks whose `B1` is singular.
+///
+/// The massless directions are decided on `F Z` (`FᵀF = B1`) by its singular values, not on
+/// the eigenvalues of `ZᵀB1Z` (their squares): an Euler–Bernoulli section (rigid shear,
+/// massless rotation) slaves the node rotations to the deflections through the trapezoidal
+/// shear rows, so that `F Z` has genuine singular values down to `≈ 0.74/N²` of its largest
+/// (measured, clamped and free ends, 10–400 elements) beside exact zeros (a free end's
+/// alternating rotation). Their squares, the eigenvalues of `ZᵀB1Z`, fall below a `1e-10`
+/// cut-off from about 270 elements on; the `F Z` test keeps them apart to `N ≈ 10⁵`. The former
+/// trigger, a failed Cholesky of `ZᵀB1Z`, missed exact zeros at 20, 50, 200 and 400 elements
+/// (round-off pivots), leaving spurious `ω² ≈ 1e20–1e23`. The massless
+/// coordinates `b` are then eliminated by least squares on the strain map
+/// `S = L2⁻¹D_eᵀZ` (minimum strain energy, `(ZN)ᵀKφ1 = 0`, without forming `K`), and the
+/// returned `L1` (lower, `L1L1ᵀ = ZᵀB1Z` on the new `Z`) comes from the QR factor of `F Z`,
+/// again without squaring. Returns the new `Z` and `L1`.
+fn condense_massless(
+    f: &Mat<f64>,
+    z: &Mat<f64>,
+    de: &Mat<f64>,
+    l2: &Mat<f64>,
+    tol: f64,
+) -> Result<(Mat<f64>, Mat<f64>)> {
+    let numerical =
+        |stage: &str, e: String| ModalError::Numerical { stage: stage.into(), reason: e };
+    let nz = z.ncols();
+    let fz = f * z;
+    // (rank, V): a block without any mass (no rows in F) is massless in every direction
+    let (rank, v) = if fz.nrows() == 0 {
+        (0, Mat::<f64>::identity(nz, nz))
+    } else {
+        let svd =
+            fz.svd().map_err(|e| numerical("SVD of the mass factor on Z", format!("{e:?}")))?;
+        let s = svd.S().column_vector();
+        let smax = (0..s.nrows()).map(|i| s[i]).fold(0.0f64, f64::max);
+        ((0..s.nrows()).filter(|&i| s[i] > tol * smax).count(), svd.V().to_owned())
+    };
+    let z_new = if rank == nz {
+        z.to_owned()
+    } else {
+        let vr = v.get(.., ..rank).to_owned();
+        let vn = v.get(.., rank..).to_owned();
+        // strain map of the massive and massless directions, S = L2⁻¹ D_eᵀ Z
+        let mut sz = de.transpose() * z;
+        l2.solve_lower_triangular_in_place(sz.as_mut());
+        let (s_r, s_n) = (&sz * &vr, &sz * &vn);
+        let n_massless = nz - rank;
+        let scale = max_abs(sz.as_ref()).max(f64::MIN_POSITIVE);
+        let without_stiffness = |smallest: f64| {
+            numerical(
+                "static condensation of massless directions",
+                format!(
+                    "{n_massless} massless direction(s) of a block without stiffness of their own \
+                     (the smallest strain singular value is {smallest:e} of {scale:e}): a \
+                     massless mechanism has no dynamics"
+                ),
+            )
+        };
+        if s_n.nrows() < n_massless {
+            return Err(without_stiffness(0.0));
+        }
+        let svd_n =
+            s_n.svd().map_err(|e| numerical("SVD of the massless strain map", format!("{e:?}")))?;
+        let sn = svd_n.S().column_vector();
+        if (0..n_massless).any(|i| sn[i] <= tol * scale || !sn[i].is_finite()) {
+            return Err(without_stiffness(
+                (0..n_massless).map(|i| sn[i]).fold(f64::INFINITY, f64::min),
+            ));
+        }
+        // b = −(S N)⁺ S V_r a: the least-squares (minimum strain energy) massless part
+        let (un, vn_s) = (svd_n.U(), svd_n.V());
+        let mut coef = un.get(.., ..n_massless).transpose() * &s_r; // n_massless × rank
+        for i in 0..n_massless {
+            let inv = 1.0 / sn[i];
+            for j in 0..rank {
+                coef[(i, j)] *= inv;
+            }
+        }
+        let b = vn_s * &coef; // n_massless × rank
+        z * (&vr - &vn * &b)
+    };
+    if rank == 0 {
+        return Ok((Mat::zeros(z.nrows(), 0), Mat::zeros(0, 0)));
+    }
+    let qr = (f * &z_new).qr();
+    let t = qr.thin_R();
+    let l1 = t.transpose().to_owned();
+    if (0..l1.nrows()).any(|i| l1[(i, i)] == 0.0 || !l1[(i, i)].is_finite()) {
+        return Err(numerical(
+            "QR of the reduced mass factor",
+            "massless directions left after condensation".into(),
+        ));
+    }
+    Ok((z_new, l1))
+}
+
 /// One decoupled block's solution before rigid/elastic classification.
 struct BlockSolution {
     s1: Vec<usize>,
@@ -410,32 +541,29 @@ fn solve_block(
             .L()
             .to_owned()
     };
-    let mut b1r = z.transpose() * &b1 * &z;
-    symmetrize(&mut b1r);
-    if z.ncols() > 0 && b1r.llt(Side::Lower).is_err() {
-        // Massless directions: (K φ1) vanishes there (theory.md §4), K = D B2⁻¹ Dᵀ.
-        let mut y = de.transpose().to_owned();
-        l2.solve_lower_triangular_in_place(y.as_mut());
-        let mut kr = (&y * &z).transpose() * (&y * &z);
-        symmetrize(&mut kr);
-        let eig = b1r.self_adjoint_eigen(Side::Lower).map_err(|e| ModalError::Numerical {
-            stage: "eigen of the reduced mass matrix".into(),
-            reason: format!("{e:?}"),
-        })?;
-        let s = eig.S().column_vector();
-        let smax = (0..s.nrows()).map(|i| s[i].abs()).fold(0.0f64, f64::max);
-        let idx: Vec<usize> = (0..s.nrows()).filter(|&i| s[i] <= tol * smax).collect();
-        let u = eig.U();
-        let n_mat = Mat::from_fn(b1r.nrows(), idx.len(), |i, j| u[(i, idx[j])]);
-        let cons2 = n_mat.transpose() * &kr;
-        let z2 = null_space(cons2.as_ref(), tol)?;
-        z = &z * &z2;
-        b1r = z.transpose() * &b1 * &z;
+    // Massless directions. A block whose B1 has a null space (a zero diagonal entry of a
+    // diagonal B1, e.g. the rotation of an Euler–Bernoulli section; eigenvalues ≤ tol · max of
+    // a non-diagonal one) goes through `condense_massless` whatever the conditioning of ZᵀB1Z;
+    // other blocks (every paper section) keep the plain Cholesky route, unchanged.
+    let mut l1 = None;
+    if z.ncols() > 0 {
+        let f = mass_factor(&b1, tol)?;
+        let massless_coordinates = f.nrows() < s1.len();
+        let mut b1r = z.transpose() * &b1 * &z;
         symmetrize(&mut b1r);
+        let chol = if massless_coordinates { None } else { b1r.llt(Side::Lower).ok() };
+        match chol {
+            Some(c) => l1 = Some(c.L().to_owned()),
+            None => {
+                let (z_new, l1_new) = condense_massless(&f, &z, &de, &l2, tol)?;
+                z = z_new;
+                l1 = Some(l1_new);
+            }
+        }
     }
     let nz = z.ncols();
     let elastic_cols: Vec<usize> = elastic.iter().map(|&i| s2[i]).collect();
-    if nz == 0 {
+    let Some(l1) = l1.filter(|_| nz > 0) else {
         return Ok(BlockSolution {
             s1,
             elastic_cols,
@@ -443,15 +571,7 @@ fn solve_block(
             phi1: Mat::zeros(all1.len(), 0),
             phi2: Mat::zeros(elastic.len(), 0),
         });
-    }
-    let l1 = b1r
-        .llt(Side::Lower)
-        .map_err(|e| ModalError::Numerical {
-            stage: "Cholesky of the reduced mass matrix ZᵀB1Z".into(),
-            reason: format!("{e:?} (massless directions left after elimination)"),
-        })?
-        .L()
-        .to_owned();
+    };
     // M = L2⁻¹ D_eᵀ Z L1⁻ᵀ, so that L1⁻¹ ZᵀKZ L1⁻ᵀ = MᵀM: the singular values of M are the
     // frequencies ω (no squaring of the condition number), its right singular vectors give
     // φ1 = Z L1⁻ᵀ v and its left ones φ2 = L2⁻ᵀ u = B2⁻¹Dᵀφ1/ω, exactly C-orthonormal.

@@ -37,8 +37,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Some(v) = env("MPC_KU")? {
         scenario.mpc.ku = v;
     }
-    if std::env::var("MPC_GRID").is_ok_and(|v| v == "absolute") {
-        scenario.mpc.control_grid = mpc::ControlGrid::Absolute;
+    match std::env::var("MPC_GRID").as_deref() {
+        Ok("absolute") => scenario.mpc.control_grid = mpc::ControlGrid::Absolute,
+        Ok("sample") => scenario.mpc.control_grid = mpc::ControlGrid::Sample,
+        _ => {}
     }
     let quiet = std::env::var("MPC_QUIET").is_ok();
     let setup = Setup::new(&scenario)?;

@@ -20,8 +20,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .map(|s| s.parse())
         .collect::<Result<_, _>>()?;
     let mut scenario = if dim == "3d" { Scenario::paper_3d(50)? } else { Scenario::paper_2d(50)? };
-    if std::env::var("MPC_GRID").is_ok_and(|v| v == "absolute") {
-        scenario.mpc.control_grid = mpc::ControlGrid::Absolute;
+    match std::env::var("MPC_GRID").as_deref() {
+        Ok("absolute") => scenario.mpc.control_grid = mpc::ControlGrid::Absolute,
+        Ok("sample") => scenario.mpc.control_grid = mpc::ControlGrid::Sample,
+        _ => {}
+    }
+    if let Ok(v) = std::env::var("MPC_KDXI") {
+        scenario.mpc.k_dxi = v.parse()?;
     }
     let setup = Setup::new(&scenario)?;
     let mut c = ControllerSettings::of(kind);
@@ -32,17 +37,45 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Ok(v) = std::env::var("MPC_LM") {
         c.levenberg_marquardt = v.parse()?;
     }
+    if let Ok(v) = std::env::var("MPC_JLIM") {
+        c.plan_joint_limit_deg = if v == "off" { None } else { Some(v.parse()?) };
+    }
+    if let Ok(v) = std::env::var("MPC_HOLD") {
+        c.fallback_hold = v.parse()?;
+    }
+    if let Ok(v) = std::env::var("MPC_RETRY_LM") {
+        c.retry_levenberg_marquardt = v.parse()?;
+    }
+    if let Ok(v) = std::env::var("MPC_ALPHA") {
+        c.retry_relaxation = Some(v.parse()?);
+    }
+    let monitor = mpc::JointMonitor::new(&setup)?;
     let results = sweep(&setup, &omegas, &c, plant, &|| {});
     for r in results {
         let r = r?;
+        if std::env::var("MPC_TRACE").is_ok() {
+            for smp in &r.samples {
+                let k = ((smp.t / r.records[1].t).round() as usize).min(r.records.len() - 1);
+                let rec = &r.records[k];
+                println!(
+                    "  t={:.2} {:?} first={} it={} planj={:.1} projj={:.1} joints={:?} V={:.3e} u={:?}",
+                    smp.t, smp.strategy, smp.first_status, smp.iterations,
+                    smp.plan_joint_angle_deg.unwrap_or(f64::NAN),
+                    monitor.max_angle(&rec.q).to_degrees(),
+                    rec.joint_angles.iter().map(|a| (a.to_degrees() * 10.0).round() / 10.0).collect::<Vec<_>>(),
+                    rec.v_state, smp.u.iter().map(|a| (a * 100.0).round() / 100.0).collect::<Vec<_>>()
+                );
+            }
+        }
         let s = &r.summary;
         println!(
             "{} {} {} w0={:.3} stab={} V={:.3e} joint={:.1}deg orient={:.2}/{:.1}deg rigid={:.3e} \
-             worst={:.3}s median={:.3}s failed1={} relaxed={} fallback={} t_end={} err={:?} wall={:.1}s",
+             worst={:.3}s median={:.3}s failed1={} relaxed={} fallback={} held={} jlim={} planj={:.1} t_end={} err={:?} wall={:.1}s",
             dim, s.controller, s.plant, s.omega0, s.stabilised, s.v_ratio_final,
             s.max_joint_angle_deg, s.orientation_error_deg, s.max_orientation_deg,
             s.rigid_rate_ratio, s.solve_time_worst_s, s.solve_time_median_s,
-            s.failed_first_attempts, s.relaxed_samples, s.fallback_samples, s.t_end, s.error,
+            s.failed_first_attempts, s.relaxed_samples, s.fallback_samples, s.held_samples, s.joint_limit_samples,
+            s.max_plan_joint_angle_deg, s.t_end, s.error,
             r.wall_time_s
         );
     }

@@ -7,6 +7,7 @@ use crate::dynamics::RomDynamics;
 use crate::error::{invalid, Result};
 use crate::plant::{relative_angle, PlantKind, SimPlant};
 use crate::scenario::{ratio, Setup};
+use crate::validity::JointMonitor;
 use crate::weights::ControlGrid;
 use nalgebra::{Vector3, Vector4};
 use rayon::prelude::*;
@@ -73,6 +74,15 @@ pub struct RunSummary {
     pub relaxed_samples: usize,
     /// Samples where the linear MPC plan was applied after NMPC failure.
     pub fallback_samples: usize,
+    /// Samples on the linear MPC plan within `ControllerSettings::fallback_hold` samples of a
+    /// fallback (NMPC not tried).
+    pub held_samples: usize,
+    /// Samples where at least one NMPC plan was rejected for leaving the model's range
+    /// (`ControllerSettings::plan_joint_limit_deg`).
+    pub joint_limit_samples: usize,
+    /// Largest joint angle between links predicted by any applied plan (deg; 0 without a
+    /// joint monitor).
+    pub max_plan_joint_angle_deg: f64,
     /// Time reached (s): the duration, or where the run stopped.
     pub t_end: f64,
     /// Why the run stopped early (plant failure), if it did.
@@ -203,8 +213,11 @@ fn observe(
 
 /// Runs one closed loop of `setup`'s scenario with disturbance magnitude `omega0`.
 ///
-/// A plant failure (e.g. Newton divergence of the FE step, or a diverging ROM plant) does not
-/// return `Err`: the run stops there and the summary says so (`error`, `stabilised = false`).
+/// A plant failure (e.g. Newton divergence of the FE step, or a diverging ROM plant) or a
+/// controller failure that leaves no plan (non-finite model evaluations) does not return
+/// `Err`: the run stops there and the summary says so (`error`, `stabilised = false`). With
+/// [`ControlGrid::Absolute`], a prediction to the grid that diverges is replaced by a plan
+/// from the measured state at the sample itself.
 pub fn run(
     setup: &Setup,
     omega0: f64,
@@ -229,6 +242,7 @@ pub fn run(
     }
     let mut ctrl =
         Controller::new(RomDynamics::new(&setup.rom)?, &setup.weights, &sc.mpc, controller)?;
+    ctrl.set_joint_monitor(JointMonitor::new(setup)?);
     let nu = sc.inputs.len();
     let mut u = vec![0.0; nu];
     let anchored = sc.mpc.control_grid == ControlGrid::Absolute;
@@ -252,27 +266,32 @@ pub fn run(
                 (Some(p), true) => {
                     // next time on the absolute grid kΔt (t itself when on it)
                     let g = ((t / dt_plan - 1e-9).ceil() * dt_plan).max(t);
-                    // the measured state predicted to the grid time under the control in
-                    // force; when that prediction diverges (a state far outside the model's
-                    // range under saturated inputs, e.g. a failing 3D LMPC) the run stops
-                    // there like on a plant failure, with its results so far
                     match ctrl.predict(&obs.q, p.piece(t, dt_plan), g - t) {
-                        Ok(x) => ctrl.step_from(t, g, &x)?,
-                        Err(e) => {
-                            error = Some(format!("prediction to the grid time {g}: {e}"));
-                            records.push(Record {
-                                t,
-                                v_state: setup.weights.state_cost(&obs.q),
-                                u: u.clone(),
-                                joint_angles: obs.joint_angles,
-                                tip: obs.tip,
-                                q: obs.q,
-                            });
-                            break;
-                        }
+                        Ok(x) => ctrl.step_from(t, g, &x),
+                        // the model diverges from the measured state (far outside its range):
+                        // plan from the measurement itself, starting at the sample
+                        Err(_) => ctrl.step(t, &obs.q),
                     }
                 }
-                _ => ctrl.step(t, &obs.q)?,
+                _ => ctrl.step(t, &obs.q),
+            };
+            let rep = match rep {
+                Ok(r) => r,
+                Err(e) => {
+                    // a solver failure that leaves no plan (e.g. non-finite model evaluations
+                    // from a state far outside the model's range) stops the run like a plant
+                    // failure does
+                    error = Some(format!("controller at t = {t}: {e}"));
+                    records.push(Record {
+                        t,
+                        v_state: setup.weights.state_cost(&obs.q),
+                        u: u.clone(),
+                        joint_angles: obs.joint_angles,
+                        tip: obs.tip,
+                        q: obs.q,
+                    });
+                    break;
+                }
             };
             let mut pieces: Vec<Vec<f64>> =
                 ctrl.plan().1.iter().map(|c| c.iter().copied().collect()).collect();
@@ -424,6 +443,12 @@ fn summarise(
             .count(),
         relaxed_samples: samples.iter().filter(|s| s.strategy == Strategy::Relaxed).count(),
         fallback_samples: samples.iter().filter(|s| s.strategy == Strategy::Fallback).count(),
+        held_samples: samples.iter().filter(|s| s.strategy == Strategy::Held).count(),
+        joint_limit_samples: samples.iter().filter(|s| s.joint_limit_rejections > 0).count(),
+        max_plan_joint_angle_deg: samples
+            .iter()
+            .filter_map(|s| s.plan_joint_angle_deg)
+            .fold(0.0, f64::max),
         t_end: last.t,
         error,
     }

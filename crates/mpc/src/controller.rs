@@ -3,6 +3,7 @@
 
 use crate::dynamics::RomDynamics;
 use crate::error::{invalid, Result};
+use crate::validity::JointMonitor;
 use crate::weights::{MpcSettings, Weights};
 use nalgebra::DVector;
 use ocp_transcription::{
@@ -31,6 +32,12 @@ impl ControllerKind {
         }
     }
 }
+
+/// Default of [`ControllerSettings::plan_joint_limit_deg`] (deg).
+pub const DEFAULT_PLAN_JOINT_LIMIT: Option<f64> = Some(20.0);
+
+/// Default of [`ControllerSettings::fallback_hold`] (samples).
+pub const DEFAULT_FALLBACK_HOLD: usize = 5;
 
 /// Settings of the controllers' solvers. Defaults in brackets.
 #[derive(Clone, Debug, PartialEq)]
@@ -72,6 +79,21 @@ pub struct ControllerSettings {
     /// When every NMPC attempt fails, apply the linear MPC plan [true]; `false`: apply the
     /// NMPC's own last (unconverged) iterate and warm-start the next sample from it.
     pub fallback_to_lmpc: bool,
+    /// Range of validity of the controller model: an NMPC plan (first attempt or relaxed
+    /// retry) whose predicted joint angle between links exceeds this (deg) at any of its
+    /// nodes is treated as a failed attempt (→ relaxed retry → linear MPC fallback), like a
+    /// solver failure. Needs the joint geometry ([`Controller::set_joint_monitor`]; the closed
+    /// loop sets it); `None`: no check. [20°: 2D NMPC on the FE plant, paper weights, the
+    /// issue's criterion met at every ω0 = 0.25…2 with 15° and 20°, not with 25° (✗ at 1.0,
+    /// 1.5) nor without the check (✗ from 1.0, elbow 56–240°); see docs/mpc.md]
+    pub plan_joint_limit_deg: Option<f64>,
+    /// After a fallback to the linear MPC plan, the next `fallback_hold` samples apply the
+    /// linear MPC plan directly (strategy [`Strategy::Held`]) before the NMPC is tried again:
+    /// a failure or an out-of-range plan means the state is where the model is not trusted,
+    /// and switching back and forth between the two controllers' plans every sample excites
+    /// the structure [5 samples = 1 s: with 0, the 2D NMPC on the FE plant fails the
+    /// criterion at ω0 = 1.25, 2.0 (limit 20°), with 5 it meets it at every ω0].
+    pub fallback_hold: usize,
 }
 
 impl Default for ControllerSettings {
@@ -89,6 +111,8 @@ impl Default for ControllerSettings {
             retry_relaxation: Some(0.5),
             retry_levenberg_marquardt: 1e-3,
             fallback_to_lmpc: true,
+            plan_joint_limit_deg: DEFAULT_PLAN_JOINT_LIMIT,
+            fallback_hold: DEFAULT_FALLBACK_HOLD,
         }
     }
 }
@@ -128,6 +152,11 @@ impl ControllerSettings {
                 return Err(invalid("retry_relaxation", a, "must be in (0, 1]"));
             }
         }
+        if let Some(a) = self.plan_joint_limit_deg {
+            if !(a > 0.0 && a <= 180.0) {
+                return Err(invalid("plan_joint_limit_deg", a, "must be in (0, 180]"));
+            }
+        }
         Ok(())
     }
 }
@@ -144,6 +173,9 @@ pub enum Strategy {
     Relaxed,
     /// Every NMPC attempt failed: the linear MPC plan was applied.
     Fallback,
+    /// Within [`ControllerSettings::fallback_hold`] samples of a fallback: the linear MPC
+    /// plan was applied without trying the NMPC.
+    Held,
 }
 
 /// What one sample's solve did.
@@ -170,6 +202,12 @@ pub struct SampleReport {
     /// Time at which the plan starts (its first control takes over): the sample time, or
     /// with [`crate::ControlGrid::Absolute`] the next grid time `kΔt ≥ t` (s).
     pub plan_start: f64,
+    /// Largest joint angle between links predicted over the applied plan's nodes (deg), when
+    /// the controller has a [`JointMonitor`].
+    pub plan_joint_angle_deg: Option<f64>,
+    /// NMPC attempts of this sample that converged (or were acceptable) but were rejected
+    /// because their plan left [`ControllerSettings::plan_joint_limit_deg`].
+    pub joint_limit_rejections: usize,
 }
 
 /// A receding-horizon controller on the augmented modal model.
@@ -180,11 +218,15 @@ pub struct Controller {
     relaxed: Option<SqpSolver<RomDynamics>>,
     lmpc: SqpSolver<RomDynamics>,
     samples: usize,
+    /// Samples left on the linear MPC after a fallback ([`ControllerSettings::fallback_hold`]).
+    hold: usize,
     /// Start time of the last plan (for the warm-start shift).
     last_start: Option<f64>,
     /// The model used to predict a measured state to the plan's start: the nonlinear model
     /// (29) for both controllers (a linearised predictor made the 3D LMPC diverge at ω0 = 0.5).
     predictor: RomDynamics,
+    /// Joint angles of plans, for the validity check and the reports.
+    monitor: Option<JointMonitor>,
 }
 
 impl std::fmt::Debug for Controller {
@@ -272,9 +314,31 @@ impl Controller {
             relaxed,
             lmpc,
             samples: 0,
+            hold: 0,
             last_start: None,
             predictor,
+            monitor: None,
         })
+    }
+
+    /// Gives the controller the joint geometry of its model, so that it reports each plan's
+    /// predicted joint angles and applies [`ControllerSettings::plan_joint_limit_deg`]
+    /// ([`crate::run`] does this).
+    pub fn set_joint_monitor(&mut self, monitor: JointMonitor) {
+        self.monitor = Some(monitor);
+    }
+
+    /// Largest predicted joint angle (deg) over the nodes of `solver`'s plan.
+    fn plan_angle(&self, solver: &SqpSolver<RomDynamics>) -> Option<f64> {
+        self.monitor.as_ref().map(|m| m.plan_max_angle(solver.states()).to_degrees())
+    }
+
+    /// Whether a plan with the predicted joint angle `angle` is within the model's range.
+    fn within_range(&self, angle: Option<f64>) -> bool {
+        match (angle, self.settings.plan_joint_limit_deg) {
+            (Some(a), Some(limit)) => a <= limit,
+            _ => true,
+        }
     }
 
     /// Length of the plan's control intervals `Δt = τp / Nc` (s).
@@ -356,6 +420,7 @@ impl Controller {
         let report = match self.settings.kind {
             ControllerKind::Lmpc => {
                 let st = self.solve_lmpc(x0, shift)?;
+                let plan_joint_angle_deg = self.plan_angle(&self.lmpc);
                 SampleReport {
                     t,
                     status: status_name(st.status),
@@ -367,6 +432,8 @@ impl Controller {
                     kkt: st.kkt,
                     u: self.lmpc.first_control().iter().copied().collect(),
                     plan_start: start,
+                    plan_joint_angle_deg,
+                    joint_limit_rejections: 0,
                 }
             }
             ControllerKind::Nmpc => self.step_nmpc(t, start, x0, shift)?,
@@ -376,6 +443,29 @@ impl Controller {
     }
 
     fn step_nmpc(&mut self, t: f64, start: f64, x0: &[f64], shift: f64) -> Result<SampleReport> {
+        if self.hold > 0 && self.samples > 0 {
+            self.hold -= 1;
+            let st = self.solve_lmpc(x0, shift)?;
+            if let Some(n) = self.nmpc.as_mut() {
+                // keep the NMPC's warm start aligned with the plans' start times
+                n.shift_time(shift)?;
+            }
+            self.nmpc_from_lmpc();
+            return Ok(SampleReport {
+                t,
+                status: status_name(st.status),
+                first_status: "Held".into(),
+                strategy: Strategy::Held,
+                iterations: st.iterations,
+                solve_time: 0.0,
+                cost: st.cost,
+                kkt: st.kkt,
+                u: self.lmpc.first_control().iter().copied().collect(),
+                plan_start: start,
+                plan_joint_angle_deg: self.plan_angle(&self.lmpc),
+                joint_limit_rejections: 0,
+            });
+        }
         let mut lmpc_done = false;
         if self.samples == 0 {
             // first sample: initial guess from the linear MPC plan
@@ -390,41 +480,61 @@ impl Controller {
             None => return Err(invalid("controller", "lmpc", "no NMPC solver")),
         };
         let mut iterations = first.iterations;
-        if accepted(&first, self.settings.accept_violation) {
-            return Ok(self.nmpc_report(t, start, first, first.status, Strategy::Sqp, iterations));
+        let mut rejections = 0;
+        let accept = self.settings.accept_violation;
+        if accepted(&first, accept) {
+            let angle = self.nmpc.as_ref().and_then(|n| self.plan_angle(n));
+            if self.within_range(angle) {
+                return Ok(self.nmpc_report(
+                    t,
+                    start,
+                    first,
+                    first.status,
+                    Strategy::Sqp,
+                    iterations,
+                    (angle, rejections),
+                ));
+            }
+            rejections += 1;
         }
         if !lmpc_done {
             self.solve_lmpc(x0, shift)?;
         }
-        let accept = self.settings.accept_violation;
         if let Some(r) = self.relaxed.as_mut() {
             copy_plan(&self.lmpc, r);
             let retry = r.solve(x0)?;
             iterations += retry.iterations;
             if accepted(&retry, accept) {
-                if let Some(n) = self.nmpc.as_mut() {
-                    copy_plan(r, n);
+                let angle = self.relaxed.as_ref().and_then(|r| self.plan_angle(r));
+                if self.within_range(angle) {
+                    if let (Some(n), Some(r)) = (self.nmpc.as_mut(), self.relaxed.as_ref()) {
+                        copy_plan(r, n);
+                    }
+                    return Ok(self.nmpc_report(
+                        t,
+                        start,
+                        retry,
+                        first.status,
+                        Strategy::Relaxed,
+                        iterations,
+                        (angle, rejections),
+                    ));
                 }
-                return Ok(self.nmpc_report(
-                    t,
-                    start,
-                    retry,
-                    first.status,
-                    Strategy::Relaxed,
-                    iterations,
-                ));
+                rejections += 1;
             }
         }
-        // failure: apply the linear plan and restart the NMPC from it; without the fallback
-        // (option) the NMPC's own last iterate is applied and kept as the next warm start,
-        // unless it is not finite (before, the NMPC iterate was overwritten by the linear
-        // plan first, so that the option applied the linear plan all the same)
+        // failure: apply the linear plan and restart the NMPC from it (then hold it for
+        // `fallback_hold` samples); without the fallback (option) the NMPC's own last iterate
+        // is applied and kept as the next warm start, unless it is not finite
         let own: Vec<f64> =
             self.nmpc.as_ref().map_or(Vec::new(), |n| n.first_control().iter().copied().collect());
         let fallback =
             self.settings.fallback_to_lmpc || own.is_empty() || own.iter().any(|v| !v.is_finite());
         let (u, st) = if fallback {
             self.nmpc_from_lmpc();
+            if self.settings.fallback_to_lmpc {
+                self.hold = self.settings.fallback_hold;
+            }
             (self.lmpc.first_control().iter().copied().collect(), *self.lmpc.stats())
         } else {
             (own, first)
@@ -440,9 +550,16 @@ impl Controller {
             kkt: st.kkt,
             u,
             plan_start: start,
+            plan_joint_angle_deg: if fallback {
+                self.plan_angle(&self.lmpc)
+            } else {
+                self.nmpc.as_ref().and_then(|n| self.plan_angle(n))
+            },
+            joint_limit_rejections: rejections,
         })
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn nmpc_report(
         &self,
         t: f64,
@@ -451,6 +568,7 @@ impl Controller {
         first: SqpStatus,
         strategy: Strategy,
         iterations: usize,
+        (plan_joint_angle_deg, joint_limit_rejections): (Option<f64>, usize),
     ) -> SampleReport {
         let u =
             self.nmpc.as_ref().map_or(Vec::new(), |n| n.first_control().iter().copied().collect());
@@ -465,6 +583,8 @@ impl Controller {
             kkt: st.kkt,
             u,
             plan_start: start,
+            plan_joint_angle_deg,
+            joint_limit_rejections,
         }
     }
 }

@@ -29,11 +29,13 @@
 //! **Controllers** ([`Controller`]). NMPC: multiple-shooting SQP (Gauss–Newton, merit line
 //! search) warm-started from the previous plan shifted by `τs`; on failure a retry from the
 //! linear MPC plan with the paper's sub-relaxation and a Levenberg–Marquardt term; if that
-//! fails too, the linear MPC plan is applied. Linear MPC: the same problem with (29)
-//! linearised at `q_r`, one QP per sample. By default each plan starts at its sample and its
-//! `u*(t)` is applied for `τs` ([`ControlGrid::Sample`]); option [`ControlGrid::Absolute`]
-//! keeps the controls on the grid `kΔt`, `Δt = τp/Nc`, predicting an off-grid sample to the
-//! next grid time (the paper's `τs = 0.2 s` is not a multiple of its `Δt = 0.25 s`; see
+//! fails too, the linear MPC plan is applied and kept for the next `fallback_hold` samples.
+//! A plan whose predicted joint angle between links exceeds `plan_joint_limit_deg` (20°; the
+//! modes are computed at 0°) counts as a failed attempt ([`JointMonitor`]). Linear MPC: the
+//! same problem with (29) linearised at `q_r`, one QP per sample. By default the controls lie
+//! on the fixed grid `kΔt`, `Δt = τp/Nc` ([`ControlGrid::Absolute`]), an off-grid sample being
+//! predicted to the next grid time (the paper's `τs = 0.2 s` is not a multiple of its
+//! `Δt = 0.25 s`); option [`ControlGrid::Sample`] starts each plan at its sample (see
 //! docs/mpc.md).
 //!
 //! **Closed loops** ([`run`], [`sweep`]): the FE plant of multibody-constraints (joints as
@@ -69,17 +71,22 @@ mod export;
 mod orientation;
 mod plant;
 mod scenario;
+mod validity;
 mod weights;
 
 #[cfg(test)]
 mod tests;
 
 pub use closed_loop::{open_loop, run, sweep, Record, RunResult, RunSummary, Snapshot};
-pub use controller::{Controller, ControllerKind, ControllerSettings, SampleReport, Strategy};
+pub use controller::{
+    Controller, ControllerKind, ControllerSettings, SampleReport, Strategy,
+    DEFAULT_PLAN_JOINT_LIMIT,
+};
 pub use dynamics::RomDynamics;
 pub use error::{MpcError, Result};
 pub use export::{export_first_sample, first_sample_problem, OcpExport};
 pub use orientation::{chord_orientation, ChordOrientation};
 pub use plant::{ControlInput, PlantKind};
 pub use scenario::{Scenario, Setup};
+pub use validity::JointMonitor;
 pub use weights::{ControlGrid, MpcSettings, Weights};

@@ -8,8 +8,8 @@ use criterion::Criterion;
 use nalgebra::{DMatrix, DVector};
 use ocp_transcription::samples::{ModalLike, SplitMix64};
 use ocp_transcription::{
-    Dynamics, Integrator, IntegratorKind, IntegratorSettings, Ocp, QpForm, SqpMode, SqpSettings,
-    SqpSolver,
+    interval_error, AdaptiveSubsteps, Dynamics, Globalisation, Integrator, IntegratorKind,
+    IntegratorSettings, Ocp, QpForm, SqpMode, SqpSettings, SqpSolver, SqpStatus,
 };
 use std::time::Instant;
 
@@ -273,6 +273,153 @@ fn sweep_table() {
     }
 }
 
+/// Calibration samples of the adaptive table (independent of the plans it is checked on):
+/// rotating states of ω0 ∈ {0.25, 0.5, 1, 1.5, 2}, each as is and with random elastic and
+/// quaternion perturbations (±0.1), with u = 0, u random in [−1, 1] and u = ±5.
+fn calibration_samples(m: &ModalLike) -> Vec<(Vec<f64>, Vec<f64>)> {
+    let mut rng = SplitMix64::new(4242);
+    let mut out = Vec::new();
+    for w in [0.25, 0.5, 1.0, 1.5, 2.0] {
+        let x = m.rotating_state(w).expect("rom-like");
+        let mut xp = x.clone();
+        for v in xp.iter_mut().skip(2) {
+            *v += rng.uniform(-0.1, 0.1);
+        }
+        for state in [x, xp] {
+            out.push((state.clone(), vec![0.0; 5]));
+            out.push((state.clone(), (0..5).map(|_| rng.uniform(-1.0, 1.0)).collect()));
+            out.push((state, (0..5).map(|_| if rng.index(2) == 0 { -5.0 } else { 5.0 }).collect()));
+        }
+    }
+    out
+}
+
+/// The adaptive table calibrated for Lawson RK4 on `model(nx)` (tolerance 1e-3, counts 8–48).
+fn calibrated_table(m: &ModalLike) -> AdaptiveSubsteps {
+    AdaptiveSubsteps::calibrate(
+        m,
+        &integrator(IntegratorKind::LawsonRk4, 16),
+        0.25,
+        &calibration_samples(m),
+        &[12, 16, 24],
+        512,
+        1e-3,
+        8,
+        48,
+    )
+    .expect("calibration")
+}
+
+/// A plan from the rotating state of `omega0` towards rest: 40 full-step SQP iterations with
+/// the sparse QP (the condensed Hessian of the free rotation is ill-conditioned), Lawson × 24.
+fn converged_plan(omega0: f64) -> (SqpSolver<ModalLike>, Vec<f64>, SqpStatus, f64) {
+    let m = model(61);
+    let x = m.rotating_state(omega0).expect("rom-like");
+    let mut o = ocp(61, 24);
+    let (mm, nq2, _) = m.rom_blocks().expect("rom-like");
+    o.x_ref[mm + nq2] = 1.0;
+    let settings = SqpSettings {
+        qp_form: QpForm::SparseClarabel,
+        globalisation: Globalisation::FullStep,
+        integrator: integrator(IntegratorKind::LawsonRk4, 24),
+        max_iterations: 40,
+        ..SqpSettings::default()
+    };
+    let mut s = SqpSolver::new(m, o, settings).expect("valid");
+    s.initialize_by_simulation(&x, &[0.0; 5]).expect("finite");
+    let st = s.solve(&x).expect("valid x0");
+    (s, x, st.status, st.kkt)
+}
+
+/// State-adapted substeps on realistic plans: per-interval counts and one-interval errors
+/// against a Lawson × 512 reference, and the time of one RTI iteration from the plan.
+fn adaptive_table() {
+    let m = model(61);
+    let table = calibrated_table(&m);
+    println!(
+        "\n## Adaptive substeps (Lawson RK4, tolerance 1e-3): calibrated c_x = {:.3}, c_u = {:.1}, c_l = {:.2}",
+        table.state_constant, table.input_constant, table.fast_constant
+    );
+    let mut reference =
+        Integrator::new(&m, &integrator(IntegratorKind::LawsonRk4, 512), 0.25).unwrap();
+    for omega0 in [0.5, 1.0, 2.0] {
+        let (plan, x, status, kkt) = converged_plan(omega0);
+        println!("\nplan from ω0 = {omega0}: {status:?}, KKT {kkt:.1e}");
+        let states: Vec<DVector<f64>> = plan.states().to_vec();
+        let controls: Vec<DVector<f64>> = plan.controls().to_vec();
+        let adaptive = IntegratorSettings {
+            adaptive: Some(table.clone()),
+            ..integrator(IntegratorKind::LawsonRk4, 16)
+        };
+        let mut int = Integrator::new(&m, &adaptive, 0.25).unwrap();
+        let mut fixed: Vec<Integrator> = [16, 20]
+            .iter()
+            .map(|&n| Integrator::new(&m, &integrator(IntegratorKind::LawsonRk4, n), 0.25).unwrap())
+            .collect();
+        let (mut xr, mut xe) = (vec![0.0; 61], vec![0.0; 61]);
+        let (mut worst, mut worst16, mut worst20, mut total) = (0.0_f64, 0.0_f64, 0.0_f64, 0);
+        let mut counts = Vec::new();
+        for k in 0..24 {
+            let (sk, uk, sn) =
+                (states[k].as_slice(), controls[k].as_slice(), states[k + 1].as_slice());
+            let n = int.choose_substeps(&m, sk, uk, Some(sn));
+            int.set_substeps(n).unwrap();
+            reference.integrate(&m, sk, uk, &mut xr).unwrap();
+            int.integrate(&m, sk, uk, &mut xe).unwrap();
+            worst = worst.max(interval_error(&xe, &xr));
+            fixed[0].integrate(&m, sk, uk, &mut xe).unwrap();
+            worst16 = worst16.max(interval_error(&xe, &xr));
+            fixed[1].integrate(&m, sk, uk, &mut xe).unwrap();
+            worst20 = worst20.max(interval_error(&xe, &xr));
+            total += n;
+            counts.push(n);
+        }
+        println!(
+            "counts {counts:?}: mean {:.1}; max one-interval error adaptive {worst:.1e}, fixed 16 {worst16:.1e}, fixed 20 {worst20:.1e}",
+            total as f64 / 24.0
+        );
+        println!("| integrator | QP form | status | total ms | integration | condensing | QP | mean substeps |");
+        println!("|---|---|---|---|---|---|---|---|");
+        for (label, isettings) in [
+            ("adaptive", adaptive.clone()),
+            ("Lawson × 16", integrator(IntegratorKind::LawsonRk4, 16)),
+            ("Lawson × 20", integrator(IntegratorKind::LawsonRk4, 20)),
+        ] {
+            for form in [QpForm::CondensedDense, QpForm::Auto] {
+                let mut settings = rti(IntegratorKind::LawsonRk4, 16, form);
+                settings.integrator = isettings.clone();
+                let mut s = SqpSolver::new(m.clone(), plan.ocp().clone(), settings).unwrap();
+                let (mut cpu, mut wall, mut ti, mut tc, mut tq, mut runs) =
+                    (0.0, 0.0, 0.0, 0.0, 0.0, 0usize);
+                let mut last = None;
+                while cpu < 0.5 || runs < 5 {
+                    s.states_mut().clone_from_slice(&states);
+                    s.controls_mut().clone_from_slice(&controls);
+                    let (c, st) = timed(|| s.solve(&x).expect("valid x0"));
+                    cpu += c;
+                    wall += st.time_total;
+                    ti += st.time_integration;
+                    tc += st.time_condensing;
+                    tq += st.time_qp;
+                    runs += 1;
+                    last = Some(st);
+                }
+                let st = last.expect("ran");
+                let (per, f) = (1e3 / runs as f64, cpu / wall);
+                println!(
+                    "| {label} | {form:?} | {:?} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} |",
+                    st.status,
+                    cpu * per,
+                    f * ti * per,
+                    f * tc * per,
+                    f * tq * per,
+                    st.mean_substeps
+                );
+            }
+        }
+    }
+}
+
 fn bench_sqp(c: &mut Criterion) {
     let mut g = c.benchmark_group("sqp_iteration_nx61_nu5_nc24");
     g.sample_size(20);
@@ -292,6 +439,19 @@ fn bench_sqp(c: &mut Criterion) {
             })
         });
     }
+    // state-adapted counts (calibrated table, tolerance 1e-3) from the same iterate
+    let mut settings = rti(IntegratorKind::LawsonRk4, 16, QpForm::CondensedDense);
+    settings.integrator.adaptive = Some(calibrated_table(&model(61)));
+    let (mut s, x) = solver(61, 24, settings);
+    let states: Vec<DVector<f64>> = s.states().to_vec();
+    let controls: Vec<DVector<f64>> = s.controls().to_vec();
+    g.bench_function("LawsonAdaptive_CondensedDense", |b| {
+        b.iter(|| {
+            s.states_mut().clone_from_slice(&states);
+            s.controls_mut().clone_from_slice(&controls);
+            s.solve(&x).expect("valid x0")
+        })
+    });
     g.finish();
     let m = model(61);
     let x = m.rotating_state(2.0).expect("rom-like");
@@ -324,6 +484,9 @@ fn main() {
     }
     if tables == "all" || tables.contains("qp") {
         qp_table();
+    }
+    if tables == "all" || tables.contains("adaptive") {
+        adaptive_table();
     }
     if tables == "all" || tables.contains("sweep") {
         sweep_table();

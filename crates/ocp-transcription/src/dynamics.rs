@@ -38,6 +38,23 @@ pub trait Dynamics: Sync {
         self.rhs(x, u, xdot);
         self.jacobians(x, u, fx, fu);
     }
+    /// The stage evaluation of the Lawson integrator with `L` = [`Dynamics::linear_part`]:
+    /// `g = f(x, u) − Lx`, `gx = ∂f/∂x − L`, `fu = ∂f/∂u`. Returns `false` when not
+    /// implemented (the default, which writes nothing; the integrator then calls
+    /// [`Dynamics::rhs_and_jacobians`] and subtracts `L` itself). A model whose linear part
+    /// is stored apart from its nonlinear terms saves a copy and a subtraction of `L` per
+    /// stage. Must agree with `rhs_and_jacobians` minus `L` up to round-off.
+    fn remainder_and_jacobians(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        g: &mut [f64],
+        gx: &mut DMatrix<f64>,
+        fu: &mut DMatrix<f64>,
+    ) -> bool {
+        let _ = (x, u, g, gx, fu);
+        false
+    }
     /// Whether [`Dynamics::weighted_hessian`] is implemented (needed by the exact-Hessian SQP).
     fn has_second_order(&self) -> bool {
         false
@@ -78,6 +95,16 @@ impl<D: Dynamics + ?Sized> Dynamics for &D {
         fu: &mut DMatrix<f64>,
     ) {
         (**self).rhs_and_jacobians(x, u, xdot, fx, fu)
+    }
+    fn remainder_and_jacobians(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        g: &mut [f64],
+        gx: &mut DMatrix<f64>,
+        fu: &mut DMatrix<f64>,
+    ) -> bool {
+        (**self).remainder_and_jacobians(x, u, g, gx, fu)
     }
     fn has_second_order(&self) -> bool {
         (**self).has_second_order()

@@ -70,6 +70,209 @@ pub struct IntegratorSettings {
     pub newton_tolerance: f64,
     /// Newton iteration limit, `≥ 1`. Default 30.
     pub newton_max_iterations: usize,
+    /// State-adapted substep counts (explicit methods): each shooting interval's count is
+    /// chosen from its nodes and control by an error table, fixed during one SQP iteration.
+    /// `None` (default): every interval uses `substeps`.
+    pub adaptive: Option<AdaptiveSubsteps>,
+}
+
+/// An a priori one-interval error table for choosing substep counts from the state.
+///
+/// Model (explicit methods of order 4):
+/// `err(n) ≈ (Δt/n)⁴ (c_x ρ_x² + c_u ρ_u + c_l ρ_l²)` with `ρ_x = ‖∂f/∂x(x, u) − L‖∞` (the
+/// part of the Jacobian the method does not integrate exactly; `L = 0` for RK4), `ρ_u =
+/// ‖∂f/∂u(x, u) u‖∞` (the forcing, which excites the fast modes of `L`) and `ρ_l = ‖Lx‖∞`
+/// (motion in the fast modes), `ρ_x` and `ρ_l` at the interval's start node, maximised
+/// with the end node when it is known. On the ROM-structured sample each part was measured
+/// to grow like its term and like `n⁻⁴` (docs/ocp-transcription.md); the constants are
+/// fitted per model by [`AdaptiveSubsteps::calibrate`]. The count is the smallest
+/// `n ∈ [min_substeps, max_substeps]` with `err(n) ≤ tolerance`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AdaptiveSubsteps {
+    /// Target one-interval error (the error measure of the calibration: max norm relative to
+    /// `max(‖x⁺‖∞, 1)`), in (0, 1). Default 1e-3.
+    pub tolerance: f64,
+    /// `c_x ≥ 0`. Default 15 (the Lawson RK4 fit on `ModalLike::paper_sized_rom`).
+    pub state_constant: f64,
+    /// `c_u ≥ 0`. Default 5000 (same fit).
+    pub input_constant: f64,
+    /// `c_l ≥ 0`. Default 64 (same fit).
+    pub fast_constant: f64,
+    /// Smallest count, `≥ 1`. Default 8 (below it the error leaves the `n⁻⁴` regime when
+    /// `Δt ω_max` is large).
+    pub min_substeps: usize,
+    /// Largest count, `≥ min_substeps`, at most 1024 (one propagator per count is precomputed).
+    /// Default 48.
+    pub max_substeps: usize,
+}
+
+impl Default for AdaptiveSubsteps {
+    fn default() -> Self {
+        Self {
+            tolerance: 1e-3,
+            state_constant: 15.0,
+            input_constant: 5000.0,
+            fast_constant: 64.0,
+            min_substeps: 8,
+            max_substeps: 48,
+        }
+    }
+}
+
+/// The one-interval error measure of the calibration: `‖x − x_ref‖∞ / max(‖x_ref‖∞, 1)`.
+pub fn interval_error(x: &[f64], x_ref: &[f64]) -> f64 {
+    let d = x.iter().zip(x_ref).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    d / norm_inf(x_ref).max(1.0)
+}
+
+impl AdaptiveSubsteps {
+    /// Checks the ranges documented on each field.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.tolerance > 0.0 && self.tolerance < 1.0) {
+            return Err(invalid("adaptive.tolerance", self.tolerance, "must be in (0, 1)"));
+        }
+        for (name, v) in [
+            ("adaptive.state_constant", self.state_constant),
+            ("adaptive.input_constant", self.input_constant),
+            ("adaptive.fast_constant", self.fast_constant),
+        ] {
+            if !(v >= 0.0 && v.is_finite()) {
+                return Err(invalid(name, v, "must be finite and ≥ 0"));
+            }
+        }
+        if self.min_substeps == 0 {
+            return Err(invalid("adaptive.min_substeps", self.min_substeps, "must be at least 1"));
+        }
+        if self.max_substeps < self.min_substeps || self.max_substeps > 1024 {
+            return Err(invalid(
+                "adaptive.max_substeps",
+                self.max_substeps,
+                "must be in [min_substeps, 1024]",
+            ));
+        }
+        Ok(())
+    }
+
+    /// Predicted one-interval error with `n` substeps over `interval` for the indicators
+    /// `rho = (ρ_x, ρ_u, ρ_l)`.
+    pub fn predicted_error(&self, interval: f64, n: usize, rho: (f64, f64, f64)) -> f64 {
+        let (x, u, l) = rho;
+        (interval / n as f64).powi(4)
+            * (self.state_constant * x * x + self.input_constant * u + self.fast_constant * l * l)
+    }
+
+    /// The smallest count in `[min_substeps, max_substeps]` whose predicted error meets the
+    /// tolerance (`max_substeps` when none does, or when an indicator is not finite).
+    pub fn substeps_for(&self, interval: f64, rho: (f64, f64, f64)) -> usize {
+        if !(rho.0.is_finite() && rho.1.is_finite() && rho.2.is_finite()) {
+            return self.max_substeps;
+        }
+        // err(n) = C n⁻⁴ ≤ tol  ⇔  n ≥ (C / tol)^{1/4}
+        let c = self.predicted_error(interval, 1, rho);
+        let n = (c / self.tolerance).powf(0.25).ceil();
+        if n.is_nan() || n > self.max_substeps as f64 {
+            return self.max_substeps;
+        }
+        let mut n = (n as usize).max(self.min_substeps);
+        // guard the rounding of the fourth root
+        while n < self.max_substeps && self.predicted_error(interval, n, rho) > self.tolerance {
+            n += 1;
+        }
+        n
+    }
+
+    /// Fits the three constants for `model` and the method of `settings` (its `adaptive`
+    /// field is ignored) from sample points `(x, u)`: the one-interval errors against a
+    /// reference with `reference_substeps` substeps are measured at the counts
+    /// `probe_substeps`, and among the ratios `c_u / c_x`, `c_l / c_x` on logarithmic grids
+    /// (10⁻³ … 10⁶) the tightest model that over-predicts *every* measured error is kept
+    /// (smallest total log over-prediction). Errors below 1e-12 are ignored (round-off).
+    /// `tolerance`, `min_substeps`, `max_substeps` are copied into the result.
+    #[allow(clippy::too_many_arguments)]
+    pub fn calibrate<D: Dynamics + ?Sized>(
+        model: &D,
+        settings: &IntegratorSettings,
+        interval: f64,
+        samples: &[(Vec<f64>, Vec<f64>)],
+        probe_substeps: &[usize],
+        reference_substeps: usize,
+        tolerance: f64,
+        min_substeps: usize,
+        max_substeps: usize,
+    ) -> Result<Self> {
+        if samples.is_empty() {
+            return Err(invalid("samples", 0, "need at least one calibration sample"));
+        }
+        if probe_substeps.is_empty() {
+            return Err(invalid("probe_substeps", 0, "need at least one probe count"));
+        }
+        let base = IntegratorSettings { adaptive: None, ..settings.clone() };
+        let mut reference = Integrator::new(
+            model,
+            &IntegratorSettings { substeps: reference_substeps, ..base.clone() },
+            interval,
+        )?;
+        let mut probes = probe_substeps
+            .iter()
+            .map(|&n| {
+                Integrator::new(
+                    model,
+                    &IntegratorSettings { substeps: n, ..base.clone() },
+                    interval,
+                )
+            })
+            .collect::<Result<Vec<_>>>()?;
+        // (h⁴-scaled) measurements: err / (Δt/n)⁴ = c_x a + c_u b + c_l c
+        let mut data: Vec<(f64, f64, f64, f64)> = Vec::new();
+        let nx = model.nx();
+        let (mut xr, mut xe) = (vec![0.0; nx], vec![0.0; nx]);
+        for (x, u) in samples {
+            reference.integrate(model, x, u, &mut xr)?;
+            let (a, b, c) = reference.indicators(model, x, u, Some(&xr));
+            for (int, &n) in probes.iter_mut().zip(probe_substeps) {
+                int.integrate(model, x, u, &mut xe)?;
+                let e = interval_error(&xe, &xr);
+                if e > 1e-12 {
+                    data.push((e / (interval / n as f64).powi(4), a * a, b, c * c));
+                }
+            }
+        }
+        let mut best: Option<(f64, f64, f64, f64)> = None;
+        let grid = |k: i32| if k < 0 { 0.0 } else { 10f64.powf(0.25 * k as f64 - 3.0) };
+        for ku in -1..=36 {
+            for kl in -1..=36 {
+                let (bu, bl) = (grid(ku), grid(kl));
+                let model_of = |a: f64, b: f64, c: f64| a + bu * b + bl * c;
+                let scale =
+                    data.iter().map(|&(y, a, b, c)| y / model_of(a, b, c)).fold(0.0, f64::max);
+                if !scale.is_finite() || scale == 0.0 {
+                    continue;
+                }
+                let over: f64 =
+                    data.iter().map(|&(y, a, b, c)| (scale * model_of(a, b, c) / y).ln()).sum();
+                if best.is_none_or(|(o, ..)| over < o) {
+                    best = Some((over, scale, scale * bu, scale * bl));
+                }
+            }
+        }
+        let Some((_, cx, cu, cl)) = best else {
+            return Err(invalid(
+                "samples",
+                "no error above 1e-12 or no finite fit",
+                "calibration needs samples whose errors the model can explain",
+            ));
+        };
+        let out = Self {
+            tolerance,
+            state_constant: cx,
+            input_constant: cu,
+            fast_constant: cl,
+            min_substeps,
+            max_substeps,
+        };
+        out.validate()?;
+        Ok(out)
+    }
 }
 
 impl Default for IntegratorSettings {
@@ -80,6 +283,7 @@ impl Default for IntegratorSettings {
             linear_part: LinearPart::Model,
             newton_tolerance: 1e-13,
             newton_max_iterations: 30,
+            adaptive: None,
         }
     }
 }
@@ -109,7 +313,33 @@ impl IntegratorSettings {
                 "must be at least 1",
             ));
         }
+        if let Some(a) = &self.adaptive {
+            a.validate()?;
+            if self.kind == IntegratorKind::ImplicitMidpoint {
+                return Err(invalid(
+                    "integrator.adaptive",
+                    "ImplicitMidpoint",
+                    "state-adapted substeps need an explicit method (RK4, LawsonRk4)",
+                ));
+            }
+            if self.substeps < a.min_substeps || self.substeps > a.max_substeps {
+                return Err(invalid(
+                    "integrator.substeps",
+                    self.substeps,
+                    "must lie in [adaptive.min_substeps, adaptive.max_substeps]",
+                ));
+            }
+        }
         Ok(())
+    }
+
+    /// The substep counts an integrator built from these settings can run:
+    /// `[min_substeps, max_substeps]` when adaptive, else `substeps` only.
+    fn count_range(&self) -> (usize, usize) {
+        match &self.adaptive {
+            Some(a) => (a.min_substeps, a.max_substeps),
+            None => (self.substeps, self.substeps),
+        }
     }
 }
 
@@ -117,8 +347,11 @@ impl IntegratorSettings {
 struct Lawson {
     l: DMatrix<f64>,
     l_op: Operator,
-    e: Operator,
-    e2: Operator,
+    /// `(E, E²)` with `E = e^{hL/2}`, `h = Δt/n`, for the counts `n = first, first + 1, …`.
+    props: Vec<(Operator, Operator)>,
+    first: usize,
+    /// Index of the current count in `props`.
+    cur: usize,
 }
 
 /// Which power of `E` to apply (identity for plain RK4).
@@ -131,9 +364,10 @@ enum Pow {
 impl Lawson {
     /// The operator of `E^p`.
     fn power(&self, p: Pow) -> &Operator {
+        let (e, e2) = &self.props[self.cur];
         match p {
-            Pow::E1 => &self.e,
-            Pow::E2 => &self.e2,
+            Pow::E1 => e,
+            Pow::E2 => e2,
         }
     }
 }
@@ -145,9 +379,14 @@ pub struct Integrator {
     nx: usize,
     nu: usize,
     substeps: usize,
+    /// Counts this integrator can run (`set_substeps`).
+    range: (usize, usize),
+    adaptive: Option<AdaptiveSubsteps>,
     interval: f64,
     h: f64,
     lawson: Option<Lawson>,
+    /// Lawson with `L` = the model's linear part: [`Dynamics::remainder_and_jacobians`] applies.
+    model_linear_part: bool,
     newton_tolerance: f64,
     newton_max_iterations: usize,
     x: Vec<f64>,
@@ -222,16 +461,22 @@ impl Integrator {
             if !all_finite(l.as_slice()) {
                 return Err(OcpError::NonFiniteDynamics { stage: "linear part" });
             }
-            let e = (&l * (0.5 * h)).exp();
-            let e2 = &e * &e;
-            if !all_finite(e2.as_slice()) {
-                return Err(OcpError::NonFiniteDynamics { stage: "matrix exponential" });
+            let (first, last) = settings.count_range();
+            let mut props = Vec::with_capacity(last - first + 1);
+            for n in first..=last {
+                let e = (&l * (0.5 * interval / n as f64)).exp();
+                let e2 = &e * &e;
+                if !all_finite(e2.as_slice()) {
+                    return Err(OcpError::NonFiniteDynamics { stage: "matrix exponential" });
+                }
+                props.push((Operator::new(e), Operator::new(e2)));
             }
             Some(Lawson {
                 l_op: Operator::new(l.clone()),
                 l,
-                e: Operator::new(e),
-                e2: Operator::new(e2),
+                props,
+                first,
+                cur: settings.substeps - first,
             })
         } else {
             None
@@ -250,8 +495,11 @@ impl Integrator {
             nx,
             nu,
             substeps: settings.substeps,
+            range: settings.count_range(),
+            adaptive: settings.adaptive.clone(),
             interval,
             h,
+            model_linear_part: lawson.is_some() && settings.linear_part == LinearPart::Model,
             lawson,
             newton_tolerance: settings.newton_tolerance,
             newton_max_iterations: settings.newton_max_iterations,
@@ -299,9 +547,95 @@ impl Integrator {
     pub fn kind(&self) -> IntegratorKind {
         self.kind
     }
-    /// Substeps per interval.
+    /// Substeps per interval (the current count).
     pub fn substeps(&self) -> usize {
         self.substeps
+    }
+
+    /// The counts [`Integrator::set_substeps`] accepts: `(min, max)` of the adaptive table,
+    /// or the fixed count twice.
+    pub fn substep_range(&self) -> (usize, usize) {
+        self.range
+    }
+
+    /// The adaptive table, if any.
+    pub fn adaptive(&self) -> Option<&AdaptiveSubsteps> {
+        self.adaptive.as_ref()
+    }
+
+    /// Switches to `n` substeps (within [`Integrator::substep_range`]; the Lawson propagators
+    /// of every count in the range are computed at construction, so this does not allocate).
+    pub fn set_substeps(&mut self, n: usize) -> Result<()> {
+        if n < self.range.0 || n > self.range.1 {
+            return Err(invalid(
+                "substeps",
+                n,
+                "must lie in the integrator's substep range (adaptive.min/max_substeps)",
+            ));
+        }
+        self.substeps = n;
+        self.h = self.interval / n as f64;
+        if let Some(lw) = &mut self.lawson {
+            lw.cur = n - lw.first;
+        }
+        Ok(())
+    }
+
+    /// The error indicators of [`AdaptiveSubsteps`] at `(x, u)`: `ρ_x = ‖∂f/∂x − L‖∞` and
+    /// `ρ_l = ‖Lx‖∞` (maximised over `x` and `x_next` when given), `ρ_u = ‖∂f/∂u u‖∞`. Uses the Jacobian
+    /// workspace; no allocation. Dimensions are the caller's responsibility (as for
+    /// [`Dynamics`]).
+    pub fn indicators<D: Dynamics + ?Sized>(
+        &mut self,
+        model: &D,
+        x: &[f64],
+        u: &[f64],
+        x_next: Option<&[f64]>,
+    ) -> (f64, f64, f64) {
+        let mut rho_x = 0.0_f64;
+        let mut rho_u = 0.0_f64;
+        let mut rho_l = 0.0_f64;
+        for (p, point) in std::iter::once(x).chain(x_next).enumerate() {
+            model.jacobians(point, u, &mut self.fx, &mut self.fu);
+            if let Some(lw) = &self.lawson {
+                self.fx -= &lw.l;
+                lw.l_op.apply_vec(&mut self.t, point, 1.0, false);
+                rho_l = rho_l.max(norm_inf(&self.t));
+            }
+            for i in 0..self.nx {
+                let mut r = 0.0;
+                for j in 0..self.nx {
+                    r += self.fx[(i, j)].abs();
+                }
+                rho_x = if r.is_nan() { f64::NAN } else { rho_x.max(r) };
+            }
+            if p == 0 {
+                for i in 0..self.nx {
+                    let mut f = 0.0;
+                    for c in 0..self.nu {
+                        f += self.fu[(i, c)] * u[c];
+                    }
+                    rho_u = if f.is_nan() { f64::NAN } else { rho_u.max(f.abs()) };
+                }
+            }
+        }
+        (rho_x, rho_u, rho_l)
+    }
+
+    /// The count the adaptive table chooses for an interval from `x` with control `u`
+    /// (and end node `x_next` when known); the current count when not adaptive.
+    pub fn choose_substeps<D: Dynamics + ?Sized>(
+        &mut self,
+        model: &D,
+        x: &[f64],
+        u: &[f64],
+        x_next: Option<&[f64]>,
+    ) -> usize {
+        let Some(a) = self.adaptive.clone() else {
+            return self.substeps;
+        };
+        let rho = self.indicators(model, x, u, x_next);
+        a.substeps_for(self.interval, rho)
     }
     /// Interval length `Δt`.
     pub fn interval(&self) -> f64 {
@@ -319,7 +653,7 @@ impl Integrator {
                 what: "exact Hessian with the implicit midpoint integrator",
             });
         }
-        let n = 4 * self.substeps;
+        let n = 4 * self.range.1;
         let nz = self.nx + self.nu;
         if self.tape_x.len() != n {
             self.tape_x = vec![vec![0.0; self.nx]; n];
@@ -388,7 +722,7 @@ impl Integrator {
         let nz = self.nx + self.nu;
         check_dim("hessian rows", nz, out.nrows())?;
         check_dim("hessian columns", nz, out.ncols())?;
-        if self.tape_x.len() != 4 * self.substeps {
+        if self.tape_x.len() < 4 * self.substeps {
             return Err(OcpError::Unsupported {
                 what: "adjoint_hessian before enable_second_order",
             });
@@ -416,7 +750,7 @@ impl Integrator {
         check_dim("a", self.nx * self.nx, a.len())?;
         check_dim("b", self.nx * self.nu, b.len())?;
         check_dim("hessian", nz * nz, hessian.len())?;
-        if self.tape_x.len() != 4 * self.substeps {
+        if self.tape_x.len() < 4 * self.substeps {
             return Err(OcpError::Unsupported {
                 what: "integrate_with_hessian before enable_second_order",
             });
@@ -543,27 +877,44 @@ impl Integrator {
         sens: bool,
         tape: Option<usize>,
     ) -> Result<()> {
-        if sens {
-            model.rhs_and_jacobians(&self.xs, u, &mut self.k[j], &mut self.fx, &mut self.fu);
-        } else {
-            model.rhs(&self.xs, u, &mut self.k[j]);
-        }
-        if let Some(lw) = &self.lawson {
-            lw.l_op.apply_vec(&mut self.k[j], &self.xs, -1.0, true);
+        // the model's own `g = f − Lx`, `∂f/∂x − L` when `L` is its linear part (saves a
+        // copy of `W` into the Jacobian and its subtraction at every stage)
+        let remainder = sens
+            && self.model_linear_part
+            && model.remainder_and_jacobians(
+                &self.xs,
+                u,
+                &mut self.k[j],
+                &mut self.fx,
+                &mut self.fu,
+            );
+        if !remainder {
+            if sens {
+                model.rhs_and_jacobians(&self.xs, u, &mut self.k[j], &mut self.fx, &mut self.fu);
+            } else {
+                model.rhs(&self.xs, u, &mut self.k[j]);
+            }
+            if let Some(lw) = &self.lawson {
+                lw.l_op.apply_vec(&mut self.k[j], &self.xs, -1.0, true);
+            }
         }
         if !all_finite(&self.k[j]) {
             return Err(OcpError::NonFiniteDynamics { stage: "rhs" });
         }
+        // stage 1 reads the substep's `S` in place (no copy into `sx`)
+        let sx = if j == 0 { &self.s } else { &self.sx };
         if let Some(base) = tape {
             self.tape_x[base + j].copy_from_slice(&self.xs);
-            self.tape_s[base + j].copy_from(&self.sx);
+            self.tape_s[base + j].copy_from(sx);
         }
         if sens {
-            if let Some(lw) = &self.lawson {
-                self.fx -= &lw.l;
+            if !remainder {
+                if let Some(lw) = &self.lawson {
+                    self.fx -= &lw.l;
+                }
             }
             // a NaN/∞ in the Jacobians propagates into the sensitivities, checked once per interval
-            crate::la::mul_right_t(&mut self.ks[j], &self.sx, &self.fx, &mut self.rows);
+            crate::la::mul_right_t(&mut self.ks[j], sx, &self.fx, &mut self.rows);
             for c in 0..self.nu {
                 for i in 0..self.nx {
                     self.ks[j][(self.nx + c, i)] += self.fu[(i, c)];
@@ -582,11 +933,8 @@ impl Integrator {
     ) -> Result<()> {
         let h = self.h;
         let sens = sens || tape.is_some();
-        // stage 1: X1 = x
+        // stage 1: X1 = x (its sensitivity is `S` itself, read in place by `stage`)
         self.xs.copy_from_slice(&self.x);
-        if sens {
-            self.sx.copy_from(&self.s);
-        }
         self.stage(model, u, 0, sens, tape)?;
         // E x, E k1 (and E S, E K1) serve stages 2 to 4 and the update, so that E² is never
         // applied: 4 propagator products per substep instead of 6
@@ -887,7 +1235,7 @@ mod tests {
         let int = Integrator::new(&m, &IntegratorSettings::new(IntegratorKind::LawsonRk4, 8), 0.25)
             .unwrap();
         let lw = int.lawson.as_ref().unwrap();
-        for op in [&lw.e, &lw.e2] {
+        for op in [&lw.props[0].0, &lw.props[0].1] {
             let nnz = op.dense().iter().filter(|v| **v != 0.0).count();
             assert!(matches!(op, Operator::BlockDiagonal { .. }), "nnz {nnz}");
             assert!(nnz <= 4 * 30 + 1, "nnz {nnz}");

@@ -280,9 +280,9 @@ impl WithSimd for SparseRightT<'_> {
                     for t in 0..w {
                         dd[t] = alpha.mul_add(acc[t], dd[t]);
                     }
-                } else if alpha == 1.0 {
-                    dd.copy_from_slice(&acc[..w]);
                 } else {
+                    // also for alpha = 1 (exact): a plain copy of 16 values compiles to a libc
+                    // memcpy call (8 % of an interval, measured)
                     for t in 0..w {
                         dd[t] = alpha * acc[t];
                     }

@@ -71,14 +71,18 @@ mod integrator;
 mod la;
 mod ocp;
 mod qp;
+mod quadratic;
 pub mod samples;
 mod sqp;
 
 pub use dynamics::Dynamics;
 pub use error::{OcpError, Result};
-pub use integrator::{Integrator, IntegratorKind, IntegratorSettings, LinearPart};
+pub use integrator::{
+    interval_error, AdaptiveSubsteps, Integrator, IntegratorKind, IntegratorSettings, LinearPart,
+};
 pub use ocp::Ocp;
 pub use qp::QpForm;
+pub use quadratic::QuadraticTerms;
 pub use sqp::{
     Globalisation, HessianApproximation, IterationLog, SqpMode, SqpSettings, SqpSolver, SqpStats,
     SqpStatus, AUTO_SPARSE_CONDITION,

@@ -3,6 +3,7 @@
 
 use crate::dynamics::Dynamics;
 use crate::error::{check_dim, invalid, Result};
+use crate::quadratic::QuadraticTerms;
 use nalgebra::DMatrix;
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
@@ -296,45 +297,10 @@ pub struct ModalLike {
     b: DMatrix<f64>,
     /// `(i, l, j, v)`: `(N(x)x)_i += v x_l x_j`.
     gamma: Vec<(usize, usize, usize, f64)>,
-    /// The Jacobian of `N(x)x` as a sparse map of `x`: entry `jac_pos[e]` (column-major
-    /// position in `∂f/∂x`) gets `Σ_{p ∈ jac_ptr[e]..jac_ptr[e+1]} jac_val[p] x[jac_idx[p]]`.
-    jac: JacobianMap,
+    /// The same terms with their Jacobian map (the fast kernel).
+    quad: QuadraticTerms,
     /// `(m, nq2, nξ)` for [`ModalLike::rom_like`].
     blocks: Option<(usize, usize, usize)>,
-}
-
-/// Column-major positions of `∂(N(x)x)/∂x` with the linear combinations of `x` they hold.
-#[derive(Clone, Debug, Default)]
-struct JacobianMap {
-    pos: Vec<u32>,
-    ptr: Vec<usize>,
-    idx: Vec<u32>,
-    val: Vec<f64>,
-}
-
-impl JacobianMap {
-    /// From tensor terms `(i, l, j, v)` (`f_i += v x_l x_j`): `∂f_i/∂x_l += v x_j`,
-    /// `∂f_i/∂x_j += v x_l`, grouped by position.
-    fn new(n: usize, gamma: &[(usize, usize, usize, f64)]) -> Self {
-        let mut terms: Vec<(u32, u32, f64)> = Vec::with_capacity(2 * gamma.len());
-        let ix = |v: usize| u32::try_from(v).expect("model dimension below 2^16");
-        for &(i, l, j, v) in gamma {
-            terms.push((ix(i + l * n), ix(j), v));
-            terms.push((ix(i + j * n), ix(l), v));
-        }
-        terms.sort_by_key(|t| (t.0, t.1));
-        let mut map = Self::default();
-        for (p, j, v) in terms {
-            if map.pos.last() != Some(&p) {
-                map.pos.push(p);
-                map.ptr.push(map.idx.len());
-            }
-            map.idx.push(j);
-            map.val.push(v);
-        }
-        map.ptr.push(map.idx.len());
-        map
-    }
 }
 
 /// Nonzeros of a dense matrix, `(i, j, v)`.
@@ -391,7 +357,7 @@ impl ModalLike {
         let b = DMatrix::from_fn(nx, nu, |_, _| rng.uniform(-1.0, 1.0));
         Ok(Self {
             w_entries: entries_of(&w),
-            jac: JacobianMap::new(nx, &gamma),
+            quad: QuadraticTerms::new(nx, &gamma)?,
             w,
             b,
             gamma,
@@ -529,7 +495,7 @@ impl ModalLike {
         }
         Ok(Self {
             w_entries: entries_of(&w),
-            jac: JacobianMap::new(nx, &gamma),
+            quad: QuadraticTerms::new(nx, &gamma)?,
             w,
             b,
             gamma,
@@ -600,18 +566,25 @@ impl Dynamics for ModalLike {
         crate::la::gemv(xdot, &self.b, u, 1.0, true);
     }
     fn jacobians(&self, x: &[f64], _u: &[f64], fx: &mut DMatrix<f64>, fu: &mut DMatrix<f64>) {
-        let f = fx.as_mut_slice();
-        f.copy_from_slice(self.w.as_slice());
-        let JacobianMap { pos, ptr, idx, val } = &self.jac;
-        for (e, &p) in pos.iter().enumerate() {
-            let (a, b) = (ptr[e], ptr[e + 1]);
-            let mut acc = 0.0;
-            for (v, &j) in val[a..b].iter().zip(&idx[a..b]) {
-                acc += v * x[j as usize];
-            }
-            f[p as usize] += acc;
-        }
+        fx.as_mut_slice().copy_from_slice(self.w.as_slice());
+        self.quad.add_jacobian(x, fx.as_mut_slice());
         fu.copy_from(&self.b);
+    }
+    fn remainder_and_jacobians(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        g: &mut [f64],
+        gx: &mut DMatrix<f64>,
+        fu: &mut DMatrix<f64>,
+    ) -> bool {
+        // gx = ∂(N(x)x)/∂x, and by Euler's identity g = N(x)x + Bu = ½ gx x + Bu
+        gx.as_mut_slice().fill(0.0);
+        self.quad.add_jacobian(x, gx.as_mut_slice());
+        crate::la::gemv(g, gx, x, 0.5, false);
+        crate::la::gemv(g, &self.b, u, 1.0, true);
+        fu.copy_from(&self.b);
+        true
     }
     fn rhs_and_jacobians(
         &self,

@@ -230,6 +230,9 @@ pub struct SqpStats {
     pub time_qp: f64,
     /// Total seconds.
     pub time_total: f64,
+    /// Mean substeps per interval of the last linearisation (the fixed count unless
+    /// [`IntegratorSettings::adaptive`] is set).
+    pub mean_substeps: f64,
 }
 
 impl Default for SqpStats {
@@ -247,6 +250,7 @@ impl Default for SqpStats {
             time_condensing: 0.0,
             time_qp: 0.0,
             time_total: 0.0,
+            mean_substeps: f64::NAN,
         }
     }
 }
@@ -296,6 +300,8 @@ pub struct SqpSolver<D: Dynamics> {
     nx: usize,
     nu: usize,
     integrators: Vec<Integrator>,
+    /// Substep count of each interval, fixed during one SQP iteration.
+    counts: Vec<usize>,
     s: Vec<DVector<f64>>,
     u: Vec<DVector<f64>>,
     lam: Vec<DVector<f64>>,
@@ -385,11 +391,13 @@ impl<D: Dynamics> SqpSolver<D> {
         for i in 0..nu {
             u0[i] = u0[i].clamp(ocp.u_min[i], ocp.u_max[i]);
         }
+        let counts = vec![settings.integrator.substeps; n];
         let mut solver = Self {
             n,
             nx,
             nu,
             integrators,
+            counts,
             s: vec![ocp.x_ref.clone(); n + 1],
             u: vec![u0; n],
             lam: vec![DVector::zeros(nx); n + 1],
@@ -434,6 +442,8 @@ impl<D: Dynamics> SqpSolver<D> {
         let mut a = DMatrix::zeros(self.nx, self.nx);
         let mut b = DMatrix::zeros(self.nx, self.nu);
         let mut phi = DVector::zeros(self.nx);
+        let c = self.integrators[0].choose_substeps(&self.model, x, u, None);
+        self.integrators[0].set_substeps(c)?;
         self.integrators[0].integrate_with_sensitivities(
             &self.model,
             x,
@@ -560,6 +570,9 @@ impl<D: Dynamics> SqpSolver<D> {
         self.initialize_constant(x0, u)?;
         for k in 0..self.n {
             let (head, tail) = self.s.split_at_mut(k + 1);
+            let c = self.integrators[0].choose_substeps(&self.model, head[k].as_slice(), u, None);
+            self.integrators[0].set_substeps(c)?;
+            self.counts[k] = c;
             self.integrators[0].integrate(
                 &self.model,
                 head[k].as_slice(),
@@ -619,18 +632,52 @@ impl<D: Dynamics> SqpSolver<D> {
         Ok(())
     }
 
+    /// Substep count of each interval in the last linearisation (all equal unless
+    /// [`IntegratorSettings::adaptive`] is set).
+    pub fn substep_counts(&self) -> &[usize] {
+        &self.counts
+    }
+
+    /// Chooses every interval's substep count from the current iterate (adaptive table:
+    /// nodes `s_k`, `s_{k+1}` and control `u_k`). They stay fixed for the linearisation and
+    /// the line search of an iteration, so `A_k`, `B_k` are the exact derivatives of the
+    /// map whose defects are driven to zero. At the first iteration of a `solve` (`fresh`)
+    /// they are chosen anew; at later ones a count may only grow (`max` with the new choice):
+    /// a count that went down and up again would keep changing the map and stall the SQP
+    /// (measured), while non-decreasing counts settle after finitely many changes and still
+    /// meet the table at the final iterate.
+    fn choose_counts(&mut self, fresh: bool) {
+        if self.settings.integrator.adaptive.is_none() {
+            return;
+        }
+        for k in 0..self.n {
+            let c = self.integrators[0].choose_substeps(
+                &self.model,
+                self.s[k].as_slice(),
+                self.u[k].as_slice(),
+                Some(self.s[k + 1].as_slice()),
+            );
+            self.counts[k] = if fresh { c } else { c.max(self.counts[k]) };
+        }
+    }
+
     fn integrator_calls(&self) -> usize {
         self.integrators.iter().map(|i| i.calls()).sum()
     }
 
     /// Linearises at the current iterate: `Φ`, `A`, `B`, defects, Hessian blocks, gradients, bounds.
-    fn linearise(&mut self, with_hessian: bool) -> Result<()> {
+    fn linearise(&mut self, with_hessian: bool, fresh_counts: bool) -> Result<()> {
         let n = self.n;
         let exact = with_hessian && self.settings.hessian == HessianApproximation::Exact;
         let t0 = Instant::now();
+        if self.lq.is_none() {
+            self.choose_counts(fresh_counts);
+            self.stats.mean_substeps =
+                self.counts.iter().sum::<usize>() as f64 / self.n.max(1) as f64;
+        }
         if self.settings.parallel_intervals && !exact && self.lq.is_none() {
             use rayon::prelude::*;
-            let (model, s, u) = (&self.model, &self.s, &self.u);
+            let (model, s, u, counts) = (&self.model, &self.s, &self.u, &self.counts);
             self.integrators
                 .par_iter_mut()
                 .zip(self.phi.par_iter_mut())
@@ -638,6 +685,7 @@ impl<D: Dynamics> SqpSolver<D> {
                 .zip(self.lin.b.par_iter_mut())
                 .enumerate()
                 .try_for_each(|(k, (((int, phi), a), b))| {
+                    int.set_substeps(counts[k])?;
                     int.integrate_with_sensitivities(
                         model,
                         s[k].as_slice(),
@@ -666,6 +714,7 @@ impl<D: Dynamics> SqpSolver<D> {
                 self.lin.hq[k].fill(0.0);
                 continue;
             }
+            self.integrators[0].set_substeps(self.counts[k])?;
             if exact {
                 self.integrators[0].integrate_with_hessian(
                     &self.model,
@@ -973,14 +1022,15 @@ impl<D: Dynamics> SqpSolver<D> {
             c += (self.x0[i] - self.shift_s[0][i]).abs();
         }
         for k in 0..n {
-            if self.integrators[0]
-                .integrate(
-                    &self.model,
-                    self.shift_s[k].as_slice(),
-                    self.shift_u[k].as_slice(),
-                    self.tmp_x.as_mut_slice(),
-                )
-                .is_err()
+            if self.integrators[0].set_substeps(self.counts[k]).is_err()
+                || self.integrators[0]
+                    .integrate(
+                        &self.model,
+                        self.shift_s[k].as_slice(),
+                        self.shift_u[k].as_slice(),
+                        self.tmp_x.as_mut_slice(),
+                    )
+                    .is_err()
             {
                 self.stats.time_integration += t0.elapsed().as_secs_f64();
                 return None;
@@ -1079,7 +1129,7 @@ impl<D: Dynamics> SqpSolver<D> {
         let status;
         let mut it = 0;
         loop {
-            if let Err(e) = self.linearise(true) {
+            if let Err(e) = self.linearise(true, it == 0) {
                 status = status_of(&e);
                 break;
             }

@@ -1,4 +1,5 @@
 //! Integration tests of `ocp-transcription` (one binary).
 
+mod adaptive;
 mod integrators;
 mod sqp;
