@@ -76,7 +76,8 @@ pub struct ControllerSettings {
     pub retry_relaxation: Option<f64>,
     /// Levenberg–Marquardt term of the retry [1e-3].
     pub retry_levenberg_marquardt: f64,
-    /// When every NMPC attempt fails, apply the linear MPC plan [true].
+    /// When every NMPC attempt fails, apply the linear MPC plan [true]; `false`: apply the
+    /// NMPC's own last (unconverged) iterate and warm-start the next sample from it.
     pub fallback_to_lmpc: bool,
     /// Range of validity of the controller model: an NMPC plan (first attempt or relaxed
     /// retry) whose predicted joint angle between links exceeds this (deg) at any of its
@@ -523,21 +524,25 @@ impl Controller {
                 rejections += 1;
             }
         }
-        // failure: apply the linear plan and restart the NMPC from it
-        self.nmpc_from_lmpc();
-        if self.settings.fallback_to_lmpc {
-            self.hold = self.settings.fallback_hold;
-        }
-        let st = *self.lmpc.stats();
-        let fallback = self.settings.fallback_to_lmpc;
-        let u: Vec<f64> = if fallback {
-            self.lmpc.first_control().iter().copied().collect()
+        // failure: apply the linear plan and restart the NMPC from it (then hold it for
+        // `fallback_hold` samples); without the fallback (option) the NMPC's own last iterate
+        // is applied and kept as the next warm start, unless it is not finite
+        let own: Vec<f64> =
+            self.nmpc.as_ref().map_or(Vec::new(), |n| n.first_control().iter().copied().collect());
+        let fallback =
+            self.settings.fallback_to_lmpc || own.is_empty() || own.iter().any(|v| !v.is_finite());
+        let (u, st) = if fallback {
+            self.nmpc_from_lmpc();
+            if self.settings.fallback_to_lmpc {
+                self.hold = self.settings.fallback_hold;
+            }
+            (self.lmpc.first_control().iter().copied().collect(), *self.lmpc.stats())
         } else {
-            self.nmpc.as_ref().map_or(Vec::new(), |n| n.first_control().iter().copied().collect())
+            (own, first)
         };
         Ok(SampleReport {
             t,
-            status: status_name(if fallback { st.status } else { first.status }),
+            status: status_name(st.status),
             first_status: status_name(first.status),
             strategy: Strategy::Fallback,
             iterations,
@@ -546,7 +551,11 @@ impl Controller {
             kkt: st.kkt,
             u,
             plan_start: start,
-            plan_joint_angle_deg: self.plan_angle(&self.lmpc),
+            plan_joint_angle_deg: if fallback {
+                self.plan_angle(&self.lmpc)
+            } else {
+                self.nmpc.as_ref().and_then(|n| self.plan_angle(n))
+            },
             joint_limit_rejections: rejections,
         })
     }

@@ -68,6 +68,7 @@ mod controller;
 mod dynamics;
 mod error;
 mod export;
+mod orientation;
 mod plant;
 mod scenario;
 mod validity;
@@ -84,6 +85,7 @@ pub use controller::{
 pub use dynamics::RomDynamics;
 pub use error::{MpcError, Result};
 pub use export::{export_first_sample, first_sample_problem, OcpExport};
+pub use orientation::{chord_orientation, ChordOrientation};
 pub use plant::{ControlInput, PlantKind};
 pub use scenario::{Scenario, Setup};
 pub use validity::JointMonitor;

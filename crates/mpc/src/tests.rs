@@ -412,6 +412,100 @@ fn predictor_is_consistent() {
     assert!(n.predict(&q, &u, -1.0).is_err());
 }
 
+/// With the absolute grid a sample's state is predicted to the grid time by the controller's
+/// model; when that prediction diverges (here: the 3D LMPC far outside its range at a large
+/// disturbance, inputs saturated) the sample plans from the measured state itself, so the run
+/// keeps its results to the end instead of returning `Err` and losing the run (issue 6: the 3D
+/// sweeps reported nothing for such runs), and nothing non-finite reaches the records.
+#[test]
+fn diverging_prediction_keeps_the_run_and_its_results() {
+    let mut sc = setup_3d().scenario.clone();
+    sc.mpc.control_grid = ControlGrid::Absolute;
+    let setup = Setup::new(&sc).unwrap();
+    let c = ControllerSettings::of(ControllerKind::Lmpc);
+    let r = run(&setup, 3.0, &c, PlantKind::Rom).unwrap();
+    let s = &r.summary;
+    assert!(!s.stabilised, "{s:?}");
+    assert!(s.max_joint_angle_deg > 90.0, "the LMPC is expected to lose the structure: {s:?}");
+    assert_eq!(r.records.last().map(|x| x.t), Some(s.t_end));
+    assert!(s.error.is_some() || (s.t_end - sc.duration).abs() < 1e-9, "{s:?}");
+    assert!(r.records.iter().all(|x| x.q.iter().all(|v| v.is_finite())));
+}
+
+/// When every NMPC attempt fails, the default applies the linear MPC's control; with
+/// `fallback_to_lmpc = false` (option) the NMPC's own last iterate is applied instead (it used
+/// to be overwritten by the linear plan first, so the option changed nothing).
+#[test]
+fn without_fallback_the_nmpc_iterate_is_applied() {
+    let setup = setup_2d();
+    let s = &setup.scenario;
+    let mut x0: Vec<f64> = setup.weights.x_ref.iter().copied().collect();
+    x0[0] = 1.5; // a fast rigid rotation: one SQP iteration is far from converged
+    let step = |fallback: bool, kind: ControllerKind| {
+        let c = ControllerSettings {
+            kind,
+            max_iterations: 1,
+            accept_violation: 1e-300,
+            retry_relaxation: None,
+            fallback_to_lmpc: fallback,
+            ..ControllerSettings::default()
+        };
+        let model = RomDynamics::new(&setup.rom).unwrap();
+        Controller::new(model, &setup.weights, &s.mpc, &c).unwrap().step(0.0, &x0).unwrap()
+    };
+    let lmpc = step(true, ControllerKind::Lmpc);
+    let with = step(true, ControllerKind::Nmpc);
+    let without = step(false, ControllerKind::Nmpc);
+    assert_eq!(with.strategy, crate::Strategy::Fallback, "{with:?}");
+    assert_eq!(without.strategy, crate::Strategy::Fallback, "{without:?}");
+    assert_eq!(with.u, lmpc.u);
+    let d = without.u.iter().zip(&lmpc.u).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    // one SQP step from the linear plan moves the first control by O(0.1) at this rate
+    assert!(d > 1e-6, "NMPC iterate {:?} equals the linear plan {:?}", without.u, lmpc.u);
+    assert!(without.u.iter().all(|u| u.is_finite() && u.abs() <= s.mpc.u_max + 1e-9));
+}
+
+/// The chord orientation of a link bent into a circular arc: the root node turns by the
+/// arc's full angle 2α but the chord only by α (the chord of an arc bisects its tangents), so
+/// the chord metric separates the link's direction from its root slope; a rigidly rotated
+/// straight link gives the rotation angle itself. Bad input is an error naming the field.
+#[test]
+fn chord_orientation_of_a_bent_and_a_rotated_link() {
+    let n = 21;
+    let straight: Vec<[f64; 3]> = (0..n).map(|k| [k as f64 / (n - 1) as f64, 0.0, 0.0]).collect();
+    // arc of unit length and total turning 2α in the e1–e3 plane, tangent e1 at the tip
+    // end, so the root tangent is turned by 2α and the chord by α
+    let alpha = 0.3f64;
+    let radius = 1.0 / (2.0 * alpha);
+    let arc: Vec<[f64; 3]> = (0..n)
+        .map(|k| {
+            let phi = 2.0 * alpha * (1.0 - k as f64 / (n - 1) as f64);
+            [
+                radius * (2.0 * alpha - phi).sin(),
+                0.0,
+                radius * (1.0 - phi.cos()) - radius * (1.0 - (2.0 * alpha).cos()),
+            ]
+        })
+        .collect();
+    let theta = 0.5f64;
+    let rotated: Vec<[f64; 3]> =
+        straight.iter().map(|p| [p[0] * theta.cos(), p[0] * theta.sin(), 0.0]).collect();
+    let snap =
+        |t: f64, p: &Vec<[f64; 3]>| Snapshot { t, positions: vec![p.clone(), vec![[0.0; 3]; 2]] };
+    let s = vec![snap(0.0, &straight), snap(0.25, &rotated), snap(0.5, &arc)];
+    let c = chord_orientation(&s, 0).unwrap();
+    // chord of the arc: turned by α about e2 (exact geometry; round-off only)
+    assert!((c.final_deg - alpha.to_degrees()).abs() < 1e-9, "{c:?}");
+    assert!((c.max_deg - theta.to_degrees()).abs() < 1e-9, "{c:?}");
+    assert_eq!(c.t_final, 0.5);
+    assert!(!c.within(0.2) && c.within(0.7));
+    assert!(chord_orientation(&[], 0).is_err());
+    let e = chord_orientation(&s, 5).unwrap_err().to_string();
+    assert!(e.contains("beam"), "{e}");
+    let degenerate = vec![snap(0.0, &vec![[0.0; 3]; n])];
+    assert!(chord_orientation(&degenerate, 0).unwrap_err().to_string().contains("chord length"));
+}
+
 /// The joint monitor reads the same elbow angle as the closed loop's records with the modal
 /// plant (both reconstruct `ξ = Φξ qξ` at the joint's two end nodes; only the summation
 /// order differs: round-off), is zero at the reference and `+∞` for a non-finite state.
