@@ -342,6 +342,30 @@ fn adaptive_table() {
     );
     let mut reference =
         Integrator::new(&m, &integrator(IntegratorKind::LawsonRk4, 512), 0.25).unwrap();
+    // the criterion bench's iterate: free rotation from ω0 = 0.5 simulated with u = 0
+    {
+        let settings = IntegratorSettings {
+            adaptive: Some(table.clone()),
+            ..integrator(IntegratorKind::LawsonRk4, 16)
+        };
+        let mut int = Integrator::new(&m, &settings, 0.25).unwrap();
+        let (mut x, u) = (m.rotating_state(0.5).unwrap(), [0.0; 5]);
+        let (mut xr, mut xe) = (vec![0.0; 61], vec![0.0; 61]);
+        let (mut total, mut worst) = (0, 0.0_f64);
+        for _ in 0..24 {
+            reference.integrate(&m, &x, &u, &mut xr).unwrap();
+            let n = int.choose_substeps(&m, &x, &u, Some(&xr));
+            int.set_substeps(n).unwrap();
+            int.integrate(&m, &x, &u, &mut xe).unwrap();
+            worst = worst.max(interval_error(&xe, &xr));
+            total += n;
+            x.copy_from_slice(&xe);
+        }
+        println!(
+            "\ncriterion iterate (free rotation from ω0 = 0.5, u = 0): mean substeps {:.1}, max one-interval error {worst:.1e}",
+            total as f64 / 24.0
+        );
+    }
     for omega0 in [0.5, 1.0, 2.0] {
         let (plan, x, status, kkt) = converged_plan(omega0);
         println!("\nplan from ω0 = {omega0}: {status:?}, KKT {kkt:.1e}");
