@@ -19,7 +19,8 @@
 //! Multiple shooting with one node per control interval: variables `s_0 … s_N`, `u_0 … u_{N−1}`
 //! (`N = Nc`), constraints `s_0 = x0` and `s_{k+1} = Φ(s_k, u_k)`, where `Φ` is one
 //! [`Integrator`] pass over the interval (RK4, implicit midpoint or Lawson RK4 with `n`
-//! substeps; never written as NLP constraints). The cost is
+//! substeps, fixed or chosen per interval from the state by an error table,
+//! [`AdaptiveSubsteps`]; never written as NLP constraints). The cost is
 //!
 //! ```text
 //!   J = Σ_k c_k Δt ½(s_k − x_r)ᵀQ(s_k − x_r) + Σ_k Δt ½(u_k − u_r)ᵀR(u_k − u_r) + ½(s_N − x_r)ᵀP(s_N − x_r),
