@@ -319,7 +319,8 @@ pub fn run_sweep(
         f,
         "controller,plant,omega0,stabilised,v_ratio_final,max_joint_angle_deg,\
          orientation_error_deg,max_orientation_deg,rigid_rate_ratio,failed_first_attempts,\
-         relaxed_samples,fallback_samples,samples,t_end,error"
+         relaxed_samples,fallback_samples,held_samples,joint_limit_samples,\
+         max_plan_joint_angle_deg,samples,t_end,error"
     )?;
     let mut summaries = Vec::new();
     for r in &runs {
@@ -328,7 +329,7 @@ pub fn run_sweep(
                 let s = &res.summary;
                 writeln!(
                     f,
-                    "{},{},{},{},{:.6e},{:.4},{:.4},{:.4},{:.6e},{},{},{},{},{},{}",
+                    "{},{},{},{},{:.6e},{:.4},{:.4},{:.4},{:.6e},{},{},{},{},{},{:.4},{},{},{}",
                     s.controller,
                     s.plant,
                     s.omega0,
@@ -341,6 +342,9 @@ pub fn run_sweep(
                     s.failed_first_attempts,
                     s.relaxed_samples,
                     s.fallback_samples,
+                    s.held_samples,
+                    s.joint_limit_samples,
+                    s.max_plan_joint_angle_deg,
                     res.samples.len(),
                     s.t_end,
                     s.error.as_deref().unwrap_or("").replace([',', '\n'], ";")

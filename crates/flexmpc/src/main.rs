@@ -212,13 +212,15 @@ fn print_mpc(o: &control::MpcOutput, cli: &Cli) -> Result<()> {
     );
     println!(
         "{} samples: solve time median {:.3} s, worst {:.3} s (τs = {} s); relaxed {}, LMPC \
-         fallback {}; loop wall time {:.1} s{}",
+         fallback {} (then held {}; plans beyond the joint limit in {}); loop wall time {:.1} s{}",
         o.result.samples.len(),
         s.solve_time_median_s,
         s.solve_time_worst_s,
         o.control.scenario.mpc.sampling,
         s.relaxed_samples,
         s.fallback_samples,
+        s.held_samples,
+        s.joint_limit_samples,
         o.result.wall_time_s,
         s.error.as_ref().map(|e| format!("; stopped at {} s: {e}", s.t_end)).unwrap_or_default()
     );

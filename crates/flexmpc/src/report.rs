@@ -386,13 +386,15 @@ pub fn write(
         ),
         ("rigid rate at T / at 0", format!("{:.3e}", s.rigid_rate_ratio)),
         (
-            "samples: total / failed first attempts / relaxed / LMPC fallback",
+            "samples: total / failed first attempts / relaxed / LMPC fallback / held / joint limit",
             format!(
-                "{} / {} / {} / {}",
+                "{} / {} / {} / {} / {} / {}",
                 result.samples.len(),
                 s.failed_first_attempts,
                 s.relaxed_samples,
-                s.fallback_samples
+                s.fallback_samples,
+                s.held_samples,
+                s.joint_limit_samples
             ),
         ),
         ("time reached (s)", format!("{}", s.t_end)),
