@@ -4,7 +4,8 @@
 //! Env: `MPC_RTI=0` for the full SQP (default: RTI on), `MPC_GLOB=full|merit` (first
 //! attempt's globalisation, default merit), `MPC_RETRY=off` (no relaxed retry: a failed or
 //! out-of-range attempt goes straight to the linear MPC fallback), `MPC_MAXIT=N` (SQP
-//! iteration limit when RTI is off), `MPC_PLANT=rom`.
+//! iteration limit when RTI is off), `MPC_HOLD=N` (fallback hold), `MPC_JLIM=deg|off` (plan
+//! joint-angle limit), `MPC_PLANT=rom`.
 use mpc::{run, ControllerKind, ControllerSettings, PlantKind, Scenario, Setup};
 use ocp_transcription::Globalisation;
 use rayon::prelude::*;
@@ -40,6 +41,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Ok(n) = std::env::var("MPC_MAXIT") {
         c.max_iterations = n.parse()?;
     }
+    if let Ok(n) = std::env::var("MPC_HOLD") {
+        c.fallback_hold = n.parse()?;
+    }
+    if let Ok(v) = std::env::var("MPC_JLIM") {
+        c.plan_joint_limit_deg = if v == "off" { None } else { Some(v.parse()?) };
+    }
     let plant = if std::env::var("MPC_PLANT").as_deref() == Ok("rom") {
         PlantKind::Rom
     } else {
@@ -60,11 +67,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     let n = t.len();
                     let iters: usize = r.samples.iter().map(|x| x.iterations).sum();
                     format!(
-                        "{dim} rti={} maxit={} glob={glob} retry={} w0={:.3} stab={} V={:.3e} joint={:.1}deg \
+                        "{dim} rti={} maxit={} hold={} jlim={:?} glob={glob} retry={} w0={:.3} stab={} V={:.3e} joint={:.1}deg \
                          orient={:.2}/{:.1}deg rigid={:.3e} worst={:.3}s p90={:.3}s median={:.3}s \
                          iters={iters} failed1={} relaxed={} fallback={} held={} jlim={} \
                          wall={:.2}s cpu={:.2}s err={:?}",
-                        c.real_time_iteration, c.max_iterations, c.retry_relaxation.is_some(), w, s.stabilised, s.v_ratio_final,
+                        c.real_time_iteration, c.max_iterations, c.fallback_hold, c.plan_joint_limit_deg, c.retry_relaxation.is_some(), w, s.stabilised, s.v_ratio_final,
                         s.max_joint_angle_deg, s.orientation_error_deg, s.max_orientation_deg,
                         s.rigid_rate_ratio, t[n - 1], t[(9 * n) / 10], t[n / 2],
                         s.failed_first_attempts, s.relaxed_samples, s.fallback_samples,
