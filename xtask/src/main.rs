@@ -35,6 +35,9 @@ Also: cargo xtask stress [FILTER] [--quick], cargo xtask fuzz [--cases N] [--see
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
+    // bit-reproducible results whatever the core count: faer's dense kernels run sequentially
+    // (the verification cases and sweeps are what run in parallel), as in the `flexmpc` CLI
+    faer::set_global_parallelism(faer::Par::Seq);
     match args.first().map(String::as_str) {
         Some("verify") => verify(&args[1..]),
         Some("bench") => bench::main(&args[1..]),

@@ -270,6 +270,11 @@ fn modes_json(report: &modal_rom::ModeReport) -> serde_json::Value {
 
 fn main() -> Result<()> {
     let cli = Cli::parse();
+    // faer's dense kernels (eigen, SVD, QR, products in modal-rom / intrinsic-beam) would
+    // otherwise split their work over the rayon pool, so their rounding, and a chaotic closed
+    // loop's whole trajectory, would depend on `--threads`; the runs of a sweep are what runs
+    // in parallel here
+    faer::set_global_parallelism(faer::Par::Seq);
     if let Some(n) = cli.threads {
         if n == 0 {
             bail!("--threads must be at least 1, got 0");
