@@ -455,7 +455,19 @@ impl Controller {
                 // keep the NMPC's warm start aligned with the plans' start times
                 n.shift_time(shift)?;
             }
-            self.nmpc_from_lmpc();
+            // real-time iteration: spend the held sample on one (not applied) NMPC iteration
+            // from the measured state, so the NMPC resumes from its own plan, not from the
+            // linear one a single Gauss–Newton step cannot turn into it; the full SQP resumes
+            // from the linear plan and converges within its own iterations
+            let accept = self.settings.accept_violation;
+            let shadow = self.settings.real_time_iteration
+                && self.nmpc.as_mut().is_some_and(|n| {
+                    n.solve(x0).is_ok_and(|st| accepted(&st, accept))
+                        && n.states().iter().all(|v| v.iter().all(|x| x.is_finite()))
+                });
+            if !shadow {
+                self.nmpc_from_lmpc();
+            }
             return Ok(SampleReport {
                 t,
                 status: status_name(st.status),
