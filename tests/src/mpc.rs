@@ -20,6 +20,7 @@ pub fn cases() -> Vec<Case> {
         Case { name: "mpc/3d-sweep-nmpc-fe", tier: Tier::Full, run: sweep_3d_nmpc },
         Case { name: "mpc/3d-sweep-lmpc-fe", tier: Tier::Full, run: sweep_3d_lmpc },
         Case { name: "mpc/3d-must-show-2", tier: Tier::Full, run: must_show_2_3d },
+        Case { name: "mpc/real-time", tier: Tier::Full, run: real_time },
     ]
 }
 
@@ -179,8 +180,11 @@ fn sweep_2d_lmpc() -> CaseOutcome {
     sweep_case(false, ControllerKind::Lmpc, &OMEGAS_2D, false)
 }
 
+// The library default (full SQP ≤ 10 iterations + relaxed retry) is checked for the
+// criterion; the real-time goal (must-show 3) is checked on the real-time configuration of
+// the shipped scenes by `mpc/real-time`, and the full SQP's times are in docs/mpc.md.
 fn sweep_2d_nmpc() -> CaseOutcome {
-    sweep_case(false, ControllerKind::Nmpc, &OMEGAS_2D, true)
+    sweep_case(false, ControllerKind::Nmpc, &OMEGAS_2D, false)
 }
 
 /// The NMPC with the modal model itself as the plant (no model mismatch): separates the
@@ -191,7 +195,7 @@ fn sweep_2d_nmpc_rom() -> CaseOutcome {
 }
 
 fn sweep_3d_nmpc() -> CaseOutcome {
-    sweep_case(true, ControllerKind::Nmpc, &[0.25, 0.5, 0.75, 1.0], true)
+    sweep_case(true, ControllerKind::Nmpc, &[0.25, 0.5, 0.75, 1.0], false)
 }
 
 fn sweep_3d_lmpc() -> CaseOutcome {
@@ -258,5 +262,42 @@ fn must_show_2_3d() -> CaseOutcome {
         0.75,
     ));
     out.push(Metric::at_most("LMPC: smallest ω0 losing the structure (elbow > 90°)", lost, 1.0));
+    Ok(out)
+}
+
+/// Issue 6, must-show 3, on the real-time NMPC of the shipped scenes
+/// (`ControllerSettings::real_time`: RTI, no relaxed retry; full steps in 2D, merit line
+/// search in 3D), FE plant: the criterion per run, the worst per-sample solve time against
+/// 50 ms (4× under τs = 0.2 s) and each closed loop's wall time against 10 s (plant
+/// included). The time goals are asserted over the runs the NMPC stabilises in 3D
+/// (ω0 ≤ 0.75); ω0 = 1.0, which no configuration stabilises (must-show 2), is reported.
+/// Times are wall clock on whatever machine runs the suite (one run per rayon thread).
+fn real_time() -> CaseOutcome {
+    let mut out = Vec::new();
+    for (three_d, omegas) in [(false, &OMEGAS_2D[..]), (true, &[0.25, 0.5, 0.75, 1.0][..])] {
+        let sc = if three_d { Scenario::paper_3d(ELEMENTS) } else { Scenario::paper_2d(ELEMENTS) }
+            .map_err(err)?;
+        let setup = Setup::new(&sc).map_err(err)?;
+        let c = ControllerSettings::real_time(three_d);
+        let tag = if three_d { "3D" } else { "2D" };
+        let (mut worst, mut wall) = (0.0f64, 0.0f64);
+        for r in sweep(&setup, omegas, &c, PlantKind::Fe, &|| {}) {
+            let r = r.map_err(err)?;
+            criterion(&r.summary, &mut out);
+            let s = &r.summary;
+            if three_d && s.omega0 > 0.75 {
+                out.push(Metric::at_most(
+                    format!("3D ω0={}: worst sample (s, report)", s.omega0),
+                    s.solve_time_worst_s,
+                    f64::INFINITY,
+                ));
+                continue;
+            }
+            worst = worst.max(s.solve_time_worst_s);
+            wall = wall.max(r.wall_time_s);
+        }
+        out.push(Metric::at_most(format!("{tag}: worst per-sample solve time (s)"), worst, 0.05));
+        out.push(Metric::at_most(format!("{tag}: slowest closed loop wall time (s)"), wall, 10.0));
+    }
     Ok(out)
 }

@@ -328,6 +328,9 @@ pub struct ControllerSpec {
     /// One SQP iteration per sample from the shifted plan instead of iterating to the KKT
     /// tolerance [false].
     pub real_time_iteration: Option<bool>,
+    /// Step of the NMPC's first attempt: `true` merit line search, `false` full Gauss–Newton
+    /// step (default true).
+    pub line_search: Option<bool>,
     /// SQP iteration limit per sample (≥ 1) (default 10).
     pub max_iterations: Option<usize>,
     /// KKT tolerance of the SQP (> 0) [1e-4].
@@ -1515,6 +1518,13 @@ fn controller_of(
     if let Some(v) = cs.real_time_iteration {
         c.real_time_iteration = v;
     }
+    if let Some(v) = cs.line_search {
+        c.globalisation = if v {
+            ocp_transcription::Globalisation::merit()
+        } else {
+            ocp_transcription::Globalisation::FullStep
+        };
+    }
     if let Some(n) = cs.max_iterations {
         if n == 0 {
             return ctx.err(sp(), "controller.max_iterations", "must be at least 1");
@@ -2227,7 +2237,8 @@ controllers = ["nmpc"]
         }
     }
 
-    /// The built-in default scene is the shipped paper 2D NMPC scene, with paper defaults.
+    /// The built-in default scene is the shipped paper 2D NMPC scene, with paper defaults and
+    /// the real-time controller.
     #[test]
     fn default_scene_is_the_shipped_paper_2d_mpc() {
         let path =
@@ -2236,7 +2247,8 @@ controllers = ["nmpc"]
         let s = load_str(Path::new(crate::DEFAULT_SCENE_PATH), crate::DEFAULT_SCENE).unwrap();
         let c = s.control.expect("the default scene has a [scenario]");
         assert_eq!(c.scenario.mpc, mpc::MpcSettings::default());
-        assert_eq!(c.controller, mpc::ControllerSettings::default());
+        // the shipped scene runs the real-time configuration (docs/mpc.md, "Real time")
+        assert_eq!(c.controller, mpc::ControllerSettings::real_time(false));
         assert_eq!(c.scenario.inputs.len(), 3);
         assert_eq!(s.name, "paper-2d-mpc");
     }
