@@ -99,21 +99,26 @@ fn ortho_3d() -> CaseOutcome {
 }
 
 fn single(n: usize, pinned: bool) -> Result<Structure, String> {
-    let beam = Beam::new(
-        Section::paper_2d().undamped(),
-        Mesh::uniform(1.0, n).map_err(err)?,
-        Components::Planar,
-    )
-    .map_err(err)?;
-    let supports = if pinned {
-        vec![Support {
-            name: "pin".into(),
+    let support = pinned.then(|| ("pin", JointKind::hinge_global([0.0, 1.0, 0.0])));
+    planar_beam(Section::paper_2d().undamped(), n, support)
+}
+
+/// One planar unit-length beam of `n` elements, with an optional support at its start.
+fn planar_beam(
+    section: Section,
+    n: usize,
+    support: Option<(&str, JointKind)>,
+) -> Result<Structure, String> {
+    let beam =
+        Beam::new(section, Mesh::uniform(1.0, n).map_err(err)?, Components::Planar).map_err(err)?;
+    let supports = support
+        .map(|(name, kind)| Support {
+            name: name.into(),
             end: EndRef::new("beam", End::Start),
-            kind: JointKind::hinge_global([0.0, 1.0, 0.0]),
-        }]
-    } else {
-        vec![]
-    };
+            kind,
+        })
+        .into_iter()
+        .collect();
     Structure::new(
         vec![StructureBeam::new("beam", beam, Placement::origin())],
         vec![],
@@ -188,25 +193,8 @@ fn single_beam() -> CaseOutcome {
 
 /// A single planar beam of the Euler–Bernoulli section (rigid shear, massless rotation).
 fn eb_beam(n: usize, clamped: bool) -> Result<Structure, String> {
-    let section = intrinsic_beam::samples::euler_bernoulli_section();
-    let beam =
-        Beam::new(section, Mesh::uniform(1.0, n).map_err(err)?, Components::Planar).map_err(err)?;
-    let supports = if clamped {
-        vec![Support {
-            name: "clamp".into(),
-            end: EndRef::new("beam", End::Start),
-            kind: JointKind::Weld,
-        }]
-    } else {
-        vec![]
-    };
-    Structure::new(
-        vec![StructureBeam::new("beam", beam, Placement::origin())],
-        vec![],
-        supports,
-        StructureSettings::default(),
-    )
-    .map_err(err)
+    let support = clamped.then_some(("clamp", JointKind::Weld));
+    planar_beam(intrinsic_beam::samples::euler_bernoulli_section(), n, support)
 }
 
 /// The Euler–Bernoulli cantilever through the constrained route (issue 8's bench (a) defect:
