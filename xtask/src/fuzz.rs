@@ -133,8 +133,9 @@ pub fn main(args: &[String]) -> Result<()> {
         "\nSources: `bytes` random bytes (lossy UTF-8), `tokens` token soup of the scene \
          vocabulary and extreme values, `mutation` 1–4 mutations of a shipped scene. Cases whose \
          scene asks for more than {MAX_ELEMENTS} elements in total are not loaded \
-         (`over the fuzz element cap`): `flexmpc::scene::load_str` has no such cap and would \
-         try to allocate them (e.g. `elements = 1000000000`).\n"
+         (`over the fuzz element cap`), to keep the fuzzer fast: a legal scene of up to \
+         `flexmpc::scene::MAX_ELEMENTS_PER_BEAM` elements per beam is loaded and would be \
+         stepped at its real cost (larger counts are a load error naming the field).\n"
     ));
     if !overflows.is_empty() {
         md.push_str(&format!(
