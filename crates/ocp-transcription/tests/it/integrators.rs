@@ -18,9 +18,19 @@ fn small_modal() -> ModalLike {
 /// round-off ~1e-16/ε ≈ 1e-10, so 1e-6 (relative to 1 + |entry|) leaves a wide margin
 /// while a wrong sensitivity (any missing term is O(h) ≈ 1e-2) fails.
 fn fd_sensitivity_error<D: Dynamics>(model: &D, kind: IntegratorKind, x: &[f64], u: &[f64]) -> f64 {
-    let (nx, nu) = (model.nx(), model.nu());
     let settings = IntegratorSettings::new(kind, 3);
     let mut int = Integrator::new(model, &settings, 0.1).unwrap();
+    fd_sensitivity_error_of(&mut int, model, x, u)
+}
+
+/// [`fd_sensitivity_error`] with a given integrator (its current substep count).
+pub(crate) fn fd_sensitivity_error_of<D: Dynamics>(
+    int: &mut Integrator,
+    model: &D,
+    x: &[f64],
+    u: &[f64],
+) -> f64 {
+    let (nx, nu) = (model.nx(), model.nu());
     let mut xe = vec![0.0; nx];
     let mut a = DMatrix::zeros(nx, nx);
     let mut b = DMatrix::zeros(nx, nu);
