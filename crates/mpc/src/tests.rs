@@ -534,27 +534,39 @@ fn joint_monitor_matches_the_records() {
     assert_eq!(m.max_angle(&bad), f64::INFINITY);
 }
 
+/// The 2D setup, the modal state of a rigid spin at ω0 = 0.5, and a controller with the
+/// joint monitor (as the closed loop sets it) for the given settings.
+fn monitored_2d() -> (&'static Setup, Vec<f64>, impl Fn(&ControllerSettings) -> Controller) {
+    let setup = setup_2d();
+    let x0 = setup
+        .scenario
+        .structure
+        .rigid_rotation_state(nalgebra::Vector3::new(0.0, 0.5, 0.0), nalgebra::Vector3::zeros());
+    let q = setup.rom.project_full(&x0, None).unwrap();
+    let controller = move |settings: &ControllerSettings| {
+        let mut c = Controller::new(
+            RomDynamics::new(&setup.rom).unwrap(),
+            &setup.weights,
+            &setup.scenario.mpc,
+            settings,
+        )
+        .unwrap();
+        c.set_joint_monitor(JointMonitor::new(setup).unwrap());
+        c
+    };
+    (setup, q, controller)
+}
+
 /// A plan beyond `plan_joint_limit_deg` is a failed attempt: with a limit far below what any
 /// plan at ω0 = 0.5 predicts, every NMPC attempt is rejected and the linear MPC plan is
 /// applied (strategy `Fallback`, its control exactly); without the limit the first attempt
 /// is accepted. The run's counters say so.
 #[test]
 fn plans_outside_the_joint_limit_fall_back_to_the_lmpc_plan() {
-    let setup = setup_2d();
+    let (setup, q, controller) = monitored_2d();
     let s = &setup.scenario;
-    let x0 = s
-        .structure
-        .rigid_rotation_state(nalgebra::Vector3::new(0.0, 0.5, 0.0), nalgebra::Vector3::zeros());
-    let q = setup.rom.project_full(&x0, None).unwrap();
     let step = |settings: &ControllerSettings| {
-        let mut c = Controller::new(
-            RomDynamics::new(&setup.rom).unwrap(),
-            &setup.weights,
-            &s.mpc,
-            settings,
-        )
-        .unwrap();
-        c.set_joint_monitor(JointMonitor::new(setup).unwrap());
+        let mut c = controller(settings);
         c.step(0.0, &q).unwrap()
     };
     let free = step(&ControllerSettings { plan_joint_limit_deg: None, ..Default::default() });
@@ -610,21 +622,9 @@ fn joint_limit_validation_names_the_field() {
 /// 1e-3° rejects every NMPC plan, so sample 0 falls back and sample 1 is held.
 #[test]
 fn held_samples_iterate_the_nmpc_under_rti() {
-    let setup = setup_2d();
-    let s = &setup.scenario;
-    let x0 = s
-        .structure
-        .rigid_rotation_state(nalgebra::Vector3::new(0.0, 0.5, 0.0), nalgebra::Vector3::zeros());
-    let q = setup.rom.project_full(&x0, None).unwrap();
+    let (_, q, controller) = monitored_2d();
     let two_samples = |settings: &ControllerSettings| {
-        let mut c = Controller::new(
-            RomDynamics::new(&setup.rom).unwrap(),
-            &setup.weights,
-            &s.mpc,
-            settings,
-        )
-        .unwrap();
-        c.set_joint_monitor(JointMonitor::new(setup).unwrap());
+        let mut c = controller(settings);
         let r0 = c.step(0.0, &q).unwrap();
         let r1 = c.step(0.2, &q).unwrap();
         (r0.strategy, r1.strategy, c.plan().1.to_vec())
