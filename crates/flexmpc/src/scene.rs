@@ -348,6 +348,11 @@ pub struct ControllerSpec {
     pub retry_levenberg_marquardt: Option<f64>,
     /// When every NMPC attempt fails, apply the linear MPC plan [true].
     pub fallback_to_lmpc: Option<bool>,
+    /// Check each NMPC plan's predicted joint angles against `plan_joint_limit_deg` and treat
+    /// a plan beyond it as a failed attempt [true].
+    pub joint_limit: Option<bool>,
+    /// Range of validity of the controller model for that check (deg, in (0, 180]) [20].
+    pub plan_joint_limit_deg: Option<f64>,
     /// Integrator in each shooting interval: `lawson-rk4`, `rk4` or `implicit-midpoint`
     /// [lawson-rk4].
     pub integrator: Option<String>,
@@ -1567,6 +1572,26 @@ fn controller_of(
     if let Some(v) = cs.fallback_to_lmpc {
         c.fallback_to_lmpc = v;
     }
+    if let Some(d) = cs.plan_joint_limit_deg {
+        if !(d > 0.0 && d <= 180.0) {
+            return ctx.err(
+                sp(),
+                "controller.plan_joint_limit_deg",
+                format!("must be in (0, 180], got {d}"),
+            );
+        }
+        c.plan_joint_limit_deg = Some(d);
+    }
+    if cs.joint_limit == Some(false) {
+        if cs.plan_joint_limit_deg.is_some() {
+            return ctx.err(
+                sp(),
+                "controller.plan_joint_limit_deg",
+                "is unused with `joint_limit = false`; remove one of them",
+            );
+        }
+        c.plan_joint_limit_deg = None;
+    }
     if let Some(i) = &cs.integrator {
         c.integrator.kind = match i.as_str() {
             "lawson-rk4" => IntegratorKind::LawsonRk4,
@@ -2110,6 +2135,20 @@ controllers = ["nmpc"]
         check("ku = 0.1", "ku = -1.0", "ku = -1.0", "controller.weights.ku", "> 0");
         check("substeps = 16", "substeps = 0", "substeps = 0", "controller.substeps", "at least 1");
         check(
+            "substeps = 16",
+            "substeps = 16\nplan_joint_limit_deg = 200.0",
+            "plan_joint_limit_deg = 200.0",
+            "controller.plan_joint_limit_deg",
+            "(0, 180]",
+        );
+        check(
+            "substeps = 16",
+            "substeps = 16\njoint_limit = false\nplan_joint_limit_deg = 25.0",
+            "plan_joint_limit_deg = 25.0",
+            "controller.plan_joint_limit_deg",
+            "joint_limit = false",
+        );
+        check(
             "sampling = 0.2",
             "sampling = 0.33",
             "sampling = 0.33",
@@ -2209,6 +2248,11 @@ controllers = ["nmpc"]
         for (file, preset) in [
             ("paper-2d-mpc.toml", mpc::Scenario::paper_2d(50).unwrap()),
             ("paper-3d-mpc.toml", mpc::Scenario::paper_3d(50).unwrap()),
+            ("paper-3d-mpc-ku1.toml", {
+                let mut p = mpc::Scenario::paper_3d(50).unwrap();
+                p.mpc.ku = mpc::SPATIAL_INPUT_WEIGHT;
+                p
+            }),
         ] {
             let s = load(&dir.join(file)).unwrap_or_else(|e| panic!("{e}"));
             let c = s.control.expect("[scenario]");
@@ -2234,6 +2278,9 @@ controllers = ["nmpc"]
             assert_eq!(sc.plant.dt, preset.plant.dt);
             assert_eq!(sc.mpc, preset.mpc);
             assert_eq!((c.plant, c.omega0), (mpc::PlantKind::Fe, 1.0));
+            if file == "paper-3d-mpc-ku1.toml" {
+                assert_eq!(c.controller, mpc::ControllerSettings::real_time_spatial());
+            }
         }
     }
 

@@ -28,6 +28,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Ok(v) = std::env::var("MPC_KDXI") {
         scenario.mpc.k_dxi = v.parse()?;
     }
+    if let Ok(v) = std::env::var("MPC_KU") {
+        scenario.mpc.ku = v.parse()?;
+    }
+    if let Ok(v) = std::env::var("MPC_KX1") {
+        scenario.mpc.kx1 = v.parse()?;
+        scenario.mpc.kx2 = scenario.mpc.kx1;
+    }
+    if let Ok(v) = std::env::var("MPC_TS") {
+        scenario.mpc.sampling = v.parse()?;
+    }
     let setup = Setup::new(&scenario)?;
     let mut c = ControllerSettings::of(kind);
     c.real_time_iteration = std::env::var("MPC_RTI").is_ok();
@@ -48,6 +58,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     if let Ok(v) = std::env::var("MPC_ALPHA") {
         c.retry_relaxation = Some(v.parse()?);
+    }
+    if std::env::var("MPC_NORETRY").is_ok() {
+        c.retry_relaxation = None;
+    }
+    if std::env::var("MPC_NOFALLBACK").is_ok() {
+        c.fallback_to_lmpc = false;
+    }
+    if std::env::var("MPC_FULLSTEP").is_ok() {
+        c.globalisation = ocp_transcription::Globalisation::FullStep;
+    }
+    if let Ok(n) = std::env::var("MPC_ITER") {
+        c.max_iterations = n.parse()?;
     }
     let monitor = mpc::JointMonitor::new(&setup)?;
     let results = sweep(&setup, &omegas, &c, plant, &|| {});

@@ -89,4 +89,4 @@ pub use orientation::{chord_orientation, ChordOrientation};
 pub use plant::{ControlInput, PlantKind};
 pub use scenario::{Scenario, Setup};
 pub use validity::JointMonitor;
-pub use weights::{ControlGrid, MpcSettings, Weights};
+pub use weights::{ControlGrid, MpcSettings, Weights, SPATIAL_INPUT_WEIGHT};
