@@ -3,7 +3,7 @@
 //! after the disturbance ω0, replayed on the FE plant and on the modal model; prints the
 //! rigid and elastic velocity coordinates of both (projected FE state) and the joint angles.
 //! `inputs3d [A] [ω0]`; env `MPC_U=u1,…` (a given input after the disturbance), `MPC_MODES=n`
-//! (modes per elastic family), `MPC_GJ=k` (torsional stiffness), `MPC_DT=h` (FE time step), `MPC_N=n` (elements per link).
+//! (modes per elastic family), `MPC_FREE=n` (n free output intervals after `MPC_U`), `MPC_GJ=k` (torsional stiffness), `MPC_DT=h` (FE time step), `MPC_N=n` (elements per link).
 use mpc::{open_loop, PlantKind, Scenario, Setup};
 
 fn norm(v: &[f64]) -> f64 {
@@ -83,7 +83,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // `MPC_U=u1,u2,…`: that constant input for 0.2 s after the disturbance ω0
     if let Ok(v) = std::env::var("MPC_U") {
         let u: Vec<f64> = v.split(',').map(|s| s.parse()).collect::<Result<_, _>>()?;
-        compare("given u", omega0, &vec![u; 8])?;
+        // `MPC_FREE=n`: then n output intervals without input (the elbow's free response)
+        let free: usize = std::env::var("MPC_FREE").map_or(Ok(0), |v| v.parse())?;
+        let mut history = vec![u; 8];
+        history.extend(vec![vec![0.0; nu]; free]);
+        compare("given u", omega0, &history)?;
     }
     Ok(())
 }
