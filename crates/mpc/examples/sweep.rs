@@ -19,7 +19,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .split(',')
         .map(|s| s.parse())
         .collect::<Result<_, _>>()?;
-    let mut scenario = if dim == "3d" { Scenario::paper_3d(50)? } else { Scenario::paper_2d(50)? };
+    // `MPC_N=n`: n elements per link instead of the paper's 50
+    let n_el: usize = std::env::var("MPC_N").map_or(Ok(50), |v| v.parse())?;
+    let mut scenario =
+        if dim == "3d" { Scenario::paper_3d(n_el)? } else { Scenario::paper_2d(n_el)? };
     match std::env::var("MPC_GRID").as_deref() {
         Ok("absolute") => scenario.mpc.control_grid = mpc::ControlGrid::Absolute,
         Ok("sample") => scenario.mpc.control_grid = mpc::ControlGrid::Sample,
