@@ -1,6 +1,8 @@
 //! Study (d): closed-loop cost against compute time for linear MPC, real-time-iteration NMPC
 //! and full SQP NMPC (with several SQP iteration limits) on the paper's 2D scenario (§5.2):
-//! FE plant 2×50 elements, the paper's weights, horizon, sampling and modes (`mpc::run`).
+//! FE plant 2×50 elements, the paper's weights, horizon, sampling and modes (`mpc::run`); and
+//! on the 3D scenario (§5.3) the LMPC, the full SQP and the real-time spatial NMPC with the
+//! paper's `k_u` and the `k_u = 1` option.
 
 use super::plot::{Chart, Series};
 use super::report::{Fmt, Study, Table};
@@ -50,7 +52,8 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
     let elements = 50;
     let omegas: &[f64] = if quick { &[0.5, 1.5] } else { &[0.5, 1.0, 1.5] };
     let configs = configs(quick);
-    ctx.plan((1 + omegas.len() * configs.len()) as u64);
+    // 2D runs, their setup, and the 3D part's ticks (one per run)
+    ctx.plan((1 + omegas.len() * configs.len() + if quick { 2 } else { 8 }) as u64);
     ctx.progress(&format!("(d) setup of the paper's 2D scenario, 2×{elements} elements"));
     let setup = Setup::new(&Scenario::paper_2d(elements)?)?;
     let ku = setup.scenario.mpc.ku;
@@ -186,8 +189,109 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
              state (records every 0.05 s)."
         ),
     );
-    study.tables = vec![table];
-    study.charts = vec![c_cost, c_final];
+    let (table_3d, chart_3d, notes_3d) = run_3d(ctx, elements)?;
+    notes.extend(notes_3d);
+    study.tables = vec![table, table_3d];
+    study.charts = vec![c_cost, c_final, chart_3d];
     study.notes = notes;
     Ok(study)
+}
+
+/// The 3D part of study (d): the paper's 3D scenario (§5.3, FE plant) under the library
+/// default (full SQP), the LMPC, and the real-time spatial NMPC with the paper's `k_u` and
+/// with the documented option `k_u = 1` (`mpc::SPATIAL_INPUT_WEIGHT`). Every run's cost is
+/// measured with the paper's `k_u`, so the rows compare on one yardstick.
+fn run_3d(ctx: &mut Ctx, elements: usize) -> Result<(Table, Chart, Vec<String>)> {
+    let quick = ctx.quick;
+    let omegas: &[f64] = if quick { &[0.5] } else { &[0.5, 1.0] };
+    ctx.progress(&format!("(d) setup of the paper's 3D scenario, 2×{elements} elements"));
+    let paper = Setup::new(&Scenario::paper_3d(elements)?)?;
+    let mut option_sc = Scenario::paper_3d(elements)?;
+    option_sc.mpc.ku = mpc::SPATIAL_INPUT_WEIGHT;
+    let option = Setup::new(&option_sc)?;
+    let ku = paper.scenario.mpc.ku;
+    let spatial = ControllerSettings::real_time_spatial();
+    let mut configs: Vec<(&str, &Setup, ControllerSettings)> = vec![
+        ("LMPC", &paper, ControllerSettings::of(ControllerKind::Lmpc)),
+        ("NMPC RTI spatial, k_u = 1", &option, spatial.clone()),
+    ];
+    if !quick {
+        configs.extend([
+            ("NMPC RTI spatial", &paper, spatial),
+            ("NMPC SQP ≤10 it. (default)", &paper, ControllerSettings::default()),
+        ]);
+    }
+    let mut table = Table::new(
+        "closed-loop-3d",
+        format!(
+            "Closed loops of the paper's 3D scenario (FE plant 2×{elements}, {} s, τs = {} s, \
+             τp = {} s, Nc = {}); paper k_u = {ku} unless stated, J measured with k_u = {ku}",
+            paper.scenario.duration,
+            paper.scenario.mpc.sampling,
+            paper.scenario.mpc.horizon,
+            paper.scenario.mpc.intervals
+        ),
+        &[
+            ("ω0 (rad/s)", Fmt::Fix(3)),
+            ("controller", Fmt::Text),
+            ("median solve (ms)", Fmt::Fix(1)),
+            ("worst solve (ms)", Fmt::Fix(1)),
+            ("SQP it./sample", Fmt::Fix(2)),
+            ("V(7.5)/V(0)", Fmt::Sci),
+            ("J/(T·V(0))", Fmt::Sci),
+            ("max elbow (deg)", Fmt::Fix(1)),
+            ("stabilised", Fmt::Text),
+            ("closed loop wall (s)", Fmt::Fix(1)),
+        ],
+    );
+    let mut chart = Chart::new(
+        "cost-time-3d",
+        "(d) 3D: closed-loop cost against solve time per sample (marker: median, whisker: worst)",
+        "solve time per sample (s)",
+        "closed-loop cost J / (T·V(0))",
+    );
+    let mut notes = Vec::new();
+    for (w, &omega0) in omegas.iter().enumerate() {
+        let mut series = Series {
+            label: format!("3D, ω0 = {omega0} rad/s"),
+            color: Some(w),
+            ..Series::default()
+        };
+        for (name, setup, c) in &configs {
+            ctx.progress(&format!("(d) 3D ω0 = {omega0}: {name}"));
+            let r = closed_loop(setup, omega0, c, PlantKind::Fe)?;
+            let s = &r.summary;
+            let mut times: Vec<f64> = r.samples.iter().map(|x| x.solve_time).collect();
+            let n = times.len().max(1) as f64;
+            let med = median(&mut times);
+            let its = r.samples.iter().map(|x| x.iterations as f64).sum::<f64>() / n;
+            let (j, _) = closed_loop_cost(&r, ku);
+            table.push(vec![
+                omega0.into(),
+                (*name).into(),
+                (med * 1e3).into(),
+                (s.solve_time_worst_s * 1e3).into(),
+                its.into(),
+                s.v_ratio_final.into(),
+                j.into(),
+                s.max_joint_angle_deg.into(),
+                if s.stabilised { "yes" } else { "no" }.into(),
+                r.wall_time_s.into(),
+            ]);
+            series.add(med, j, name.trim_start_matches("NMPC ").to_string());
+            series.whisker_to.push(s.solve_time_worst_s);
+            notes.push(format!(
+                "3D ω0 = {omega0}, {name}: {} (V(7.5)/V(0) {:.3e}, elbow {:.1}°, J/(T·V(0)) \
+                 {:.3e}, worst sample {:.1} ms).",
+                if s.stabilised { "stabilised" } else { "not stabilised" },
+                s.v_ratio_final,
+                s.max_joint_angle_deg,
+                j,
+                s.solve_time_worst_s * 1e3
+            ));
+            ctx.tick();
+        }
+        chart.series.push(series);
+    }
+    Ok((table, chart, notes))
 }
