@@ -1482,6 +1482,30 @@ fn non_negative(
     }
 }
 
+/// An optional `[controller]` value in `(0, max]` behind an on/off switch (`retry` /
+/// `retry_relaxation`, `joint_limit` / `plan_joint_limit_deg`): `None` when neither is given
+/// (keep the default), `Some(None)` when switched off, `Some(Some(v))` for a value; a value
+/// given with the switch off is an error naming both.
+fn switched(
+    ctx: &Ctx<'_>,
+    span: Option<std::ops::Range<usize>>,
+    (switch, on): (&str, Option<bool>),
+    field: &str,
+    value: Option<f64>,
+    max: f64,
+) -> Result<Option<Option<f64>>, SceneError> {
+    let key = format!("controller.{field}");
+    match (on, value) {
+        (Some(false), Some(_)) => {
+            ctx.err(span, &key, format!("is unused with `{switch} = false`; remove one of them"))
+        }
+        (Some(false), None) => Ok(Some(None)),
+        (_, Some(v)) if v > 0.0 && v <= max => Ok(Some(Some(v))),
+        (_, Some(v)) => ctx.err(span, &key, format!("must be in (0, {max}], got {v}")),
+        (_, None) => Ok(None),
+    }
+}
+
 /// `nmpc` / `lmpc`.
 pub fn controller_kind(name: &str) -> Option<mpc::ControllerKind> {
     match name {
@@ -1549,48 +1573,23 @@ fn controller_of(
         c.retry_levenberg_marquardt =
             non_negative(ctx, sp(), "controller.retry_levenberg_marquardt", v)?;
     }
-    if let Some(a) = cs.retry_relaxation {
-        if !(a > 0.0 && a <= 1.0) {
-            return ctx.err(
-                sp(),
-                "controller.retry_relaxation",
-                format!("must be in (0, 1], got {a}"),
-            );
-        }
-        c.retry_relaxation = Some(a);
-    }
-    if cs.retry == Some(false) {
-        if cs.retry_relaxation.is_some() {
-            return ctx.err(
-                sp(),
-                "controller.retry_relaxation",
-                "is unused with `retry = false`; remove one of them",
-            );
-        }
-        c.retry_relaxation = None;
+    if let Some(a) =
+        switched(ctx, sp(), ("retry", cs.retry), "retry_relaxation", cs.retry_relaxation, 1.0)?
+    {
+        c.retry_relaxation = a;
     }
     if let Some(v) = cs.fallback_to_lmpc {
         c.fallback_to_lmpc = v;
     }
-    if let Some(d) = cs.plan_joint_limit_deg {
-        if !(d > 0.0 && d <= 180.0) {
-            return ctx.err(
-                sp(),
-                "controller.plan_joint_limit_deg",
-                format!("must be in (0, 180], got {d}"),
-            );
-        }
-        c.plan_joint_limit_deg = Some(d);
-    }
-    if cs.joint_limit == Some(false) {
-        if cs.plan_joint_limit_deg.is_some() {
-            return ctx.err(
-                sp(),
-                "controller.plan_joint_limit_deg",
-                "is unused with `joint_limit = false`; remove one of them",
-            );
-        }
-        c.plan_joint_limit_deg = None;
+    if let Some(d) = switched(
+        ctx,
+        sp(),
+        ("joint_limit", cs.joint_limit),
+        "plan_joint_limit_deg",
+        cs.plan_joint_limit_deg,
+        180.0,
+    )? {
+        c.plan_joint_limit_deg = d;
     }
     if let Some(i) = &cs.integrator {
         c.integrator.kind = match i.as_str() {

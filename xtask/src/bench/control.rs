@@ -46,6 +46,25 @@ fn closed_loop_cost(r: &RunResult, ku: f64) -> (f64, f64) {
     ((jv + ju) / (t * v0), jv / (t * v0))
 }
 
+/// Per-run figures of a closed loop: solve time per sample (median, mean; s), SQP iterations
+/// per sample, and the two costs of [`closed_loop_cost`].
+struct Figures {
+    median: f64,
+    mean: f64,
+    iterations: f64,
+    cost: f64,
+    mean_v: f64,
+}
+
+fn figures(r: &RunResult, ku: f64) -> Figures {
+    let mut times: Vec<f64> = r.samples.iter().map(|x| x.solve_time).collect();
+    let n = times.len().max(1) as f64;
+    let mean = times.iter().sum::<f64>() / n;
+    let iterations = r.samples.iter().map(|x| x.iterations as f64).sum::<f64>() / n;
+    let (cost, mean_v) = closed_loop_cost(r, ku);
+    Figures { median: median(&mut times), mean, iterations, cost, mean_v }
+}
+
 /// Runs study (d).
 pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
     let quick = ctx.quick;
@@ -113,12 +132,8 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
             ctx.progress(&format!("(d) ω0 = {omega0}: {name}"));
             let r = closed_loop(&setup, omega0, c, PlantKind::Fe)?;
             let s = &r.summary;
-            let mut times: Vec<f64> = r.samples.iter().map(|x| x.solve_time).collect();
-            let n = times.len().max(1) as f64;
-            let mean = times.iter().sum::<f64>() / n;
-            let med = median(&mut times);
-            let its = r.samples.iter().map(|x| x.iterations as f64).sum::<f64>() / n;
-            let (j, vmean) = closed_loop_cost(&r, ku);
+            let Figures { median: med, mean, iterations: its, cost: j, mean_v: vmean } =
+                figures(&r, ku);
             table.push(vec![
                 omega0.into(),
                 name.as_str().into(),
@@ -261,11 +276,7 @@ fn run_3d(ctx: &mut Ctx, elements: usize) -> Result<(Table, Chart, Vec<String>)>
             ctx.progress(&format!("(d) 3D ω0 = {omega0}: {name}"));
             let r = closed_loop(setup, omega0, c, PlantKind::Fe)?;
             let s = &r.summary;
-            let mut times: Vec<f64> = r.samples.iter().map(|x| x.solve_time).collect();
-            let n = times.len().max(1) as f64;
-            let med = median(&mut times);
-            let its = r.samples.iter().map(|x| x.iterations as f64).sum::<f64>() / n;
-            let (j, _) = closed_loop_cost(&r, ku);
+            let Figures { median: med, iterations: its, cost: j, .. } = figures(&r, ku);
             table.push(vec![
                 omega0.into(),
                 (*name).into(),
