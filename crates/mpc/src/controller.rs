@@ -458,21 +458,7 @@ impl Controller {
         let report = match self.settings.kind {
             ControllerKind::Lmpc => {
                 let st = self.solve_lmpc(x0, shift)?;
-                let plan_joint_angle_deg = self.plan_angle(&self.lmpc);
-                SampleReport {
-                    t,
-                    status: status_name(st.status),
-                    first_status: status_name(st.status),
-                    strategy: Strategy::Qp,
-                    iterations: st.iterations,
-                    solve_time: 0.0,
-                    cost: st.cost,
-                    kkt: st.kkt,
-                    u: self.lmpc.first_control().iter().copied().collect(),
-                    plan_start: start,
-                    plan_joint_angle_deg,
-                    joint_limit_rejections: 0,
-                }
+                self.lmpc_report(t, start, st, status_name(st.status), Strategy::Qp)
             }
             ControllerKind::Nmpc => self.step_nmpc(t, start, x0, shift)?,
         };
@@ -501,20 +487,7 @@ impl Controller {
             if !shadow {
                 self.nmpc_from_lmpc();
             }
-            return Ok(SampleReport {
-                t,
-                status: status_name(st.status),
-                first_status: "Held".into(),
-                strategy: Strategy::Held,
-                iterations: st.iterations,
-                solve_time: 0.0,
-                cost: st.cost,
-                kkt: st.kkt,
-                u: self.lmpc.first_control().iter().copied().collect(),
-                plan_start: start,
-                plan_joint_angle_deg: self.plan_angle(&self.lmpc),
-                joint_limit_rejections: 0,
-            });
+            return Ok(self.lmpc_report(t, start, st, "Held".into(), Strategy::Held));
         }
         let mut lmpc_done = false;
         if self.samples == 0 {
@@ -610,6 +583,31 @@ impl Controller {
     }
 
     #[allow(clippy::too_many_arguments)]
+    /// The report of a sample that applies the linear MPC plan.
+    fn lmpc_report(
+        &self,
+        t: f64,
+        start: f64,
+        st: ocp_transcription::SqpStats,
+        first_status: String,
+        strategy: Strategy,
+    ) -> SampleReport {
+        SampleReport {
+            t,
+            status: status_name(st.status),
+            first_status,
+            strategy,
+            iterations: st.iterations,
+            solve_time: 0.0,
+            cost: st.cost,
+            kkt: st.kkt,
+            u: self.lmpc.first_control().iter().copied().collect(),
+            plan_start: start,
+            plan_joint_angle_deg: self.plan_angle(&self.lmpc),
+            joint_limit_rejections: 0,
+        }
+    }
+
     fn nmpc_report(
         &self,
         t: f64,
