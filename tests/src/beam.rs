@@ -69,6 +69,18 @@ pub fn cases() -> Vec<Case> {
     ]
 }
 
+/// The clamped–free planar cantilever `L = EI = m = 1` with the Euler–Bernoulli section
+/// (rigid shear, massless rotation) on `n` uniform elements.
+pub(crate) fn eb_cantilever(n: usize) -> Result<BeamProblem, String> {
+    let beam = Beam::new(
+        intrinsic_beam::samples::euler_bernoulli_section(),
+        Mesh::uniform(1.0, n).map_err(err)?,
+        Components::Planar,
+    )
+    .map_err(err)?;
+    BeamProblem::new(beam, EndCondition::Clamped, EndCondition::Free, Loads::none()).map_err(err)
+}
+
 fn err(e: BeamError) -> String {
     e.to_string()
 }
@@ -302,14 +314,7 @@ fn euler_bernoulli_dense_modes() -> CaseOutcome {
     let meshes = [10usize, 20, 50, 100, 200, 400];
     let (mut worst, mut count_off, mut e400) = (0f64, 0usize, 0f64);
     for &n in &meshes {
-        let beam = Beam::new(
-            intrinsic_beam::samples::euler_bernoulli_section(),
-            Mesh::uniform(1.0, n).map_err(err)?,
-            Components::Planar,
-        )
-        .map_err(err)?;
-        let p = BeamProblem::new(beam, EndCondition::Clamped, EndCondition::Free, Loads::none())
-            .map_err(err)?;
+        let p = eb_cantilever(n)?;
         let modes = linear_modes(&p).map_err(err)?;
         count_off += usize::from(modes.len() != 2 * n);
         let bend: Vec<f64> = modes

@@ -204,7 +204,6 @@ fn eb_beam(n: usize, clamped: bool) -> Result<Structure, String> {
 fn euler_bernoulli() -> CaseOutcome {
     use intrinsic_beam::modes::closed_form::{bending, Supports};
     use intrinsic_beam::modes::{family, linear_modes, Family};
-    use intrinsic_beam::{BeamProblem, EndCondition, Loads};
     let exact = bending(Supports::ClampedFree, 1.0, 1.0, 1.0, 1)[0];
     let meshes = [10usize, 20, 50, 100, 200];
     let (mut errors, mut rigid, mut not_first, mut vs_dense) = (Vec::new(), 0usize, 0usize, 0f64);
@@ -215,14 +214,7 @@ fn euler_bernoulli() -> CaseOutcome {
         let w = frequencies_of(&b, ModeKind::BendingE2);
         let w1 = *w.first().ok_or("no bending mode")?;
         errors.push(w1 / exact - 1.0);
-        let beam = Beam::new(
-            intrinsic_beam::samples::euler_bernoulli_section(),
-            Mesh::uniform(1.0, n).map_err(err)?,
-            Components::Planar,
-        )
-        .map_err(err)?;
-        let p = BeamProblem::new(beam, EndCondition::Clamped, EndCondition::Free, Loads::none())
-            .map_err(err)?;
+        let p = crate::beam::eb_cantilever(n)?;
         let dense = linear_modes(&p)
             .map_err(err)?
             .iter()

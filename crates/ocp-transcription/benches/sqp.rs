@@ -273,34 +273,13 @@ fn sweep_table() {
     }
 }
 
-/// Calibration samples of the adaptive table (independent of the plans it is checked on):
-/// rotating states of ω0 ∈ {0.25, 0.5, 1, 1.5, 2}, each as is and with random elastic and
-/// quaternion perturbations (±0.1), with u = 0, u random in [−1, 1] and u = ±5.
-fn calibration_samples(m: &ModalLike) -> Vec<(Vec<f64>, Vec<f64>)> {
-    let mut rng = SplitMix64::new(4242);
-    let mut out = Vec::new();
-    for w in [0.25, 0.5, 1.0, 1.5, 2.0] {
-        let x = m.rotating_state(w).expect("rom-like");
-        let mut xp = x.clone();
-        for v in xp.iter_mut().skip(2) {
-            *v += rng.uniform(-0.1, 0.1);
-        }
-        for state in [x, xp] {
-            out.push((state.clone(), vec![0.0; 5]));
-            out.push((state.clone(), (0..5).map(|_| rng.uniform(-1.0, 1.0)).collect()));
-            out.push((state, (0..5).map(|_| if rng.index(2) == 0 { -5.0 } else { 5.0 }).collect()));
-        }
-    }
-    out
-}
-
 /// The adaptive table calibrated for Lawson RK4 on `model(nx)` (tolerance 1e-3, counts 8–48).
 fn calibrated_table(m: &ModalLike) -> AdaptiveSubsteps {
     AdaptiveSubsteps::calibrate(
         m,
         &integrator(IntegratorKind::LawsonRk4, 16),
         0.25,
-        &calibration_samples(m),
+        &m.calibration_samples(5).expect("rom-like"),
         &[12, 16, 24],
         512,
         1e-3,

@@ -522,6 +522,31 @@ impl ModalLike {
         Some(x)
     }
 
+    /// Calibration samples of an adaptive substep table
+    /// ([`crate::AdaptiveSubsteps::calibrate`]) for a [`ModalLike::rom_like`] model: rotating
+    /// states ([`ModalLike::rotating_state`]) of ω0 ∈ {0.25, 0.5, 1, 1.5, 2}, each as is and
+    /// with seeded random elastic and quaternion perturbations (±0.1), with u = 0, u random in
+    /// [−1, 1] and u = ±5, each input vector of length `nu`. `None` for
+    /// [`ModalLike::new`] models.
+    pub fn calibration_samples(&self, nu: usize) -> Option<Vec<(Vec<f64>, Vec<f64>)>> {
+        let mut rng = SplitMix64::new(4242);
+        let mut out = Vec::new();
+        for w in [0.25, 0.5, 1.0, 1.5, 2.0] {
+            let x = self.rotating_state(w)?;
+            let mut xp = x.clone();
+            for v in xp.iter_mut().skip(2) {
+                *v += rng.uniform(-0.1, 0.1);
+            }
+            for state in [x, xp] {
+                out.push((state.clone(), vec![0.0; nu]));
+                out.push((state.clone(), (0..nu).map(|_| rng.uniform(-1.0, 1.0)).collect()));
+                let sat = (0..nu).map(|_| if rng.index(2) == 0 { -5.0 } else { 5.0 }).collect();
+                out.push((state, sat));
+            }
+        }
+        Some(out)
+    }
+
     /// The paper-sized benchmark model with the ROM's structure ([`ModalLike::rom_like`]):
     /// `nx = 61`, `nu = 5`, frequencies up to 175 rad/s, `gamma_scale = 0.1`. The scale is
     /// calibrated on the real 3D ROM's one-interval Lawson errors at the rotating initial

@@ -71,26 +71,6 @@ fn adapted_sensitivities_match_central_differences() {
     }
 }
 
-/// Calibration samples: rotating states of several rates, as is and with small elastic and
-/// quaternion perturbations, with u = 0, moderate and saturated inputs.
-fn calibration_samples(m: &ModalLike) -> Vec<(Vec<f64>, Vec<f64>)> {
-    let mut rng = SplitMix64::new(4242);
-    let mut out = Vec::new();
-    for w in [0.25, 0.5, 1.0, 1.5, 2.0] {
-        let x = m.rotating_state(w).unwrap();
-        let mut xp = x.clone();
-        for v in xp.iter_mut().skip(2) {
-            *v += rng.uniform(-0.1, 0.1);
-        }
-        for state in [x, xp] {
-            out.push((state.clone(), vec![0.0; 5]));
-            out.push((state.clone(), (0..5).map(|_| rng.uniform(-1.0, 1.0)).collect()));
-            out.push((state, (0..5).map(|_| if rng.index(2) == 0 { -5.0 } else { 5.0 }).collect()));
-        }
-    }
-    out
-}
-
 /// The error table, calibrated on one set of states and also with its documented defaults,
 /// meets 1e-3 on *other* random states (rotation rate in [0, 2.2], random elastic content
 /// up to ±0.1, inputs in [−5, 5]) of the paper-sized ROM-like model, against a Lawson × 512
@@ -105,7 +85,7 @@ fn error_table_meets_the_tolerance_on_random_states() {
         &m,
         &lawson,
         0.25,
-        &calibration_samples(&m),
+        &m.calibration_samples(5).expect("rom-like"),
         &[12, 16, 24],
         512,
         1e-3,
