@@ -112,7 +112,7 @@ pub fn progress_bar(len: Option<u64>, quiet: bool, what: &str) -> indicatif::Pro
     bar
 }
 
-/// The summary of one run with the keys of issue 6 (plus the strategy counts and errors) and
+/// The summary of one run with the summary keys (plus the strategy counts and errors) and
 /// its measured timings (`solve_time_*`, `wall_time_s`): what `--json` prints on stdout. The
 /// files get [`crate::timings::summary_without_timings`] instead.
 pub fn summary_json(r: &RunResult) -> serde_json::Value {
