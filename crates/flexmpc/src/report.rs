@@ -9,8 +9,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use mpc::RunResult;
-use plotters::prelude::*;
 
+use crate::figures::{planes, snapshots_svg, window};
 use crate::plot::{self, Axes, Series};
 use crate::scene::{Control, Scene};
 
@@ -28,127 +28,6 @@ pub fn esc(s: &str) -> String {
         }
     }
     o
-}
-
-/// The planes in which snapshots are drawn: `(name, horizontal axis, vertical axis)`.
-fn planes(planar: bool) -> Vec<(&'static str, usize, usize)> {
-    if planar {
-        vec![("x–z", 0, 2)]
-    } else {
-        vec![("x–y", 0, 1), ("x–z", 0, 2)]
-    }
-}
-
-/// A square window `(center, half width)` around every snapshot in plane `(a, b)`.
-fn window(result: &RunResult, a: usize, b: usize) -> ((f64, f64), f64) {
-    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for s in &result.snapshots {
-        for beam in &s.positions {
-            for p in beam {
-                for (k, c) in [a, b].into_iter().enumerate() {
-                    lo[k] = lo[k].min(p[c]);
-                    hi[k] = hi[k].max(p[c]);
-                }
-            }
-        }
-    }
-    if !lo[0].is_finite() {
-        return ((0.0, 0.0), 1.0);
-    }
-    let w = 0.55 * (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1e-9);
-    ((0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])), w)
-}
-
-/// Colour of snapshot `k` of `n`: blue (t = 0) to red (end).
-fn time_color(k: usize, n: usize) -> RGBColor {
-    let f = if n > 1 { k as f64 / (n - 1) as f64 } else { 0.0 };
-    RGBColor((30.0 + 200.0 * f) as u8, 60, (220.0 - 190.0 * f) as u8)
-}
-
-/// Draws every snapshot of `result` in plane `(a, b)` into `area`, coloured by time.
-fn draw_snapshots<DB: DrawingBackend>(
-    area: &DrawingArea<DB, plotters::coord::Shift>,
-    result: &RunResult,
-    (name, a, b): (&str, usize, usize),
-    title: &str,
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
-    let n = result.snapshots.len();
-    let axis = ["x", "y", "z"];
-    let ((ca, cb), w) = window(result, a, b);
-    let mut chart = ChartBuilder::on(area)
-        .caption(format!("{title} ({name} plane)"), ("sans-serif", 16))
-        .margin(10)
-        .x_label_area_size(30)
-        .y_label_area_size(45)
-        .build_cartesian_2d((ca - w)..(ca + w), (cb - w)..(cb + w))?;
-    chart.configure_mesh().x_desc(axis[a]).y_desc(axis[b]).draw()?;
-    for (k, s) in result.snapshots.iter().enumerate() {
-        let c = time_color(k, n);
-        let width = if k == 0 || k + 1 == n { 3 } else { 1 };
-        for beam in &s.positions {
-            chart.draw_series(LineSeries::new(
-                beam.iter().map(|p| (p[a], p[b])),
-                c.stroke_width(width),
-            ))?;
-        }
-    }
-    Ok(())
-}
-
-/// Fig. 7 style: every snapshot of the deformed structure, coloured by time, one panel per
-/// plane.
-pub fn snapshots_svg(result: &RunResult, planar: bool, path: &Path) -> Result<()> {
-    let pl = planes(planar);
-    let root = SVGBackend::new(path, (560 * pl.len() as u32, 560)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let areas = root.split_evenly((1, pl.len()));
-    let title = format!(
-        "snapshots every {:.2} s, blue → red",
-        result.snapshots.get(1).map_or(0.0, |s| s.t)
-    );
-    for (plane, area) in pl.iter().zip(areas.iter()) {
-        draw_snapshots(area, result, *plane, &title)?;
-    }
-    root.present()?;
-    Ok(())
-}
-
-/// Figs. 7 and 9 style for a sweep: the snapshots of every run, one row per controller, one
-/// panel per ω0, in the first plane of the structure (`x–z` planar, `x–y` spatial; each run's
-/// `runs/<controller>-w<ω0>-snapshots.svg` has every plane).
-pub fn sweep_snapshots_svg(
-    runs: &[crate::control::SweepRun],
-    planar: bool,
-    path: &Path,
-) -> Result<()> {
-    let kinds = plot::sweep_kinds(runs);
-    let cols = runs.len().div_ceil(kinds.len().max(1)).max(1);
-    let root = SVGBackend::new(path, (300 * cols as u32, 320 * kinds.len().max(1) as u32))
-        .into_drawing_area();
-    root.fill(&WHITE)?;
-    let areas = root.split_evenly((kinds.len().max(1), cols));
-    let plane = planes(planar)[0];
-    for (row, k) in kinds.iter().enumerate() {
-        for (col, r) in runs.iter().filter(|r| r.controller == *k).enumerate() {
-            let Some(area) = areas.get(row * cols + col) else { continue };
-            let title = format!("{} ω0 = {}", k.name().to_uppercase(), r.omega0);
-            match &r.result {
-                Ok(res) => draw_snapshots(area, res, plane, &title)?,
-                Err(_) => {
-                    area.draw(&Text::new(
-                        format!("{title}: failed"),
-                        (10, 20),
-                        ("sans-serif", 14).into_font(),
-                    ))?;
-                }
-            }
-        }
-    }
-    root.present()?;
-    Ok(())
 }
 
 /// An animated SVG (SMIL, discrete frames at the snapshot times, real time, looping) of the
@@ -225,6 +104,34 @@ fn animation_svg(result: &RunResult, planar: bool, path: &Path) -> Result<()> {
     writeln!(svg, "</svg>")?;
     std::fs::write(path, svg).with_context(|| format!("writing {}", path.display()))?;
     Ok(())
+}
+
+/// The controller's mode set in words: `the lowest 8`, `rigid 2, axial 1, bending 4`,
+/// `modes 1, 2, 5 of the table below (scene indices 0, 1, 4, 0-based)`.
+pub fn selection_text(sel: &modal_rom::ModeSelection) -> String {
+    match sel {
+        modal_rom::ModeSelection::Lowest(n) => format!("the lowest {n} (rigid included)"),
+        modal_rom::ModeSelection::ByKind(k) => {
+            let parts: Vec<String> = [
+                ("rigid", k.rigid),
+                ("axial", k.axial),
+                ("torsion", k.torsion),
+                ("bending about e2", k.bending_e2),
+                ("bending about e3", k.bending_e3),
+                ("mixed", k.mixed),
+            ]
+            .iter()
+            .filter(|(_, n)| *n > 0)
+            .map(|(name, n)| format!("{name} {n}"))
+            .collect();
+            format!("the lowest of each kind: {}", parts.join(", "))
+        }
+        modal_rom::ModeSelection::Indices(i) => format!(
+            "modes {} of the table below (scene indices {}, 0-based)",
+            i.iter().map(|m| (m + 1).to_string()).collect::<Vec<_>>().join(", "),
+            i.iter().map(|m| m.to_string()).collect::<Vec<_>>().join(", ")
+        ),
+    }
 }
 
 /// The page head and its style sheet (no external resources).
@@ -372,12 +279,19 @@ pub fn write(
     };
     let _ = writeln!(
         h,
-        "<tr><th>criterion (issue 6, at the end: rigid rate &lt; 5% of ω0, orientation within \
-         20% of its largest excursion, V/V(0) &lt; 0.1)</th><td>{verdict}</td></tr>"
+        "<tr><th>criterion (at the end: rigid rate &lt; 5% of ω0, orientation within 20% of \
+         its largest excursion, V/V(0) &lt; 0.1)</th><td>{verdict}</td></tr>"
     );
     for (k, v) in [
         ("controller / plant", format!("{} / {}", s.controller, s.plant)),
-        ("ω0 (rad/s) × axis", format!("{} × {:?}", s.omega0, sc.omega_direction)),
+        (
+            "ω0 (rad/s) × axis",
+            format!(
+                "{} × ({})",
+                s.omega0,
+                sc.omega_direction.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(", ")
+            ),
+        ),
         ("V(T)/V(0)", format!("{:.4e}", s.v_ratio_final)),
         ("largest joint angle between links (deg)", format!("{:.2}", s.max_joint_angle_deg)),
         (
@@ -487,7 +401,19 @@ pub fn write(
                 c.fallback_to_lmpc
             ),
         ),
-        ("integrator", format!("{:?}, {} substeps per interval", c.integrator.kind, c.integrator.substeps)),
+        (
+            "integrator",
+            format!(
+                "{}, {} substeps per interval",
+                match c.integrator.kind {
+                    ocp_transcription::IntegratorKind::Rk4 => "explicit RK4",
+                    ocp_transcription::IntegratorKind::ImplicitMidpoint => "implicit midpoint",
+                    ocp_transcription::IntegratorKind::LawsonRk4 => "Lawson exponential RK4",
+                    _ => "another integrator",
+                },
+                c.integrator.substeps
+            ),
+        ),
         (
             "weights (34)–(36)",
             format!(
@@ -503,7 +429,7 @@ pub fn write(
             ),
         ),
         ("timing", format!("τp = {} s, τs = {} s, Nc = {}, duration {} s, plant dt = {} s", m.horizon, m.sampling, m.intervals, sc.duration, sc.plant.dt)),
-        ("controller modes", format!("{:?}", sc.selection)),
+        ("controller modes", selection_text(&sc.selection)),
     ] {
         row(&mut h, k, &v);
     }
@@ -583,7 +509,7 @@ window.addEventListener('load', function () {{
 pub fn write_sweep(
     scene: &Scene,
     control: &Control,
-    runs: &[crate::control::SweepRun],
+    runs: &[crate::results::SweepRun],
     out: &Path,
     timings: bool,
 ) -> Result<PathBuf> {
