@@ -156,7 +156,8 @@ pub fn run_mpc(
         crate::timings::remove(out)?;
         Vec::new()
     };
-    let report = crate::report::write(scene, &control, &result, out, opts.timings)?;
+    let report =
+        crate::report::write(scene, &control, &result, Some(&setup.rom), out, opts.timings)?;
     bar.finish_and_clear();
     Ok(MpcOutput { result, control, csv, samples, summary, report, timings })
 }
@@ -282,7 +283,7 @@ pub fn run_sweep(
     let plot = out.join("cost.svg");
     crate::figures::sweep_cost(&plot, &scene.name, &runs)?;
     let inputs = out.join("inputs.svg");
-    crate::figures::sweep_inputs(&inputs, &scene.name, &runs)?;
+    crate::figures::sweep_inputs(&inputs, &scene.name, &control.scenario.inputs, &runs)?;
     let snapshots = out.join("snapshots.svg");
     crate::figures::sweep_snapshots_svg(&runs, planar, &snapshots)?;
     let timings = if opts.timings {

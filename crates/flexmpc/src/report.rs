@@ -1,8 +1,10 @@
 //! The offline HTML report of a closed loop: `index.html` (hand-written HTML, no external
 //! URLs) next to its SVG figures (plotters, plus one hand-written animated SVG): scene
 //! summary, mode table and mode shapes (paper Figs. 4–5), snapshots of the deformed structure
-//! (Fig. 7), the scaled cost `V(t)/V(0)` (Fig. 6), inputs (Fig. 10), joint angles, solve time
-//! per sample against `τs`, and the closed-loop summary.
+//! in three time windows (Figs. 7, 9), the scaled cost `V(t)/V(0)` (Figs. 6, 8), inputs
+//! (Fig. 10), joint angles, which path produced each sample's control, the modal energy and
+//! the reduced model's prediction against the plant, solve time per sample against `τs`, and
+//! the closed-loop summary.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -176,6 +178,7 @@ pub fn write(
     scene: &Scene,
     control: &Control,
     result: &RunResult,
+    rom: Option<&modal_rom::ModalRom>,
     out: &Path,
     timings: bool,
 ) -> Result<PathBuf> {
@@ -206,27 +209,43 @@ pub fn write(
         },
         &[(control.controller.kind.name().to_uppercase(), cost)],
     )?;
-    // inputs (Fig. 10)
-    let inputs: Vec<Series> = result
-        .input_names
-        .iter()
-        .enumerate()
-        .map(|(i, n)| {
-            let pts: Vec<(f64, f64)> = result.records.iter().map(|r| (r.t, r.u[i])).collect();
-            (n.clone(), plot::steps(&pts))
+    // inputs (Fig. 10), one panel per unit
+    let mut by_unit: Vec<(&str, Vec<Series>)> = Vec::new();
+    for (i, n) in result.input_names.iter().enumerate() {
+        let unit = sc.inputs.get(i).map_or("N or N·m", crate::figures::input_unit);
+        let pts: Vec<(f64, f64)> = result.records.iter().map(|r| (r.t, r.u[i])).collect();
+        match by_unit.iter_mut().find(|(u, _)| *u == unit) {
+            Some((_, v)) => v.push((n.clone(), plot::steps(&pts))),
+            None => by_unit.push((unit, vec![(n.clone(), plot::steps(&pts))])),
+        }
+    }
+    let charts: Vec<(Axes, Vec<Series>)> = by_unit
+        .into_iter()
+        .map(|(unit, series)| {
+            (
+                Axes {
+                    title: format!("inputs in {unit} (each held for τs)"),
+                    x: "t (s)".into(),
+                    y: format!("u ({unit})"),
+                    ..Default::default()
+                },
+                series,
+            )
         })
         .collect();
-    plot::lines(
-        &out.join("inputs.svg"),
-        (900, 420),
-        &Axes {
-            title: "inputs u (held for τs)".into(),
-            x: "t (s)".into(),
-            y: "u (N, N·m)".into(),
-            ..Default::default()
-        },
-        &inputs,
-    )?;
+    plot::grid(&out.join("inputs.svg"), (1000, 380 * charts.len().max(1) as u32), 1, &charts)?;
+    // which path produced each sample, energy and the model against the plant
+    crate::figures::strategy_timeline(&out.join("strategies.svg"), result, sc.mpc.sampling)?;
+    let prediction_error = match rom {
+        Some(rom) => crate::figures::energy_and_prediction(
+            &out.join("energy.svg"),
+            &out.join("prediction.svg"),
+            result,
+            rom,
+            sc.mpc.sampling,
+        )?,
+        None => None,
+    };
     // joint angles
     let angles: Vec<Series> = result
         .joint_names
@@ -261,7 +280,7 @@ pub fn write(
     let _ = writeln!(h, "<h1>{}</h1>\n<p>{}</p>", esc(&title), esc(scene.description.trim()));
     let _ = writeln!(
         h,
-        r#"<p id="figure-status">figures: script did not run</p>
+        r#"<p id="figure-status" hidden>figures: script did not run</p>
 <p>Files: <a href="timeseries.csv">timeseries.csv</a>, <a href="samples.json">samples.json</a> (per-sample solver log), <a href="summary.json">summary.json</a>, <a href="snapshots.json">snapshots.json</a>{}.</p>"#,
         if timings {
             r#"; measured timings: <a href="timings.json">timings.json</a>, <a href="timings.csv">timings.csv</a>"#
@@ -319,18 +338,40 @@ pub fn write(
     let _ = writeln!(h, "</table>");
 
     // figures of the run
+    let (fig_cost, fig_snap) = if planar { ("Fig. 6", "Fig. 7") } else { ("Fig. 8", "Fig. 9") };
     let _ = writeln!(h, "<h2>Cost</h2>");
     figure(
         &mut h,
         "cost.svg",
-        "State part of the cost (34), V(t)/V(0), from the projected plant state (paper Fig. 6).",
+        &format!("State part of the cost (34), V(t)/V(0), from the projected plant state (paper {fig_cost})."),
     );
     let _ = writeln!(h, "<h2>Snapshots</h2>");
-    figure(&mut h, "snapshots.svg", "Deformed structure every snapshot interval, coloured from blue (t = 0) to red (end) (paper Fig. 7).");
+    figure(&mut h, "snapshots.svg", &format!("Deformed structure every snapshot interval in three time windows, shade darkening as t increases (paper {fig_snap})."));
     figure(&mut h, "animation.svg", "Animation of the snapshots (real time, looping).");
     let _ = writeln!(h, "<h2>Inputs and joint angles</h2>");
-    figure(&mut h, "inputs.svg", "Control inputs, each held for τs (paper Fig. 10).");
+    figure(
+        &mut h,
+        "inputs.svg",
+        if planar {
+            "Control inputs, each held for τs (the paper's Fig. 10 shows them for the 3D case)."
+        } else {
+            "Control inputs, each held for τs (paper Fig. 10)."
+        },
+    );
     figure(&mut h, "angles.svg", "Joint angles (supports: the root link's orientation).");
+    let _ = writeln!(h, "<h2>Controller</h2>");
+    figure(&mut h, "strategies.svg", "Which path produced each sample's control: linear MPC, NMPC, NMPC after a relaxed retry, linear MPC plan after an NMPC failure (fallback) or held on it afterwards.");
+    if rom.is_some() {
+        figure(&mut h, "energy.svg", "Energy ½(q1ᵀq1 + q2ᵀq2) (21) of the plant's state projected on the controller's modes.");
+        figure(
+            &mut h,
+            "prediction.svg",
+            &match prediction_error {
+                Some(e) => format!("The controller's reduced model (29) against the plant: from the plant's state at each sample, the model's prediction of the energy over the sample interval with the applied inputs. Largest relative error at the end of an interval: {e:.2e}."),
+                None => "The controller's reduced model (29) against the plant: no prediction could be made from the recorded states.".to_string(),
+            },
+        );
+    }
     let _ = writeln!(h, "<h2>Solve time per sample</h2>");
     if timings {
         let _ = writeln!(
@@ -455,11 +496,12 @@ pub fn write(
                 );
             }
             let _ = writeln!(h, "</table>");
-            figure(&mut h, "modes/shapes.svg", "Elastic mode shapes: translational velocity on the reference configuration (paper Fig. 5).");
+            let (f4, f5) = if planar { (" (paper Fig. 4)", " (paper Fig. 5)") } else { ("", "") };
+            figure(&mut h, "modes/shapes.svg", &format!("Elastic mode shapes: translational velocity on the reference configuration{f5}."));
             figure(
                 &mut h,
                 "modes/components.svg",
-                "Velocity components of the elastic modes along the beams (paper Fig. 4).",
+                &format!("Velocity components of the elastic modes along the beams{f4}."),
             );
         }
         Err(e) => {
@@ -575,11 +617,26 @@ pub fn write_sweep(
     }
     let _ = writeln!(h, "</table>");
     let _ = writeln!(h, "<h2>Cost</h2>");
-    figure(&mut h, "cost.svg", "State part of the cost, V(t)/V(0), per ω0 (paper Figs. 6, 8).");
+    let planar =
+        matches!(control.scenario.structure.components(), intrinsic_beam::Components::Planar);
+    let (fig_cost, fig_snap) = if planar { ("Fig. 6", "Fig. 7") } else { ("Fig. 8", "Fig. 9") };
+    figure(
+        &mut h,
+        "cost.svg",
+        &format!("State part of the cost, V(t)/V(0), per ω0 (paper {fig_cost})."),
+    );
     let _ = writeln!(h, "<h2>Snapshots</h2>");
-    figure(&mut h, "snapshots.svg", "Deformed structure every snapshot interval, blue (t = 0) to red (end), per run (paper Figs. 7, 9).");
+    figure(&mut h, "snapshots.svg", &format!("Deformed structure every snapshot interval in three time windows, shade darkening as t increases, one row per run (paper {fig_snap})."));
     let _ = writeln!(h, "<h2>Inputs</h2>");
-    figure(&mut h, "inputs.svg", "Control inputs per ω0, each held for τs (paper Fig. 10).");
+    figure(
+        &mut h,
+        "inputs.svg",
+        if planar {
+            "Control inputs per ω0, each held for τs (the paper's Fig. 10 shows them for the 3D case)."
+        } else {
+            "Control inputs per ω0, each held for τs (paper Fig. 10)."
+        },
+    );
     let _ = writeln!(h, "<h2>Solve time per sample</h2>");
     if timings {
         figure(
