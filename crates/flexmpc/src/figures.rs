@@ -443,6 +443,8 @@ fn prediction_chart(path: &Path, plant: &[(f64, f64)], predicted: &[(f64, f64)])
         .label_style(("sans-serif", crate::plot::TICK_FONT))
         .axis_desc_style(("sans-serif", crate::plot::AXIS_FONT))
         .x_labels(10)
+        .y_labels(6)
+        .light_line_style(RGBColor(240, 240, 240))
         .y_label_formatter(&|v| format!("{v:.0e}"))
         .draw()?;
     chart.draw_series(LineSeries::new(

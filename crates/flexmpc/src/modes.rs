@@ -165,11 +165,23 @@ pub fn plot(report: &ModeReport, dir: &Path) -> Result<Vec<std::path::PathBuf>> 
     // Fig. 4: components against the cumulative arc length.
     let fig4 = dir.join("components.svg");
     {
-        let root = SVGBackend::new(&fig4, (900, 260 * k.max(1) as u32)).into_drawing_area();
+        let root = SVGBackend::new(&fig4, (1100, 280 * k.max(1) as u32)).into_drawing_area();
         root.fill(&WHITE)?;
-        let panels = root.split_evenly((k.max(1), 1));
+        let entries: Vec<(String, RGBColor, bool)> = shapes
+            .iter()
+            .enumerate()
+            .map(|(j, m)| {
+                (
+                    format!("mode {} ({}, {:.3} rad/s)", m.index + 1, m.label, m.frequency_rad_s),
+                    palette[j % palette.len()],
+                    false,
+                )
+            })
+            .collect();
+        let plot_area = crate::plot::with_legend(&root, &entries)?;
+        let panels = plot_area.split_evenly((k.max(1), 1));
         for (c, panel) in panels.iter().enumerate() {
-            let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+            let mut series: Vec<Vec<(f64, f64)>> = Vec::new();
             let mut lo = f64::INFINITY;
             let mut hi = f64::NEG_INFINITY;
             let mut s_max: f64 = 0.0;
@@ -188,23 +200,30 @@ pub fn plot(report: &ModeReport, dir: &Path) -> Result<Vec<std::path::PathBuf>> 
                     pts.push((f64::NAN, f64::NAN));
                 }
                 s_max = s_max.max(offset);
-                series.push((
-                    format!("mode {} ({}, {:.3} rad/s)", m.index + 1, m.label, m.frequency_rad_s),
-                    pts,
-                ));
+                series.push(pts);
             }
             if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
                 hi = lo + 1.0;
             }
             let pad = 0.05 * (hi - lo);
+            let name = names.get(c).copied().unwrap_or("?");
             let mut chart = ChartBuilder::on(panel)
-                .caption(format!("φ_{}", names.get(c).copied().unwrap_or("?")), ("sans-serif", 16))
+                .caption(format!("φ_{name}"), ("sans-serif", crate::plot::AXIS_FONT))
                 .margin(10)
-                .x_label_area_size(30)
-                .y_label_area_size(55)
+                .x_label_area_size(40)
+                .y_label_area_size(70)
                 .build_cartesian_2d(0.0..s_max.max(1e-12), (lo - pad)..(hi + pad))?;
-            chart.configure_mesh().x_desc("s along the beams").draw()?;
-            for (j, (label, pts)) in series.into_iter().enumerate() {
+            chart
+                .configure_mesh()
+                .x_desc("s along the beams (m)")
+                .y_desc(format!("φ_{name} (B1-normalised)"))
+                .label_style(("sans-serif", crate::plot::TICK_FONT))
+                .axis_desc_style(("sans-serif", crate::plot::TICK_FONT))
+                .x_labels(8)
+                .y_labels(5)
+                .y_label_formatter(&|v| crate::plot::short(*v))
+                .draw()?;
+            for (j, pts) in series.into_iter().enumerate() {
                 let color = palette[j % palette.len()];
                 for segment in pts.split(|p| p.0.is_nan()) {
                     chart.draw_series(LineSeries::new(
@@ -212,21 +231,6 @@ pub fn plot(report: &ModeReport, dir: &Path) -> Result<Vec<std::path::PathBuf>> 
                         color.stroke_width(2),
                     ))?;
                 }
-                if c == 0 {
-                    chart
-                        .draw_series(std::iter::once(PathElement::new(vec![], color)))?
-                        .label(label)
-                        .legend(move |(x, y)| {
-                            PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-                        });
-                }
-            }
-            if c == 0 {
-                chart
-                    .configure_series_labels()
-                    .background_style(WHITE.mix(0.8))
-                    .border_style(BLACK)
-                    .draw()?;
             }
         }
         root.present()?;
@@ -270,10 +274,19 @@ pub fn plot(report: &ModeReport, dir: &Path) -> Result<Vec<std::path::PathBuf>> 
                     ("sans-serif", 13),
                 )
                 .margin(8)
-                .x_label_area_size(20)
-                .y_label_area_size(30)
+                .x_label_area_size(36)
+                .y_label_area_size(50)
                 .build_cartesian_2d((cx - w)..(cx + w), (cz - w)..(cz + w))?;
-            chart.configure_mesh().x_desc("x").y_desc("z").draw()?;
+            chart
+                .configure_mesh()
+                .x_desc("x (m)")
+                .y_desc("z (m)")
+                .label_style(("sans-serif", 13))
+                .x_labels(4)
+                .y_labels(4)
+                .x_label_formatter(&|v| crate::plot::short(*v))
+                .y_label_formatter(&|v| crate::plot::short(*v))
+                .draw()?;
             for b in &m.beams {
                 chart.draw_series(LineSeries::new(
                     b.reference.iter().map(|r| (r[0], r[2])),

@@ -216,7 +216,7 @@ where
     DB::ErrorType: 'static,
 {
     let mut entries: Vec<(String, RGBColor, Mark)> = Vec::new();
-    if series.len() > 1 || !axes.references.is_empty() {
+    if series.iter().any(|(n, _)| !n.is_empty()) || !axes.references.is_empty() {
         for (k, (name, _)) in series.iter().enumerate() {
             entries.push((
                 name.clone(),
@@ -259,7 +259,8 @@ where
             .label_style(("sans-serif", TICK_FONT))
             .axis_desc_style(("sans-serif", AXIS_FONT))
             .x_labels(8)
-            .y_labels(8)
+            .y_labels(6)
+            .light_line_style(RGBColor(240, 240, 240))
             .y_label_formatter(&|v| format!("{v:.0e}"))
             .draw()?;
         for (k, (_, pts)) in pos.iter().enumerate() {
