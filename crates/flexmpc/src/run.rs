@@ -1,6 +1,7 @@
-//! Running a scene: stepping the plant, writing the CSV time series, progress bar.
+//! Running a scene: stepping the plant, writing the CSV time series (through the `csv`
+//! crate: a name with a comma or a quote is quoted, never splits a column), progress bar,
+//! and with `--vtk` the deformed structure at every output step ([`crate::vtk`]).
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
@@ -14,6 +15,8 @@ pub struct RunSummary {
     pub csv: PathBuf,
     /// Plot written (if the scene asked for one).
     pub plot: Option<PathBuf>,
+    /// VTK collection written (`--vtk`).
+    pub vtk: Option<PathBuf>,
     /// Steps taken.
     pub steps: usize,
     /// Wall time (s).
@@ -84,20 +87,29 @@ fn row(scene: &Scene, iterations: usize) -> Vec<f64> {
 }
 
 /// Runs a scene and writes `<out>/timeseries.csv` (and `plot.svg` if asked).
-pub fn simulate(mut scene: Scene, out: &Path, quiet: bool) -> Result<RunSummary> {
+pub fn simulate(scene: Scene, out: &Path, quiet: bool) -> Result<RunSummary> {
+    simulate_with(scene, out, quiet, false)
+}
+
+/// [`simulate`], and with `vtk` also `vtk/simulate-<k>.vtu` per output step and the
+/// collection `vtk/simulate.pvd` ([`crate::vtk`]).
+pub fn simulate_with(mut scene: Scene, out: &Path, quiet: bool, vtk: bool) -> Result<RunSummary> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let csv_path = out.join("timeseries.csv");
-    let mut csv = std::io::BufWriter::new(
-        std::fs::File::create(&csv_path)
-            .with_context(|| format!("creating {}", csv_path.display()))?,
-    );
+    let mut csv = csv::Writer::from_path(&csv_path)
+        .with_context(|| format!("creating {}", csv_path.display()))?;
     let cols = columns(&scene);
-    writeln!(csv, "{}", cols.join(","))?;
+    csv.write_record(&cols)?;
     let mut table: Vec<Vec<f64>> = Vec::new();
+    let mut frames =
+        if vtk { Some(crate::vtk::Collection::new(&out.join("vtk"), "simulate")?) } else { None };
     let first = row(&scene, 0);
     let total0 = first[3];
-    writeln!(csv, "{}", fmt_row(&first))?;
+    csv.write_record(fmt_row(&first))?;
     table.push(first);
+    if let Some(c) = &mut frames {
+        c.push(&crate::vtk::frame_of_plant(&scene.plant))?;
+    }
     let bar = if quiet { ProgressBar::hidden() } else { ProgressBar::new(scene.steps as u64) };
     bar.set_style(
         ProgressStyle::with_template(
@@ -126,13 +138,16 @@ pub fn simulate(mut scene: Scene, out: &Path, quiet: bool) -> Result<RunSummary>
             let rw = row(&scene, iterations);
             iterations = 0;
             total_end = rw[3];
-            writeln!(csv, "{}", fmt_row(&rw))?;
+            csv.write_record(fmt_row(&rw))?;
             table.push(rw);
+            if let Some(c) = &mut frames {
+                c.push(&crate::vtk::frame_of_plant(&scene.plant))?;
+            }
             bar.set_position(step as u64);
         }
     }
     bar.finish_and_clear();
-    csv.flush()?;
+    csv.flush().with_context(|| format!("writing {}", csv_path.display()))?;
     let seconds = start.elapsed().as_secs_f64();
     let plot = if scene.plot.is_empty() {
         None
@@ -141,9 +156,11 @@ pub fn simulate(mut scene: Scene, out: &Path, quiet: bool) -> Result<RunSummary>
         crate::plot::time_series(&path, &scene.title, &cols, &table, &scene.plot)?;
         Some(path)
     };
+    let vtk = frames.map(crate::vtk::Collection::finish).transpose()?;
     Ok(RunSummary {
         csv: csv_path,
         plot,
+        vtk,
         steps: scene.steps,
         seconds,
         total_energy: (total0, total_end),
@@ -151,6 +168,6 @@ pub fn simulate(mut scene: Scene, out: &Path, quiet: bool) -> Result<RunSummary>
     })
 }
 
-fn fmt_row(r: &[f64]) -> String {
-    r.iter().map(|v| format!("{v:.10e}")).collect::<Vec<_>>().join(",")
+fn fmt_row(r: &[f64]) -> Vec<String> {
+    r.iter().map(|v| format!("{v:.10e}")).collect()
 }
