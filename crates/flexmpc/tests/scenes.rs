@@ -133,16 +133,16 @@ fn documented_fields() -> BTreeMap<String, usize> {
     out
 }
 
-/// A `pub struct …Spec` of scene.rs: its serde field names and their Rust types.
+/// A `pub struct …Spec` of scene/spec.rs: its serde field names and their Rust types.
 struct SpecStruct {
     fields: Vec<(String, String)>,
 }
 
-/// The spec structs of crates/flexmpc/src/scene.rs (by a simple parse of `pub name: Type,`
+/// The spec structs of crates/flexmpc/src/scene/spec.rs (by a simple parse of `pub name: Type,`
 /// lines between `pub struct XxxSpec {` and the closing `}`; `#[serde(rename = "…")]` and
 /// `rename_all = "kebab-case"` are honoured).
 fn spec_structs() -> BTreeMap<String, SpecStruct> {
-    let src = std::fs::read_to_string(manifest_dir().join("src/scene.rs")).unwrap();
+    let src = std::fs::read_to_string(manifest_dir().join("src/scene/spec.rs")).unwrap();
     let mut out = BTreeMap::new();
     let mut current: Option<(String, SpecStruct, bool)> = None;
     let mut kebab_next = false;
@@ -185,7 +185,7 @@ fn spec_structs() -> BTreeMap<String, SpecStruct> {
             }
         }
     }
-    assert!(out.contains_key("SceneSpec"), "scene.rs has no `pub struct SceneSpec {{`");
+    assert!(out.contains_key("SceneSpec"), "scene/spec.rs has no `pub struct SceneSpec {{`");
     out
 }
 
@@ -265,14 +265,17 @@ fn guide_documents_exactly_the_parser_fields() {
         leaves.iter().filter(|f| !documented.contains_key(*f)).collect();
     assert!(
         undocumented.is_empty(),
-        "fields accepted by scene.rs but missing from docs/guide.md: {undocumented:?}"
+        "fields accepted by the scene parser but missing from docs/guide.md: {undocumented:?}"
     );
     let unknown: Vec<String> = documented
         .iter()
         .filter(|(f, _)| !leaves.contains(*f) && !tables.contains(*f))
         .map(|(f, l)| format!("{f} (docs/guide.md:{l})"))
         .collect();
-    assert!(unknown.is_empty(), "documented fields that scene.rs does not accept: {unknown:?}");
+    assert!(
+        unknown.is_empty(),
+        "documented fields that the scene parser does not accept: {unknown:?}"
+    );
 }
 
 /// Fields the parser reads only to reject them with a pointed message (a joint's `end`, a

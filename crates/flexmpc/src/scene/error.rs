@@ -1,0 +1,179 @@
+//! Scene errors: the file, the line and the field of each error, and the mapping of a byte
+//! offset in the scene text to its line and `table.key` path.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use super::spec::SceneSpec;
+
+/// A scene error: file, line (1-based, when known), field path and message.
+#[derive(Debug)]
+pub struct SceneError {
+    /// The scene file.
+    pub file: PathBuf,
+    /// Line of the offending entry (1-based), if known.
+    pub line: Option<usize>,
+    /// Field path, e.g. `joints[1].ends`.
+    pub field: String,
+    /// What is wrong and what is allowed.
+    pub message: String,
+}
+
+impl fmt::Display for SceneError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.line {
+            Some(l) => {
+                write!(f, "{}:{}: field `{}`: {}", self.file.display(), l, self.field, self.message)
+            }
+            None => write!(f, "{}: field `{}`: {}", self.file.display(), self.field, self.message),
+        }
+    }
+}
+
+impl std::error::Error for SceneError {}
+
+#[derive(Clone, Copy)]
+pub(super) struct Ctx<'a> {
+    pub(super) file: &'a Path,
+    pub(super) text: &'a str,
+}
+
+impl Ctx<'_> {
+    pub(super) fn line(&self, offset: usize) -> usize {
+        self.text[..offset.min(self.text.len())].matches('\n').count() + 1
+    }
+
+    /// An error at the entry `span`; the line is that of the field's own `key = …` line
+    /// inside the entry when there is one, else the entry's first line.
+    pub(super) fn err<T>(
+        &self,
+        span: Option<std::ops::Range<usize>>,
+        field: impl Into<String>,
+        message: impl Into<String>,
+    ) -> Result<T, SceneError> {
+        let field = field.into();
+        let key = field
+            .rsplit('.')
+            .next()
+            .unwrap_or("")
+            .split('[')
+            .next()
+            .unwrap_or("")
+            .trim()
+            .to_string();
+        let line = span.map(|s| {
+            // The entry runs from its span to the next table header (spans of array-of-table
+            // entries may cover the header only).
+            let start = s.start.min(self.text.len());
+            let first_nl =
+                self.text[start..].find('\n').map(|i| start + i + 1).unwrap_or(self.text.len());
+            let end = self.text[first_nl..]
+                .match_indices('\n')
+                .map(|(i, _)| first_nl + i + 1)
+                .find(|&i| self.text[i..].trim_start_matches([' ', '\t']).starts_with('['))
+                .unwrap_or(self.text.len())
+                .max(s.end.min(self.text.len()));
+            let body = &self.text[start..end];
+            let mut off = s.start;
+            for l in body.split_inclusive('\n') {
+                let t = l.trim_start();
+                if !key.is_empty()
+                    && field.contains('.')
+                    && t.starts_with(&key)
+                    && t[key.len()..].trim_start().starts_with('=')
+                {
+                    return self.line(off);
+                }
+                off += l.len();
+            }
+            self.line(s.start)
+        });
+        // Top-level keys without a span: their own line.
+        let line = line.or_else(|| {
+            self.text
+                .lines()
+                .position(|l| {
+                    let t = l.trim_start();
+                    !field.contains('.')
+                        && t.starts_with(field.as_str())
+                        && t[field.len()..].trim_start().starts_with('=')
+                })
+                .map(|i| i + 1)
+        });
+        Err(SceneError { file: self.file.to_path_buf(), line, field, message: message.into() })
+    }
+}
+
+/// The table path (e.g. `beams[1]`) in effect at byte `offset`.
+pub(super) fn table_at(text: &str, offset: usize) -> Option<String> {
+    let mut current: Option<String> = None;
+    let mut counts: std::collections::HashMap<String, usize> = std::collections::HashMap::new();
+    let mut pos = 0;
+    for line in text.split_inclusive('\n') {
+        if pos > offset {
+            break;
+        }
+        let t = line.trim();
+        if let Some(name) = t.strip_prefix("[[").and_then(|r| r.split("]]").next()) {
+            let c = counts.entry(name.trim().to_string()).or_insert(0);
+            current = Some(format!("{}[{}]", name.trim(), *c));
+            *c += 1;
+        } else if let Some(name) = t.strip_prefix('[').and_then(|r| r.split(']').next()) {
+            current = Some(name.trim().to_string());
+        }
+        pos += line.len();
+    }
+    current
+}
+
+/// The dotted field path (`table.key`) of the `key = value` line containing byte `offset`.
+pub(super) fn field_at(text: &str, offset: usize) -> String {
+    let start = text[..offset.min(text.len())].rfind('\n').map(|i| i + 1).unwrap_or(0);
+    let line = text[start..].lines().next().unwrap_or("");
+    let key = line.split('=').next().unwrap_or("").trim().to_string();
+    match (table_at(text, offset), key.is_empty() || !line.contains('=')) {
+        (Some(t), false) => format!("{t}.{key}"),
+        (None, false) => key,
+        (Some(t), true) => t,
+        (None, true) => "(syntax)".into(),
+    }
+}
+
+pub(super) fn field_from_message(m: &str) -> Option<String> {
+    let start = m.find('`')?;
+    let rest = &m[start + 1..];
+    let end = rest.find('`')?;
+    Some(rest[..end].to_string())
+}
+
+/// The entry (span and field) that a structure error message names, by joint/support/beam
+/// name in backquotes.
+pub(super) fn locate(spec: &SceneSpec, msg: &str) -> (Option<std::ops::Range<usize>>, String) {
+    let quoted: Vec<&str> = msg.split('`').skip(1).step_by(2).collect();
+    // Joints and supports first (the last one named is the one that clashed), then beams.
+    for q in quoted.iter().rev() {
+        for (i, j) in spec.joints.iter().enumerate() {
+            if j.get_ref().name == *q {
+                return (Some(j.span()), format!("joints[{i}] (`{q}`)"));
+            }
+        }
+        for (i, s) in spec.supports.iter().enumerate() {
+            if s.get_ref().name == *q {
+                return (Some(s.span()), format!("supports[{i}] (`{q}`)"));
+            }
+        }
+    }
+    for q in &quoted {
+        for (i, b) in spec.beams.iter().enumerate() {
+            if b.get_ref().name == *q {
+                let field = if msg.contains("placement") && b.get_ref().attach.is_some() {
+                    format!("beams[{i}].attach")
+                } else {
+                    format!("beams[{i}] (`{q}`)")
+                };
+                return (Some(b.span()), field);
+            }
+        }
+    }
+    (None, "(structure)".into())
+}

@@ -1,0 +1,231 @@
+//! Scene files (TOML): sections, beams and meshes, joints, supports, loads and inputs,
+//! initial conditions, run settings — parsed with serde and turned into a
+//! [`multibody_constraints::Plant`]. Every error names the file, the line and the field.
+
+mod control;
+mod error;
+mod inputs;
+mod spec;
+mod structure;
+#[cfg(test)]
+mod tests;
+
+use std::path::{Path, PathBuf};
+
+use intrinsic_beam::Amplitude;
+use multibody_constraints::{Plant, PlantSettings};
+use nalgebra::Vector3;
+
+pub use control::{controller_kind, plant_kind};
+pub use error::SceneError;
+use error::{field_at, field_from_message, locate, table_at, Ctx};
+pub use spec::*;
+pub use structure::MAX_ELEMENTS_PER_BEAM;
+
+/// An input applied during the run (for the CSV).
+#[derive(Debug, Clone)]
+pub enum InputKind {
+    /// Point load index on a beam.
+    Load {
+        /// Beam index.
+        beam: usize,
+        /// Index into the beam's point loads.
+        index: usize,
+    },
+    /// Joint torque.
+    Torque {
+        /// Joint name.
+        joint: String,
+        /// Axis.
+        axis: Option<usize>,
+        /// Value.
+        value: f64,
+        /// History.
+        amplitude: Amplitude,
+    },
+}
+
+/// A named input.
+#[derive(Debug, Clone)]
+pub struct Input {
+    /// Column name.
+    pub name: String,
+    /// What it drives.
+    pub kind: InputKind,
+}
+
+/// A scene ready to run.
+pub struct Scene {
+    /// Source file.
+    pub file: PathBuf,
+    /// The plant, in its initial state.
+    pub plant: Plant,
+    /// Number of steps.
+    pub steps: usize,
+    /// Output stride.
+    pub output_every: usize,
+    /// Inputs (for the CSV and for torque histories).
+    pub inputs: Vec<Input>,
+    /// Plot columns.
+    pub plot: Vec<String>,
+    /// Plot title.
+    pub title: String,
+    /// Description.
+    pub description: String,
+    /// Scene name: the file stem (output folders are `out/<name>`).
+    pub name: String,
+    /// Modes listed and plotted by `flexmpc modes` and the report (`[modes] count`) (default 8).
+    pub mode_count: usize,
+    /// Reference angles (deg) for `flexmpc modes` (`[modes] angles`; empty: the scene's).
+    pub mode_angles: Vec<f64>,
+    /// The closed-loop setup (`[scenario]` present), for `flexmpc mpc`/`sweep`.
+    pub control: Option<Control>,
+}
+
+/// What `flexmpc mpc` and `flexmpc sweep` run: an `mpc::Scenario` built from the scene
+/// (structure, control inputs, mode set, disturbance, timing, weights) and the controller.
+#[derive(Clone, Debug)]
+pub struct Control {
+    /// The scenario (structure and inputs from the scene; `name` = the scene's name).
+    pub scenario: mpc::Scenario,
+    /// Controller settings (`[controller]`).
+    pub controller: mpc::ControllerSettings,
+    /// Plant (`[scenario] plant`).
+    pub plant: mpc::PlantKind,
+    /// Disturbance magnitude of `flexmpc mpc` (`[scenario] omega0`).
+    pub omega0: f64,
+    /// `[sweep] omega0` (empty when the scene has no `[sweep]`).
+    pub sweep_omegas: Vec<f64>,
+    /// `[sweep] controllers` (default: the `[controller] kind`).
+    pub sweep_controllers: Vec<mpc::ControllerKind>,
+}
+
+/// Reads and parses a scene file (syntax and types), without building it.
+pub fn parse(file: &Path) -> Result<(SceneSpec, String), SceneError> {
+    let text = std::fs::read_to_string(file).map_err(|e| SceneError {
+        file: file.to_path_buf(),
+        line: None,
+        field: "(file)".into(),
+        message: format!("cannot read: {e}"),
+    })?;
+    parse_str(file, &text).map(|s| (s, text))
+}
+
+/// Parses scene text; `file` is used in errors.
+pub fn parse_str(file: &Path, text: &str) -> Result<SceneSpec, SceneError> {
+    toml::from_str::<SceneSpec>(text).map_err(|e| {
+        let ctx = Ctx { file, text };
+        let line = e.span().map(|s| ctx.line(s.start));
+        // toml's message names the field (e.g. "missing field `dt`", "unknown field `lenght`").
+        let message = e.message().trim().to_string();
+        // "invalid type/value/length: … `-4` …" quote the value, not the field: take the key
+        // at the span for those.
+        let quotes_field = !message.starts_with("invalid");
+        let field = field_from_message(&message)
+            .filter(|_| quotes_field)
+            .map(|f| match e.span().and_then(|s| table_at(text, s.start)) {
+                Some(t) if !message.contains("missing") || !t.is_empty() => format!("{t}.{f}"),
+                _ => f,
+            })
+            .or_else(|| e.span().map(|s| field_at(text, s.start)))
+            .unwrap_or_else(|| "(syntax)".into());
+        SceneError { file: file.to_path_buf(), line, field, message }
+    })
+}
+
+/// Builds a scene from a file.
+pub fn load(file: &Path) -> Result<Scene, SceneError> {
+    let (spec, text) = parse(file)?;
+    build(file, &text, spec)
+}
+
+/// Builds a scene from a file with the reference angle of its first joint-attached beam
+/// (the structure's first joint) replaced by `angle_deg`: `flexmpc modes --angle`.
+pub fn load_at_angle(file: &Path, angle_deg: f64) -> Result<Scene, SceneError> {
+    let (mut spec, text) = parse(file)?;
+    let Some(attach) = spec.beams.iter_mut().find_map(|b| b.get_mut().attach.as_mut()) else {
+        return Err(SceneError {
+            file: file.to_path_buf(),
+            line: None,
+            field: "beams.attach".into(),
+            message: "--angle needs a beam placed by a joint (`attach = { joint = .. }`); \
+                      this scene has none"
+                .into(),
+        });
+    };
+    if !angle_deg.is_finite() {
+        return Err(SceneError {
+            file: file.to_path_buf(),
+            line: None,
+            field: "--angle".into(),
+            message: format!("the angle must be finite, got {angle_deg}"),
+        });
+    }
+    attach.angle_deg = angle_deg;
+    build(file, &text, spec)
+}
+
+/// Builds a scene from text (`file` names it in errors).
+pub fn load_str(file: &Path, text: &str) -> Result<Scene, SceneError> {
+    let spec = parse_str(file, text)?;
+    build(file, text, spec)
+}
+
+fn build(file: &Path, text: &str, spec: SceneSpec) -> Result<Scene, SceneError> {
+    let ctx = Ctx { file, text };
+    let (structure, beam_names) = structure::structure_of(&ctx, &spec)?;
+    let run = spec.run.get_ref();
+    let run_span = Some(spec.run.span());
+    if !(run.dt.is_finite() && run.dt > 0.0) {
+        return ctx.err(run_span, "run.dt", format!("must be positive, got {}", run.dt));
+    }
+    if !(run.duration.is_finite() && run.duration >= 0.0) {
+        return ctx.err(
+            run_span,
+            "run.duration",
+            format!("must be non-negative, got {}", run.duration),
+        );
+    }
+    let settings = PlantSettings {
+        dt: run.dt,
+        newton_tolerance: run.newton_tolerance.unwrap_or(1e-12),
+        ..Default::default()
+    };
+    let mut plant = Plant::new(structure, settings).or_else(|e| {
+        let msg = e.to_string();
+        let (span, field) = locate(&spec, &msg);
+        ctx.err(
+            span.or(run_span.clone()),
+            if field == "(structure)" { "run".to_string() } else { field },
+            msg,
+        )
+    })?;
+    if let Some(g) = spec.gravity {
+        plant.set_gravity(Vector3::from(g)).or_else(|e| ctx.err(None, "gravity", e.to_string()))?;
+    }
+    let (inputs, controls) = inputs::inputs_of(&ctx, &spec, &mut plant, &beam_names)?;
+    inputs::initial_state(&ctx, &spec, &mut plant)?;
+    let steps = (run.duration / run.dt).round() as usize;
+    let output_every = run.output_every.unwrap_or(10);
+    if output_every == 0 {
+        return ctx.err(run_span, "run.output_every", "must be at least 1");
+    }
+    let name =
+        file.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "scene".into());
+    let (mode_count, mode_angles) = control::modes_of(&ctx, &spec)?;
+    let control = control::control_of(&ctx, &spec, &plant, controls, &name)?;
+    Ok(Scene {
+        file: file.to_path_buf(),
+        plant,
+        steps,
+        output_every,
+        inputs,
+        plot: spec.output.plot.clone(),
+        title: spec.output.title.clone().unwrap_or_default(),
+        description: spec.description.clone().unwrap_or_default(),
+        name,
+        mode_count,
+        mode_angles,
+        control,
+    })
+}
