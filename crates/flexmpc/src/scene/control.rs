@@ -1,8 +1,11 @@
 //! `[modes]`, `[controller]`, `[scenario]` and `[sweep]` → the closed-loop setup.
 
-use multibody_constraints::Plant;
+use multibody_constraints::structure::Structure;
+use multibody_constraints::PlantSettings;
+use serde::de::{value, IntoDeserializer};
+use serde::Deserialize;
 
-use super::error::{Ctx, SceneError};
+use super::error::{Ctx, Owner, SceneError};
 use super::spec::SceneSpec;
 use super::Control;
 
@@ -57,16 +60,8 @@ fn selection_of(ctx: &Ctx<'_>, spec: &SceneSpec) -> Result<modal_rom::ModeSelect
             )
         }
     }
-    if let Some(p) = &ms.selection {
-        return match p.as_str() {
-            "paper-2d" => Ok(modal_rom::samples::paper_2d_selection()),
-            "paper-3d" => Ok(modal_rom::samples::paper_3d_selection()),
-            other => ctx.err(
-                span,
-                "modes.selection",
-                format!("unknown mode set `{other}` (allowed: paper-2d, paper-3d)"),
-            ),
-        };
+    if let Some(p) = ms.selection {
+        return Ok(p.selection());
     }
     if let Some(k) = ms.kinds {
         let total = k.rigid + k.axial + k.torsion + k.bending_e2 + k.bending_e3 + k.mixed;
@@ -94,196 +89,111 @@ fn selection_of(ctx: &Ctx<'_>, spec: &SceneSpec) -> Result<modal_rom::ModeSelect
     }
 }
 
-/// A positive finite value, or an error naming `field`.
-fn positive(
-    ctx: &Ctx<'_>,
-    span: Option<std::ops::Range<usize>>,
-    field: &str,
-    v: f64,
-) -> Result<f64, SceneError> {
-    if v.is_finite() && v > 0.0 {
-        Ok(v)
-    } else {
-        ctx.err(span, field, format!("must be finite and > 0, got {v}"))
-    }
-}
-
-/// A finite value ≥ 0, or an error naming `field`.
-fn non_negative(
-    ctx: &Ctx<'_>,
-    span: Option<std::ops::Range<usize>>,
-    field: &str,
-    v: f64,
-) -> Result<f64, SceneError> {
-    if v.is_finite() && v >= 0.0 {
-        Ok(v)
-    } else {
-        ctx.err(span, field, format!("must be finite and ≥ 0, got {v}"))
-    }
-}
-
-/// An optional `[controller]` value in `(0, max]` behind an on/off switch (`retry` /
-/// `retry_relaxation`, `joint_limit` / `plan_joint_limit_deg`): `None` when neither is given
-/// (keep the default), `Some(None)` when switched off, `Some(Some(v))` for a value; a value
-/// given with the switch off is an error naming both.
+/// A `[controller]` value behind an on/off switch (`retry` / `retry_relaxation`,
+/// `joint_limit` / `plan_joint_limit_deg`): `None` when neither is given (keep the default),
+/// `Some(None)` when switched off, `Some(Some(v))` for a value (its range is the library's
+/// rule); a value given with the switch off is an error naming both.
 fn switched(
     ctx: &Ctx<'_>,
     span: Option<std::ops::Range<usize>>,
     (switch, on): (&str, Option<bool>),
     field: &str,
     value: Option<f64>,
-    max: f64,
 ) -> Result<Option<Option<f64>>, SceneError> {
-    let key = format!("controller.{field}");
     match (on, value) {
-        (Some(false), Some(_)) => {
-            ctx.err(span, &key, format!("is unused with `{switch} = false`; remove one of them"))
-        }
+        (Some(false), Some(_)) => ctx.err(
+            span,
+            format!("controller.{field}"),
+            format!("is unused with `{switch} = false`; remove one of them"),
+        ),
         (Some(false), None) => Ok(Some(None)),
-        (_, Some(v)) if v > 0.0 && v <= max => Ok(Some(Some(v))),
-        (_, Some(v)) => ctx.err(span, &key, format!("must be in (0, {max}], got {v}")),
+        (_, Some(v)) => Ok(Some(Some(v))),
         (_, None) => Ok(None),
     }
 }
 
-/// `nmpc` / `lmpc`.
+/// `nmpc` / `lmpc` (the names of `[controller] kind`).
 pub fn controller_kind(name: &str) -> Option<mpc::ControllerKind> {
-    match name {
-        "nmpc" => Some(mpc::ControllerKind::Nmpc),
-        "lmpc" => Some(mpc::ControllerKind::Lmpc),
-        _ => None,
-    }
+    mpc::ControllerKind::deserialize(IntoDeserializer::<value::Error>::into_deserializer(name)).ok()
 }
 
-/// `fe` / `rom`.
+/// `fe` / `rom` (the names of `[scenario] plant`).
 pub fn plant_kind(name: &str) -> Option<mpc::PlantKind> {
-    match name {
-        "fe" => Some(mpc::PlantKind::Fe),
-        "rom" => Some(mpc::PlantKind::Rom),
-        _ => None,
-    }
+    mpc::PlantKind::deserialize(IntoDeserializer::<value::Error>::into_deserializer(name)).ok()
 }
 
-/// `[controller]` → `mpc::ControllerSettings` and the weights part of `mpc::MpcSettings`.
+/// `[controller]` → `mpc::ControllerSettings` and the weights part of `mpc::MpcSettings`
+/// (unset keys keep the library's defaults; the library's `validate` checks the values).
 fn controller_of(
     ctx: &Ctx<'_>,
     spec: &SceneSpec,
-    mpc_settings: &mut mpc::MpcSettings,
+    m: &mut mpc::MpcSettings,
 ) -> Result<mpc::ControllerSettings, SceneError> {
-    use ocp_transcription::IntegratorKind;
     let mut c = mpc::ControllerSettings::default();
     let Some(cs) = &spec.controller else { return Ok(c) };
     let span = Some(cs.span());
-    let sp = || span.clone();
     let cs = cs.get_ref();
-    if let Some(k) = &cs.kind {
-        c.kind = match controller_kind(k) {
-            Some(k) => k,
-            None => {
-                return ctx.err(sp(), "controller.kind", format!("`{k}` (allowed: nmpc, lmpc)"))
-            }
-        };
-    }
-    if let Some(v) = cs.real_time_iteration {
-        c.real_time_iteration = v;
-    }
-    if let Some(v) = cs.line_search {
-        c.globalisation = if v {
-            ocp_transcription::Globalisation::merit()
-        } else {
-            ocp_transcription::Globalisation::FullStep
-        };
-    }
-    if let Some(n) = cs.max_iterations {
-        if n == 0 {
-            return ctx.err(sp(), "controller.max_iterations", "must be at least 1");
+    fn set<T>(slot: &mut T, v: Option<T>) {
+        if let Some(v) = v {
+            *slot = v;
         }
-        c.max_iterations = n;
     }
-    if let Some(v) = cs.kkt_tolerance {
-        c.kkt_tolerance = positive(ctx, sp(), "controller.kkt_tolerance", v)?;
-    }
-    if let Some(v) = cs.accept_violation {
-        c.accept_violation = positive(ctx, sp(), "controller.accept_violation", v)?;
-    }
-    if let Some(v) = cs.levenberg_marquardt {
-        c.levenberg_marquardt = non_negative(ctx, sp(), "controller.levenberg_marquardt", v)?;
-    }
-    if let Some(v) = cs.retry_levenberg_marquardt {
-        c.retry_levenberg_marquardt =
-            non_negative(ctx, sp(), "controller.retry_levenberg_marquardt", v)?;
-    }
-    if let Some(a) =
-        switched(ctx, sp(), ("retry", cs.retry), "retry_relaxation", cs.retry_relaxation, 1.0)?
-    {
-        c.retry_relaxation = a;
-    }
-    if let Some(v) = cs.fallback_to_lmpc {
-        c.fallback_to_lmpc = v;
-    }
-    if let Some(d) = switched(
-        ctx,
-        sp(),
-        ("joint_limit", cs.joint_limit),
-        "plan_joint_limit_deg",
-        cs.plan_joint_limit_deg,
-        180.0,
-    )? {
-        c.plan_joint_limit_deg = d;
-    }
-    if let Some(i) = &cs.integrator {
-        c.integrator.kind = match i.as_str() {
-            "lawson-rk4" => IntegratorKind::LawsonRk4,
-            "rk4" => IntegratorKind::Rk4,
-            "implicit-midpoint" => IntegratorKind::ImplicitMidpoint,
-            other => {
-                return ctx.err(
-                    sp(),
-                    "controller.integrator",
-                    format!("`{other}` (allowed: lawson-rk4, rk4, implicit-midpoint)"),
-                )
+    set(&mut c.kind, cs.kind);
+    set(&mut c.real_time_iteration, cs.real_time_iteration);
+    set(
+        &mut c.globalisation,
+        cs.line_search.map(|on| {
+            if on {
+                ocp_transcription::Globalisation::merit()
+            } else {
+                ocp_transcription::Globalisation::FullStep
             }
-        };
-    }
-    if let Some(n) = cs.substeps {
-        if n == 0 {
-            return ctx.err(sp(), "controller.substeps", "must be at least 1");
-        }
-        c.integrator.substeps = n;
-    }
+        }),
+    );
+    set(&mut c.max_iterations, cs.max_iterations);
+    set(&mut c.kkt_tolerance, cs.kkt_tolerance);
+    set(&mut c.accept_violation, cs.accept_violation);
+    set(&mut c.levenberg_marquardt, cs.levenberg_marquardt);
+    set(&mut c.retry_levenberg_marquardt, cs.retry_levenberg_marquardt);
+    set(&mut c.fallback_to_lmpc, cs.fallback_to_lmpc);
+    set(
+        &mut c.retry_relaxation,
+        switched(ctx, span.clone(), ("retry", cs.retry), "retry_relaxation", cs.retry_relaxation)?,
+    );
+    set(
+        &mut c.plan_joint_limit_deg,
+        switched(
+            ctx,
+            span.clone(),
+            ("joint_limit", cs.joint_limit),
+            "plan_joint_limit_deg",
+            cs.plan_joint_limit_deg,
+        )?,
+    );
+    set(&mut c.integrator.kind, cs.integrator.map(|i| i.kind()));
+    set(&mut c.integrator.substeps, cs.substeps);
     if let Some(w) = &cs.weights {
-        let span = Some(w.span());
         let w = w.get_ref();
-        let m = mpc_settings;
-        for (name, v, slot) in [
-            ("kx1", w.kx1, &mut m.kx1),
-            ("kx2", w.kx2, &mut m.kx2),
-            ("k_dxi", w.k_dxi, &mut m.k_dxi),
-            ("k_xi_rigid", w.k_xi_rigid, &mut m.k_xi_rigid),
-            ("k_xi_elastic", w.k_xi_elastic, &mut m.k_xi_elastic),
-        ] {
-            if let Some(v) = v {
-                *slot = non_negative(ctx, span.clone(), &format!("controller.weights.{name}"), v)?;
-            }
-        }
-        if let Some(v) = w.ku {
-            m.ku = positive(ctx, span.clone(), "controller.weights.ku", v)?;
-        }
-        if let Some(v) = w.u_max {
-            m.u_max = positive(ctx, span.clone(), "controller.weights.u_max", v)?;
-        }
+        set(&mut m.kx1, w.kx1);
+        set(&mut m.kx2, w.kx2);
+        set(&mut m.k_dxi, w.k_dxi);
+        set(&mut m.ku, w.ku);
+        set(&mut m.k_xi_rigid, w.k_xi_rigid);
+        set(&mut m.k_xi_elastic, w.k_xi_elastic);
+        set(&mut m.u_max, w.u_max);
     }
-    if let Err(e) = c.validate() {
-        return ctx.err(sp(), "controller", e.to_string());
-    }
+    c.validate().or_else(|e| ctx.library(spec, Owner::Controller, e))?;
     Ok(c)
 }
 
-/// `[scenario]`, `[controller]`, `[sweep]` and the mode set → the closed-loop setup.
+/// `[scenario]`, `[controller]`, `[sweep]` and the mode set → the closed-loop setup on
+/// `structure` with the plant settings of `[run]`; every value is checked by the library's
+/// `validate` ([`mpc::Scenario::validate`], [`mpc::ControllerSettings::validate`]).
 pub(super) fn control_of(
     ctx: &Ctx<'_>,
     spec: &SceneSpec,
-    plant: &Plant,
+    structure: &Structure,
+    plant: PlantSettings,
     controls: Vec<mpc::ControlInput>,
     name: &str,
 ) -> Result<Option<Control>, SceneError> {
@@ -303,7 +213,6 @@ pub(super) fn control_of(
         return Ok(None);
     };
     let span = Some(sc.span());
-    let sp = || span.clone();
     let ss = sc.get_ref();
     if spec.gravity.is_some() {
         return ctx.err(
@@ -312,122 +221,44 @@ pub(super) fn control_of(
             "a scene with [scenario] has no gravity (the closed loop's plant has none)",
         );
     }
-    if controls.is_empty() {
-        return ctx.err(
-            sp(),
-            "scenario",
-            "a closed loop needs control inputs: mark [[loads]] or [[torques]] with \
-             `control = true`",
-        );
-    }
     let selection = selection_of(ctx, spec)?;
     let mut m = mpc::MpcSettings::default();
     if let Some(v) = ss.horizon {
-        m.horizon = positive(ctx, sp(), "scenario.horizon", v)?;
+        m.horizon = v;
     }
     if let Some(v) = ss.sampling {
-        m.sampling = positive(ctx, sp(), "scenario.sampling", v)?;
-        if m.sampling > m.horizon {
-            return ctx.err(
-                sp(),
-                "scenario.sampling",
-                format!("τs = {} must not exceed the horizon τp = {}", m.sampling, m.horizon),
-            );
-        }
+        m.sampling = v;
     }
-    if let Some(n) = ss.intervals {
-        if n == 0 {
-            return ctx.err(sp(), "scenario.intervals", "must be at least 1");
-        }
-        m.intervals = n;
+    if let Some(v) = ss.intervals {
+        m.intervals = v;
     }
     let controller = controller_of(ctx, spec, &mut m)?;
     let omega0 = ss.omega0.unwrap_or(1.0);
     if !omega0.is_finite() {
-        return ctx.err(sp(), "scenario.omega0", format!("must be finite, got {omega0}"));
+        return ctx.err(span, "scenario.omega0", format!("must be finite, got {omega0}"));
     }
-    if ss.axis.iter().any(|v| !v.is_finite()) || ss.axis.iter().all(|v| *v == 0.0) {
-        return ctx.err(
-            sp(),
-            "scenario.axis",
-            format!("must be finite and non-zero, got {:?}", ss.axis),
-        );
-    }
-    let center = ss.center.unwrap_or([0.0; 3]);
-    if center.iter().any(|v| !v.is_finite()) {
-        return ctx.err(sp(), "scenario.center", "entries must be finite");
-    }
-    let structure = plant.structure().clone();
-    let supports: Vec<String> =
-        structure.joints().iter().filter(|j| j.ground).map(|j| j.name.clone()).collect();
-    let root = match &ss.root {
-        Some(r) if supports.contains(r) => r.clone(),
-        Some(r) => {
-            return ctx.err(
-                sp(),
-                "scenario.root",
-                format!("unknown support `{r}` (supports: {})", supports.join(", ")),
-            )
-        }
-        None => match supports.first() {
-            Some(r) => r.clone(),
-            None => return ctx.err(sp(), "scenario.root", "the structure has no support"),
-        },
-    };
-    let plant_kind = match ss.plant.as_deref() {
-        None => mpc::PlantKind::Fe,
-        Some(p) => match plant_kind(p) {
-            Some(k) => k,
-            None => return ctx.err(sp(), "scenario.plant", format!("`{p}` (allowed: fe, rom)")),
-        },
-    };
-    let duration = positive(ctx, sp(), "scenario.duration", ss.duration.unwrap_or(7.5))?;
-    let output_interval =
-        positive(ctx, sp(), "scenario.output_interval", ss.output_interval.unwrap_or(0.05))?;
-    let snapshot_interval =
-        positive(ctx, sp(), "scenario.snapshot_interval", ss.snapshot_interval.unwrap_or(0.25))?;
-    let rom_plant_substeps = ss.rom_plant_substeps.unwrap_or(16);
-    if rom_plant_substeps == 0 {
-        return ctx.err(sp(), "scenario.rom_plant_substeps", "must be at least 1");
-    }
-    let whole = |a: f64, b: f64| {
-        let r = a / b;
-        r.round() >= 1.0 && (r - r.round()).abs() <= 1e-9 * r.round()
-    };
-    let dt = plant.settings().dt;
-    for (field, a, b, what) in [
-        ("scenario.duration", duration, output_interval, "output_interval"),
-        ("scenario.sampling", m.sampling, output_interval, "output_interval"),
-        ("scenario.snapshot_interval", snapshot_interval, output_interval, "output_interval"),
-        ("scenario.output_interval", output_interval, dt, "[run] dt"),
-    ] {
-        if !whole(a, b) {
-            return ctx.err(
-                sp(),
-                field,
-                format!("{a} s must be a whole multiple (≥ 1) of {what} = {b} s"),
-            );
-        }
-    }
+    // the first support by default; an unknown name is the library's error
+    let root = ss
+        .root
+        .clone()
+        .or_else(|| structure.joints().iter().find(|j| j.ground).map(|j| j.name.clone()));
     let scenario = mpc::Scenario {
         name: name.to_string(),
-        structure,
+        structure: structure.clone(),
         inputs: controls,
         selection,
         rom_options: modal_rom::RomOptions::default(),
         omega_direction: ss.axis,
-        center,
-        root,
-        duration,
-        output_interval,
-        snapshot_interval,
-        plant: *plant.settings(),
-        rom_plant_substeps,
+        center: ss.center.unwrap_or([0.0; 3]),
+        root: root.unwrap_or_default(),
+        duration: ss.duration.unwrap_or(7.5),
+        output_interval: ss.output_interval.unwrap_or(0.05),
+        snapshot_interval: ss.snapshot_interval.unwrap_or(0.25),
+        plant,
+        rom_plant_substeps: ss.rom_plant_substeps.unwrap_or(16),
         mpc: m,
     };
-    if let Err(e) = scenario.validate() {
-        return ctx.err(sp(), "scenario", e.to_string());
-    }
+    scenario.validate().or_else(|e| ctx.library(spec, Owner::Scenario, e))?;
     let (sweep_omegas, sweep_controllers) = match &spec.sweep {
         None => (Vec::new(), vec![controller.kind]),
         Some(sw) => {
@@ -444,22 +275,7 @@ pub(super) fn control_of(
                 Some(v) if v.is_empty() => {
                     return ctx.err(span, "sweep.controllers", "give at least one of nmpc, lmpc")
                 }
-                Some(v) => {
-                    let mut out = Vec::new();
-                    for k in v {
-                        match controller_kind(k) {
-                            Some(k) => out.push(k),
-                            None => {
-                                return ctx.err(
-                                    span,
-                                    "sweep.controllers",
-                                    format!("`{k}` (allowed: nmpc, lmpc)"),
-                                )
-                            }
-                        }
-                    }
-                    out
-                }
+                Some(v) => v.clone(),
             };
             (s.omega0.clone(), kinds)
         }
@@ -467,7 +283,7 @@ pub(super) fn control_of(
     Ok(Some(Control {
         scenario,
         controller,
-        plant: plant_kind,
+        plant: ss.plant.unwrap_or(mpc::PlantKind::Fe),
         omega0,
         sweep_omegas,
         sweep_controllers,

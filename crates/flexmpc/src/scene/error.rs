@@ -104,6 +104,93 @@ impl Ctx<'_> {
     }
 }
 
+/// Which library settings an error comes from: the table that maps its fields to scene keys.
+#[derive(Clone, Copy, Debug)]
+pub(super) enum Owner {
+    /// [`mpc::ControllerSettings::validate`] (fields as named there).
+    Controller,
+    /// [`mpc::Scenario::validate`] (its own fields, `mpc.<field>`, `plant.<field>`).
+    Scenario,
+}
+
+/// The scene key of each settings field that the `mpc` crate's `validate()`s name: `(owner,
+/// library field, scene key)`. A field not listed is reported against its owner's table.
+const KEYS: &[(&str, &str, &str)] = &[
+    ("controller", "max_iterations", "controller.max_iterations"),
+    ("controller", "kkt_tolerance", "controller.kkt_tolerance"),
+    ("controller", "accept_violation", "controller.accept_violation"),
+    ("controller", "levenberg_marquardt", "controller.levenberg_marquardt"),
+    ("controller", "retry_levenberg_marquardt", "controller.retry_levenberg_marquardt"),
+    ("controller", "retry_relaxation", "controller.retry_relaxation"),
+    ("controller", "plan_joint_limit_deg", "controller.plan_joint_limit_deg"),
+    ("controller", "integrator.substeps", "controller.substeps"),
+    ("scenario", "mpc.kx1", "controller.weights.kx1"),
+    ("scenario", "mpc.kx2", "controller.weights.kx2"),
+    ("scenario", "mpc.k_dxi", "controller.weights.k_dxi"),
+    ("scenario", "mpc.ku", "controller.weights.ku"),
+    ("scenario", "mpc.k_xi_rigid", "controller.weights.k_xi_rigid"),
+    ("scenario", "mpc.k_xi_elastic", "controller.weights.k_xi_elastic"),
+    ("scenario", "mpc.u_max", "controller.weights.u_max"),
+    ("scenario", "mpc.horizon", "scenario.horizon"),
+    ("scenario", "mpc.sampling", "scenario.sampling"),
+    ("scenario", "mpc.intervals", "scenario.intervals"),
+    ("scenario", "duration", "scenario.duration"),
+    ("scenario", "output_interval", "scenario.output_interval"),
+    ("scenario", "snapshot_interval", "scenario.snapshot_interval"),
+    ("scenario", "rom_plant_substeps", "scenario.rom_plant_substeps"),
+    ("scenario", "omega_direction", "scenario.axis"),
+    ("scenario", "center", "scenario.center"),
+    ("scenario", "root", "scenario.root"),
+    ("scenario", "inputs", "scenario"),
+    ("scenario", "plant.dt", "run.dt"),
+    ("scenario", "plant.newton_tolerance", "run.newton_tolerance"),
+];
+
+/// Scene-file advice appended to a library message, by scene key.
+const HINTS: &[(&str, &str)] = &[(
+    "scenario",
+    "mark [[loads]] or [[torques]] with `control = true` (the closed loop's inputs)",
+)];
+
+impl Ctx<'_> {
+    /// A settings error of the `mpc` crate at the scene key of the field it names ([`KEYS`]),
+    /// on that key's line.
+    pub(super) fn library<T>(
+        &self,
+        spec: &SceneSpec,
+        owner: Owner,
+        e: mpc::MpcError,
+    ) -> Result<T, SceneError> {
+        let table = match owner {
+            Owner::Controller => "controller",
+            Owner::Scenario => "scenario",
+        };
+        let (key, message) = match &e {
+            mpc::MpcError::Invalid { field, value, reason } => (
+                KEYS.iter()
+                    .find(|(o, f, _)| *o == table && f == field)
+                    .map_or(table, |(_, _, k)| *k),
+                format!("{reason}, got {value}"),
+            ),
+            _ => (table, e.to_string()),
+        };
+        let message = match HINTS.iter().find(|(k, _)| *k == key) {
+            Some((_, hint)) => format!("{message}: {hint}"),
+            None => message,
+        };
+        let span = if key.starts_with("controller.weights.") {
+            spec.controller.as_ref().and_then(|c| c.get_ref().weights.as_ref()).map(|w| w.span())
+        } else if key.starts_with("controller") {
+            spec.controller.as_ref().map(|c| c.span())
+        } else if key.starts_with("run") {
+            Some(spec.run.span())
+        } else {
+            spec.scenario.as_ref().map(|s| s.span())
+        };
+        self.err(span, key, message)
+    }
+}
+
 /// The table path (e.g. `beams[1]`) in effect at byte `offset`.
 pub(super) fn table_at(text: &str, offset: usize) -> Option<String> {
     let mut current: Option<String> = None;

@@ -118,9 +118,10 @@ pub fn parse_str(file: &Path, text: &str) -> Result<SceneSpec, SceneError> {
         let line = e.span().map(|s| ctx.line(s.start));
         // toml's message names the field (e.g. "missing field `dt`", "unknown field `lenght`").
         let message = e.message().trim().to_string();
-        // "invalid type/value/length: … `-4` …" quote the value, not the field: take the key
-        // at the span for those.
-        let quotes_field = !message.starts_with("invalid");
+        // "invalid type/value/length: … `-4` …" and "unknown variant `pid`, expected …" quote
+        // the value, not the field: take the key at the span for those.
+        let quotes_field =
+            !(message.starts_with("invalid") || message.starts_with("unknown variant"));
         let field = field_from_message(&message)
             .filter(|_| quotes_field)
             .map(|f| match e.span().and_then(|s| table_at(text, s.start)) {
@@ -213,7 +214,8 @@ fn build(file: &Path, text: &str, spec: SceneSpec) -> Result<Scene, SceneError> 
     let name =
         file.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "scene".into());
     let (mode_count, mode_angles) = control::modes_of(&ctx, &spec)?;
-    let control = control::control_of(&ctx, &spec, &plant, controls, &name)?;
+    let control =
+        control::control_of(&ctx, &spec, plant.structure(), *plant.settings(), controls, &name)?;
     Ok(Scene {
         file: file.to_path_buf(),
         plant,

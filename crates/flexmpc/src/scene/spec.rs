@@ -249,7 +249,7 @@ pub struct ModesSpec {
     pub angles: Option<Vec<f64>>,
     /// Controller model: a named set, `paper-2d` (2 rigid + 4 axial + 4 bending, §5.2) or
     /// `paper-3d` (4 rigid + 4 axial + 4 torsion + 4 + 4 bending, §5.3).
-    pub selection: Option<String>,
+    pub selection: Option<ModeSet>,
     /// Controller model: the lowest modes of each kind (counts, each ≥ 0, total ≥ 1).
     pub kinds: Option<KindsSpec>,
     /// Controller model: the lowest `n` modes (rigid first), n ≥ 1.
@@ -287,7 +287,7 @@ pub struct WeightsSpec {
 pub struct ControllerSpec {
     /// `nmpc` (SQP on the augmented modal model) or `lmpc` (one QP on the model linearised
     /// at the reference) (default nmpc). `--controller` overrides.
-    pub kind: Option<String>,
+    pub kind: Option<mpc::ControllerKind>,
     /// One SQP iteration per sample from the shifted plan instead of iterating to the KKT
     /// tolerance [false].
     pub real_time_iteration: Option<bool>,
@@ -318,7 +318,7 @@ pub struct ControllerSpec {
     pub plan_joint_limit_deg: Option<f64>,
     /// Integrator in each shooting interval: `lawson-rk4`, `rk4` or `implicit-midpoint`
     /// [lawson-rk4].
-    pub integrator: Option<String>,
+    pub integrator: Option<Integrator>,
     /// Integrator substeps per shooting interval `τp/Nc` (≥ 1) (default 16).
     pub substeps: Option<usize>,
     /// Weights of the cost, the paper's by default.
@@ -352,7 +352,7 @@ pub struct ScenarioSpec {
     pub intervals: Option<usize>,
     /// Plant: `fe` (the constrained FE model, the paper's) or `rom` (the modal model
     /// itself, fast studies) (default fe). `--plant` overrides.
-    pub plant: Option<String>,
+    pub plant: Option<mpc::PlantKind>,
     /// Interval of the recorded time series (s, a multiple of `[run] dt`) [0.05].
     pub output_interval: Option<f64>,
     /// Interval of the snapshots of the deformed structure (s, a multiple of
@@ -370,7 +370,7 @@ pub struct SweepSpec {
     pub omega0: Vec<f64>,
     /// Controllers, each `nmpc` or `lmpc` (non-empty) [the `[controller] kind`].
     /// `--controller` overrides.
-    pub controllers: Option<Vec<String>>,
+    pub controllers: Option<Vec<mpc::ControllerKind>>,
 }
 
 /// A whole scene.
@@ -418,4 +418,49 @@ pub struct SceneSpec {
     pub scenario: Option<Spanned<ScenarioSpec>>,
     /// The runs of `flexmpc sweep`.
     pub sweep: Option<Spanned<SweepSpec>>,
+}
+
+/// A named mode set of the controller model (`[modes] selection`).
+#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
+pub enum ModeSet {
+    /// 2 rigid + 4 axial + 4 bending modes (paper §5.2).
+    #[serde(rename = "paper-2d")]
+    Paper2d,
+    /// 4 rigid + 4 axial + 4 torsion + 4 + 4 bending modes (paper §5.3).
+    #[serde(rename = "paper-3d")]
+    Paper3d,
+}
+
+impl ModeSet {
+    /// The library's mode selection of this set.
+    pub fn selection(self) -> modal_rom::ModeSelection {
+        match self {
+            ModeSet::Paper2d => modal_rom::samples::paper_2d_selection(),
+            ModeSet::Paper3d => modal_rom::samples::paper_3d_selection(),
+        }
+    }
+}
+
+/// The integrator of the shooting intervals (`[controller] integrator`).
+#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum Integrator {
+    /// Lawson exponential RK4.
+    LawsonRk4,
+    /// Classical RK4.
+    Rk4,
+    /// Implicit midpoint rule.
+    ImplicitMidpoint,
+}
+
+impl Integrator {
+    /// The library's integrator kind.
+    pub fn kind(self) -> ocp_transcription::IntegratorKind {
+        use ocp_transcription::IntegratorKind;
+        match self {
+            Integrator::LawsonRk4 => IntegratorKind::LawsonRk4,
+            Integrator::Rk4 => IntegratorKind::Rk4,
+            Integrator::ImplicitMidpoint => IntegratorKind::ImplicitMidpoint,
+        }
+    }
 }

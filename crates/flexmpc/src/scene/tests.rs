@@ -234,8 +234,20 @@ controllers = ["nmpc"]
         assert!(msg.contains(field), "field `{field}` in: {msg}");
         assert!(msg.contains(allowed), "`{allowed}` in: {msg}");
     };
-    check("kind = \"nmpc\"", "kind = \"pid\"", "kind = \"pid\"", "controller.kind", "nmpc, lmpc");
-    check("plant = \"fe\"", "plant = \"beam\"", "plant = \"beam\"", "scenario.plant", "fe, rom");
+    check(
+        "kind = \"nmpc\"",
+        "kind = \"pid\"",
+        "kind = \"pid\"",
+        "controller.kind",
+        "`nmpc` or `lmpc`",
+    );
+    check(
+        "plant = \"fe\"",
+        "plant = \"beam\"",
+        "plant = \"beam\"",
+        "scenario.plant",
+        "`fe` or `rom`",
+    );
     check("ku = 0.1", "ku = -1.0", "ku = -1.0", "controller.weights.ku", "> 0");
     check("substeps = 16", "substeps = 0", "substeps = 0", "controller.substeps", "at least 1");
     check(
@@ -267,7 +279,7 @@ controllers = ["nmpc"]
         "controllers = [\"lqr\"]",
         "controllers",
         "sweep.controllers",
-        "nmpc, lmpc",
+        "`nmpc` or `lmpc`",
     );
     check("omega0 = [0.5, 1.0]", "omega0 = []", "omega0 = []", "sweep.omega0", "at least one");
     check(
@@ -282,7 +294,7 @@ controllers = ["nmpc"]
         "selection = \"paper-9d\"",
         "selection",
         "modes.selection",
-        "paper-2d, paper-3d",
+        "`paper-2d` or `paper-3d`",
     );
     check(
         "frame = \"follower\"",
