@@ -288,7 +288,7 @@ fn main() -> Result<()> {
                 if !(d.is_finite() && d > 0.0) {
                     bail!("--duration must be finite and > 0, got {d}");
                 }
-                s.steps = (d / s.plant.settings().dt).round().max(1.0) as usize;
+                s.steps = (d / s.plant_settings.dt).round().max(1.0) as usize;
             }
             let out = out.clone().unwrap_or_else(|| default_out(scene));
             let summary = run::simulate(s, &out, cli.quiet || cli.json)?;
@@ -317,7 +317,7 @@ fn main() -> Result<()> {
                     Some(a) => (scene::load_at_angle(scene, *a)?, dir.clone()),
                     None => (scene::load(scene)?, dir.clone()),
                 };
-                let report = modes::report(s.plant.structure(), n_modes)?;
+                let report = modes::report(&s.structure, n_modes)?;
                 let figures = modes::plot(&report, &dir)?;
                 if !cli.json {
                     if angles.len() > 1 && !cli.quiet {
@@ -351,8 +351,9 @@ fn main() -> Result<()> {
             }
         }
         Some(Command::Check { scene }) => {
-            let s = scene::load(scene)?;
-            let st = s.plant.structure();
+            let checked = scene::check(scene)?;
+            let s = &checked.scene;
+            let st = &s.structure;
             if cli.json {
                 let v = serde_json::json!({
                     "scene": scene,

@@ -6,6 +6,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 
+use multibody_constraints::Plant;
+
 use crate::scene::{InputKind, Scene};
 
 /// What a run produced.
@@ -27,7 +29,7 @@ pub struct RunSummary {
 
 /// Column names of the time series.
 pub fn columns(scene: &Scene) -> Vec<String> {
-    let s = scene.plant.structure();
+    let s = &scene.structure;
     let mut c = vec![
         "t".to_string(),
         "energy".into(),
@@ -56,8 +58,7 @@ pub fn columns(scene: &Scene) -> Vec<String> {
     c
 }
 
-fn row(scene: &Scene, iterations: usize) -> Vec<f64> {
-    let p = &scene.plant;
+fn row(scene: &Scene, p: &Plant, iterations: usize) -> Vec<f64> {
     let s = p.structure();
     let (e, v) = (p.energy(), p.potential_energy());
     let mut r = vec![p.time(), e, v, e + v, iterations as f64];
@@ -84,7 +85,8 @@ fn row(scene: &Scene, iterations: usize) -> Vec<f64> {
 }
 
 /// Runs a scene and writes `<out>/timeseries.csv` (and `plot.svg` if asked).
-pub fn simulate(mut scene: Scene, out: &Path, quiet: bool) -> Result<RunSummary> {
+pub fn simulate(scene: Scene, out: &Path, quiet: bool) -> Result<RunSummary> {
+    let mut plant = scene.plant()?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let csv_path = out.join("timeseries.csv");
     let mut csv = std::io::BufWriter::new(
@@ -94,7 +96,7 @@ pub fn simulate(mut scene: Scene, out: &Path, quiet: bool) -> Result<RunSummary>
     let cols = columns(&scene);
     writeln!(csv, "{}", cols.join(","))?;
     let mut table: Vec<Vec<f64>> = Vec::new();
-    let first = row(&scene, 0);
+    let first = row(&scene, &plant, 0);
     let total0 = first[3];
     writeln!(csv, "{}", fmt_row(&first))?;
     table.push(first);
@@ -110,20 +112,17 @@ pub fn simulate(mut scene: Scene, out: &Path, quiet: bool) -> Result<RunSummary>
     let mut vv = 0.0f64;
     let mut iterations = 0;
     for step in 1..=scene.steps {
-        let t_mid = scene.plant.time() + 0.5 * scene.plant.settings().dt;
+        let t_mid = plant.time() + 0.5 * plant.settings().dt;
         for i in &scene.inputs {
             if let InputKind::Torque { joint, axis, value, amplitude } = &i.kind {
-                scene.plant.set_joint_torque(joint, *axis, value * amplitude.at(t_mid))?;
+                plant.set_joint_torque(joint, *axis, value * amplitude.at(t_mid))?;
             }
         }
-        let r = scene
-            .plant
-            .step()
-            .with_context(|| format!("step {step} of {}", scene.file.display()))?;
+        let r = plant.step().with_context(|| format!("step {step} of {}", scene.file.display()))?;
         iterations += r.iterations;
         vv = vv.max(r.velocity_violation);
         if step % scene.output_every == 0 || step == scene.steps {
-            let rw = row(&scene, iterations);
+            let rw = row(&scene, &plant, iterations);
             iterations = 0;
             total_end = rw[3];
             writeln!(csv, "{}", fmt_row(&rw))?;

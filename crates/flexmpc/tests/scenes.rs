@@ -803,6 +803,22 @@ fn cases() -> Vec<Case> {
             "allowed: planar, spatial",
         ),
         case(
+            "more steps than a run can take",
+            "duration = 0.01",
+            "duration = 1e15",
+            "duration = 1e15",
+            "run.duration",
+            "at most",
+        ),
+        case(
+            "duration not a multiple of dt (the run would end at t = 10)",
+            "dt = 1e-3\nduration = 0.01",
+            "dt = 10.0\nduration = 6.0",
+            "duration = 6.0",
+            "run.duration",
+            "whole multiple",
+        ),
+        case(
             "TOML syntax error",
             "length = 1.0\nelements = 4\n\n",
             "length = 1.0.0\nelements = 4\n\n",
@@ -889,6 +905,22 @@ fn mpc_cases() -> Vec<Case> {
             "at least one",
         ),
         case(
+            "more modes than the structure has",
+            "lowest = 5",
+            "lowest = 10000",
+            "lowest = 10000",
+            "modes.lowest",
+            "10000",
+        ),
+        case(
+            "closed loop with more plant steps than a run can take",
+            "duration = 0.4",
+            "duration = 1e15",
+            "duration = 1e15",
+            "scenario.duration",
+            "at most",
+        ),
+        case(
             "unknown weight",
             "[scenario]",
             "[controller.weights]\nkx3 = 1.0\n\n[scenario]",
@@ -899,7 +931,7 @@ fn mpc_cases() -> Vec<Case> {
     ]
 }
 
-/// Runs one malformed case through `scene::load` on a real file and returns the error.
+/// Runs one malformed case through `scene::check` (what `flexmpc check` runs) on a real file and returns the error.
 fn malformed_error(c: &Case, dir: &Path) -> (PathBuf, usize, scene::SceneError) {
     malformed_error_in(BASE, c, dir)
 }
@@ -916,7 +948,7 @@ fn malformed_error_in(base: &str, c: &Case, dir: &Path) -> (PathBuf, usize, scen
         .find(c.at)
         .map(|off| text[..off].matches('\n').count() + 1)
         .unwrap_or_else(|| panic!("{}: {:?} not in the edited text", c.name, c.at));
-    match scene::load(&path) {
+    match scene::check(&path) {
         Ok(_) => panic!("{}: the malformed scene was accepted:\n{text}", c.name),
         Err(e) => (path, line, e),
     }

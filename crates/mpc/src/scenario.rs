@@ -164,7 +164,8 @@ impl Scenario {
                 "duration",
                 self.duration,
                 format!(
-                    "is {steps:.3e} plant steps of plant.dt = {} s; at most {MAX_PLANT_STEPS}",
+                    "must be at most {MAX_PLANT_STEPS} plant steps of plant.dt = {} s \
+                     ({steps:.3e})",
                     self.plant.dt
                 ),
             ));

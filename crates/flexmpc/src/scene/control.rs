@@ -289,3 +289,30 @@ pub(super) fn control_of(
         sweep_controllers,
     }))
 }
+
+/// The setup that `mpc`, `sweep` and `ocp` build first ([`mpc::Setup::new`]: the modes, the
+/// mode set, the reduced model with the control inputs, the weights); a mode set that the
+/// structure's modes cannot fill is an error at the `[modes]` key that asked for it.
+pub(super) fn setup_of(
+    ctx: &Ctx<'_>,
+    spec: &SceneSpec,
+    control: &Control,
+) -> Result<mpc::Setup, SceneError> {
+    use modal_rom::ModalError;
+    mpc::Setup::new(&control.scenario).or_else(|e| match &e {
+        mpc::MpcError::Modal(ModalError::NotEnoughModes { .. } | ModalError::Invalid { .. }) => {
+            let m = spec.modes.as_ref();
+            let key = m.map_or("modes", |m| {
+                let m = m.get_ref();
+                match (&m.selection, &m.kinds, &m.lowest) {
+                    (Some(_), _, _) => "modes.selection",
+                    (_, Some(_), _) => "modes.kinds",
+                    (_, _, Some(_)) => "modes.lowest",
+                    _ => "modes.indices",
+                }
+            });
+            ctx.err(m.map(|m| m.span()), key, e.to_string())
+        }
+        _ => ctx.library(spec, Owner::Scenario, e),
+    })
+}

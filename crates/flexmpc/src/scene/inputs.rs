@@ -2,6 +2,7 @@
 //! inputs of a closed loop.
 
 use intrinsic_beam::{Amplitude, LoadFrame, PointLoad};
+use multibody_constraints::structure::Structure;
 use multibody_constraints::Plant;
 use nalgebra::{Vector3, Vector6};
 
@@ -35,29 +36,31 @@ fn amplitude(
     Ok(amp)
 }
 
-/// Applies the scene's loads and torques to `plant`: the inputs (for the CSV) and the control
-/// inputs of a closed loop, in the order they appear in the file.
+/// The scene's loads and torques on `structure`: the inputs (for the CSV and the plant of
+/// `simulate`), the control inputs of a closed loop (in the order they appear in the file),
+/// and the point loads per beam.
 pub(super) fn inputs_of(
     ctx: &Ctx<'_>,
     spec: &SceneSpec,
-    plant: &mut Plant,
+    structure: &Structure,
     beam_names: &[String],
-) -> Result<(Vec<Input>, Vec<mpc::ControlInput>), SceneError> {
+) -> Result<Inputs, SceneError> {
     let ctx = *ctx;
     let mut inputs = Vec::new();
     let mut controls = Vec::new();
+    let mut loads: Vec<(usize, PointLoad)> = Vec::new();
     for (i, l) in spec.loads.iter().enumerate() {
         let span = l.span();
         let ls = l.get_ref();
         let f = |x: &str| format!("loads[{i}].{x}");
-        let Some(b) = plant.structure().beam_index(&ls.beam) else {
+        let Some(b) = structure.beam_index(&ls.beam) else {
             return ctx.err(
                 Some(span),
                 f("beam"),
                 format!("unknown beam `{}` (beams: {})", ls.beam, beam_names.join(", ")),
             );
         };
-        let n_el = plant.structure().beams()[b].beam.n_elements();
+        let n_el = structure.beams()[b].beam.n_elements();
         let node = match &ls.node {
             NodeSpec::Index(n) if *n <= n_el => *n,
             NodeSpec::Index(n) => {
@@ -137,8 +140,8 @@ pub(super) fn inputs_of(
             );
         }
         let amp = amplitude(&ctx, span.clone(), &f("amplitude"), &ls.amplitude)?;
-        let index = plant.loads(b).point.len();
-        plant.loads_mut(b).point.push(PointLoad { node, frame, value, amplitude: amp });
+        let index = loads.iter().filter(|(beam, _)| *beam == b).count();
+        loads.push((b, PointLoad { node, frame, value, amplitude: amp }));
         inputs.push(Input { name, kind: InputKind::Load { beam: b, index } });
     }
     for (i, t) in spec.torques.iter().enumerate() {
@@ -186,9 +189,6 @@ pub(super) fn inputs_of(
         if !value.is_finite() {
             return ctx.err(Some(span), f("value"), format!("must be finite, got {value}"));
         }
-        plant
-            .set_joint_torque(&ts.joint, ts.axis, value * amp.at(0.0))
-            .or_else(|e| ctx.err(Some(span.clone()), f("joint"), e.to_string()))?;
         inputs.push(Input {
             name: format!("torque:{}", ts.joint),
             kind: InputKind::Torque {
@@ -198,9 +198,46 @@ pub(super) fn inputs_of(
                 amplitude: amp,
             },
         });
-    } // control inputs in the order they appear in the file
+    }
+    // control inputs in the order they appear in the file
     controls.sort_by_key(|(at, _)| *at);
-    Ok((inputs, controls.into_iter().map(|(_, c)| c).collect()))
+    Ok(Inputs { inputs, controls: controls.into_iter().map(|(_, c)| c).collect(), loads })
+}
+
+/// The inputs of a scene ([`inputs_of`]).
+pub(super) struct Inputs {
+    /// Every load and torque (CSV columns; torque histories).
+    pub(super) inputs: Vec<Input>,
+    /// The control inputs of a closed loop, in the order of `u`.
+    pub(super) controls: Vec<mpc::ControlInput>,
+    /// Point loads with their beam index, in file order.
+    pub(super) loads: Vec<(usize, PointLoad)>,
+}
+
+/// Applies the point loads and the torques' values at `t = 0` to `plant`; an unknown joint
+/// or axis of a torque is an error at that torque.
+pub(super) fn apply(
+    ctx: &Ctx<'_>,
+    spec: &SceneSpec,
+    plant: &mut Plant,
+    loads: &[(usize, PointLoad)],
+    inputs: &[Input],
+) -> Result<(), SceneError> {
+    for (b, l) in loads {
+        plant.loads_mut(*b).point.push(l.clone());
+    }
+    let torques = inputs.iter().filter_map(|i| match &i.kind {
+        InputKind::Torque { joint, axis, value, amplitude } => {
+            Some((joint, axis, value, amplitude))
+        }
+        InputKind::Load { .. } => None,
+    });
+    for (i, (t, (joint, axis, value, amplitude))) in spec.torques.iter().zip(torques).enumerate() {
+        plant
+            .set_joint_torque(joint, *axis, value * amplitude.at(0.0))
+            .or_else(|e| ctx.err(Some(t.span()), format!("torques[{i}].joint"), e.to_string()))?;
+    }
+    Ok(())
 }
 
 /// Sets the initial state (`[[initial.rigid]]`) and checks that the energies are finite.

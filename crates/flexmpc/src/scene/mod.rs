@@ -12,13 +12,14 @@ mod tests;
 
 use std::path::{Path, PathBuf};
 
-use intrinsic_beam::Amplitude;
-use multibody_constraints::{Plant, PlantSettings};
+use intrinsic_beam::{Amplitude, PointLoad};
+use multibody_constraints::structure::Structure;
+use multibody_constraints::{MultibodyError, Plant, PlantSettings};
 use nalgebra::Vector3;
 
 pub use control::{controller_kind, plant_kind};
 pub use error::SceneError;
-use error::{field_at, field_from_message, locate, table_at, Ctx};
+use error::{field_at, field_from_message, table_at, Ctx};
 pub use spec::*;
 pub use structure::MAX_ELEMENTS_PER_BEAM;
 
@@ -54,13 +55,16 @@ pub struct Input {
     pub kind: InputKind,
 }
 
-/// A scene ready to run.
+/// A scene ready to run: the structure and everything built on it. The FE plant of
+/// `simulate` is built by [`Scene::plant`]; closed loops build theirs in `mpc`.
 pub struct Scene {
     /// Source file.
     pub file: PathBuf,
-    /// The plant, in its initial state.
-    pub plant: Plant,
-    /// Number of steps.
+    /// The structure (beams, joints, supports) in its reference configuration.
+    pub structure: Structure,
+    /// Settings of the FE plant (`[run] dt`, `newton_tolerance`).
+    pub plant_settings: PlantSettings,
+    /// Number of steps of `simulate`.
     pub steps: usize,
     /// Output stride.
     pub output_every: usize,
@@ -80,6 +84,35 @@ pub struct Scene {
     pub mode_angles: Vec<f64>,
     /// The closed-loop setup (`[scenario]` present), for `flexmpc mpc`/`sweep`.
     pub control: Option<Control>,
+    /// The parsed file and its text (errors of [`Scene::plant`] name their line), and the
+    /// point loads per beam.
+    source: Source,
+}
+
+struct Source {
+    text: String,
+    spec: SceneSpec,
+    loads: Vec<(usize, PointLoad)>,
+}
+
+impl Scene {
+    /// The FE plant of `simulate` in its initial state: gravity, the point loads, the torques
+    /// at `t = 0` (control inputs at 0) and `[[initial.rigid]]`. Errors name the torque, the
+    /// initial rotation or the gravity that the plant refused.
+    pub fn plant(&self) -> Result<Plant, SceneError> {
+        let ctx = Ctx { file: &self.file, text: &self.source.text };
+        let spec = &self.source.spec;
+        let mut plant = Plant::new(self.structure.clone(), self.plant_settings)
+            .or_else(|e| ctx.err(Some(spec.run.span()), "run", e.to_string()))?;
+        if let Some(g) = spec.gravity {
+            plant
+                .set_gravity(Vector3::from(g))
+                .or_else(|e| ctx.err(None, "gravity", e.to_string()))?;
+        }
+        inputs::apply(&ctx, spec, &mut plant, &self.source.loads, &self.inputs)?;
+        inputs::initial_state(&ctx, spec, &mut plant)?;
+        Ok(plant)
+    }
 }
 
 /// What `flexmpc mpc` and `flexmpc sweep` run: an `mpc::Scenario` built from the scene
@@ -172,6 +205,47 @@ pub fn load_str(file: &Path, text: &str) -> Result<Scene, SceneError> {
     build(file, text, spec)
 }
 
+/// A scene with everything its commands build before they run: what `flexmpc check` checks.
+pub struct Checked {
+    /// The scene.
+    pub scene: Scene,
+    /// The FE plant of `simulate`, in its initial state.
+    pub plant: Plant,
+    /// The closed loop's setup (modes, reduced model, weights) when the scene has a
+    /// `[scenario]`.
+    pub setup: Option<mpc::Setup>,
+}
+
+/// Loads a scene and builds what `simulate`, `modes`, `mpc`, `sweep` and `ocp` build before
+/// they run, through the library's own checks: the scene ([`load`]), the plant of
+/// `simulate` ([`Scene::plant`]) and, for a closed-loop scene, [`mpc::Setup::new`] (the
+/// modes fill the mode set; the control inputs act on the model).
+pub fn check(file: &Path) -> Result<Checked, SceneError> {
+    let (spec, text) = parse(file)?;
+    checked(build(file, &text, spec)?)
+}
+
+/// [`check`] of scene text (`file` names it in errors).
+pub fn check_str(file: &Path, text: &str) -> Result<Checked, SceneError> {
+    checked(load_str(file, text)?)
+}
+
+fn checked(scene: Scene) -> Result<Checked, SceneError> {
+    let plant = scene.plant()?;
+    let setup = match &scene.control {
+        None => None,
+        Some(c) => {
+            let ctx = Ctx { file: &scene.file, text: &scene.source.text };
+            Some(control::setup_of(&ctx, &scene.source.spec, c)?)
+        }
+    };
+    Ok(Checked { scene, plant, setup })
+}
+
+/// Most steps a `simulate` run may take (`[run] duration / dt`), that of a closed loop
+/// ([`mpc::MAX_PLANT_STEPS`]).
+pub const MAX_STEPS: usize = mpc::MAX_PLANT_STEPS;
+
 fn build(file: &Path, text: &str, spec: SceneSpec) -> Result<Scene, SceneError> {
     let ctx = Ctx { file, text };
     let (structure, beam_names) = structure::structure_of(&ctx, &spec)?;
@@ -187,26 +261,40 @@ fn build(file: &Path, text: &str, spec: SceneSpec) -> Result<Scene, SceneError> 
             format!("must be non-negative, got {}", run.duration),
         );
     }
-    let settings = PlantSettings {
+    let plant_settings = PlantSettings {
         dt: run.dt,
         newton_tolerance: run.newton_tolerance.unwrap_or(1e-12),
         ..Default::default()
     };
-    let mut plant = Plant::new(structure, settings).or_else(|e| {
-        let msg = e.to_string();
-        let (span, field) = locate(&spec, &msg);
-        ctx.err(
-            span.or(run_span.clone()),
-            if field == "(structure)" { "run".to_string() } else { field },
-            msg,
-        )
+    plant_settings.validate().or_else(|e| match e {
+        MultibodyError::BadSetting { field, value, reason } => {
+            ctx.err(run_span.clone(), format!("run.{field}"), format!("{reason}, got {value}"))
+        }
+        e => ctx.err(run_span.clone(), "run", e.to_string()),
     })?;
-    if let Some(g) = spec.gravity {
-        plant.set_gravity(Vector3::from(g)).or_else(|e| ctx.err(None, "gravity", e.to_string()))?;
+    let inputs = inputs::inputs_of(&ctx, &spec, &structure, &beam_names)?;
+    let steps = run.duration / run.dt;
+    if steps > MAX_STEPS as f64 {
+        return ctx.err(
+            run_span,
+            "run.duration",
+            format!(
+                "{} s is {steps:.3e} steps of dt = {} s; at most {MAX_STEPS}",
+                run.duration, run.dt
+            ),
+        );
     }
-    let (inputs, controls) = inputs::inputs_of(&ctx, &spec, &mut plant, &beam_names)?;
-    inputs::initial_state(&ctx, &spec, &mut plant)?;
-    let steps = (run.duration / run.dt).round() as usize;
+    if run.duration > 0.0 && !((steps - steps.round()).abs() <= 1e-9 * steps && steps >= 0.5) {
+        return ctx.err(
+            run_span,
+            "run.duration",
+            format!(
+                "{} s must be a whole multiple (≥ 1) of dt = {} s (the run steps by dt)",
+                run.duration, run.dt
+            ),
+        );
+    }
+    let steps = steps.round() as usize;
     let output_every = run.output_every.unwrap_or(10);
     if output_every == 0 {
         return ctx.err(run_span, "run.output_every", "must be at least 1");
@@ -215,13 +303,14 @@ fn build(file: &Path, text: &str, spec: SceneSpec) -> Result<Scene, SceneError> 
         file.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "scene".into());
     let (mode_count, mode_angles) = control::modes_of(&ctx, &spec)?;
     let control =
-        control::control_of(&ctx, &spec, plant.structure(), *plant.settings(), controls, &name)?;
+        control::control_of(&ctx, &spec, &structure, plant_settings, inputs.controls, &name)?;
     Ok(Scene {
         file: file.to_path_buf(),
-        plant,
+        structure,
+        plant_settings,
         steps,
         output_every,
-        inputs,
+        inputs: inputs.inputs,
         plot: spec.output.plot.clone(),
         title: spec.output.title.clone().unwrap_or_default(),
         description: spec.description.clone().unwrap_or_default(),
@@ -229,5 +318,6 @@ fn build(file: &Path, text: &str, spec: SceneSpec) -> Result<Scene, SceneError> 
         mode_count,
         mode_angles,
         control,
+        source: Source { text: text.to_string(), spec, loads: inputs.loads },
     })
 }
