@@ -4,6 +4,8 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+use multibody_constraints::MultibodyError;
+
 use super::spec::SceneSpec;
 
 /// A scene error: file, line (1-based, when known), field path and message.
@@ -233,34 +235,66 @@ pub(super) fn field_from_message(m: &str) -> Option<String> {
     Some(rest[..end].to_string())
 }
 
-/// The entry (span and field) that a structure error message names, by joint/support/beam
-/// name in backquotes.
-pub(super) fn locate(spec: &SceneSpec, msg: &str) -> (Option<std::ops::Range<usize>>, String) {
-    let quoted: Vec<&str> = msg.split('`').skip(1).step_by(2).collect();
-    // Joints and supports first (the last one named is the one that clashed), then beams.
-    for q in quoted.iter().rev() {
-        for (i, j) in spec.joints.iter().enumerate() {
-            if j.get_ref().name == *q {
-                return (Some(j.span()), format!("joints[{i}] (`{q}`)"));
-            }
-        }
-        for (i, s) in spec.supports.iter().enumerate() {
-            if s.get_ref().name == *q {
-                return (Some(s.span()), format!("supports[{i}] (`{q}`)"));
-            }
-        }
-    }
-    for q in &quoted {
-        for (i, b) in spec.beams.iter().enumerate() {
-            if b.get_ref().name == *q {
-                let field = if msg.contains("placement") && b.get_ref().attach.is_some() {
-                    format!("beams[{i}].attach")
+/// The scene entry (span and field) a structure error is about, from the error's typed
+/// fields: the joint or support that owns it (the owner labels of `multibody_constraints`,
+/// "joint `name`" and "support `name`"; the last one listed when several are involved),
+/// else the beam it names.
+pub(super) fn entry_of(
+    spec: &SceneSpec,
+    e: &MultibodyError,
+) -> (Option<std::ops::Range<usize>>, String) {
+    let beam = |name: &str, placement: bool| {
+        spec.beams.iter().enumerate().find(|(_, b)| b.get_ref().name == name).map(|(i, b)| {
+            let field = if placement && b.get_ref().attach.is_some() {
+                format!("beams[{i}].attach")
+            } else {
+                format!("beams[{i}] (`{name}`)")
+            };
+            (Some(b.span()), field)
+        })
+    };
+    // (label, span, field) of every joint and support
+    let owners = spec
+        .joints
+        .iter()
+        .enumerate()
+        .map(|(i, j)| ("joint", "joints", i, j))
+        .chain(spec.supports.iter().enumerate().map(|(i, s)| ("support", "supports", i, s)))
+        .map(|(what, table, i, j)| {
+            let name = &j.get_ref().name;
+            (format!("{what} `{name}`"), j.span(), format!("{table}[{i}] (`{name}`)"))
+        })
+        .collect::<Vec<_>>();
+    let owner = |label: &str| {
+        owners.iter().find(|(l, _, _)| l == label).map(|(_, s, f)| (Some(s.clone()), f.clone()))
+    };
+    let found = match e {
+        MultibodyError::UnknownBeam { owner: o, .. }
+        | MultibodyError::UnknownEnd { owner: o, .. }
+        | MultibodyError::ZeroAxis { owner: o, .. }
+        | MultibodyError::NotPlanar { owner: o, .. } => owner(o).or_else(|| {
+            spec.beams.iter().map(|b| &b.get_ref().name).find_map(|n| {
+                if *o == format!("placement of beam `{n}`") {
+                    beam(n, true)
+                } else if *o == format!("beam `{n}`") {
+                    beam(n, false)
                 } else {
-                    format!("beams[{i}] (`{q}`)")
-                };
-                return (Some(b.span()), field);
-            }
-        }
-    }
-    (None, "(structure)".into())
+                    None
+                }
+            })
+        }),
+        MultibodyError::EndUsedTwice { second, .. } => owner(second),
+        MultibodyError::TooFewEnds { joint, .. } => owner(&format!("joint `{joint}`")),
+        MultibodyError::DuplicateName { name, .. } => owner(&format!("joint `{name}`"))
+            .or_else(|| owner(&format!("support `{name}`")))
+            .or_else(|| beam(name, false)),
+        MultibodyError::BadPlacement { beam: b, .. } => beam(b, true),
+        MultibodyError::RedundantConstraints { involved, .. } => owners
+            .iter()
+            .filter_map(|(l, s, f)| involved.rfind(l.as_str()).map(|at| (at, s, f)))
+            .max_by_key(|(at, _, _)| *at)
+            .map(|(_, s, f)| (Some(s.clone()), f.clone())),
+        _ => None,
+    };
+    found.unwrap_or((None, "(structure)".into()))
 }

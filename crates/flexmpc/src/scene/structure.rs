@@ -8,7 +8,7 @@ use multibody_constraints::structure::{
 use nalgebra::{Matrix6, Vector3, Vector6};
 use toml::Spanned;
 
-use super::error::{locate, Ctx, SceneError};
+use super::error::{entry_of, Ctx, SceneError};
 use super::spec::{JointSpec, SceneSpec, SectionSpec};
 
 /// Largest mesh a scene may ask for, per beam: beyond it a step system needs gigabytes, and
@@ -368,9 +368,8 @@ pub(super) fn structure_of(
         StructureSettings { allow_disconnected: spec.allow_disconnected, ..Default::default() },
     )
     .or_else(|e| {
-        let msg = e.to_string();
-        let (span, field) = locate(spec, &msg);
-        ctx.err(span, field, msg)
+        let (span, field) = entry_of(spec, &e);
+        ctx.err(span, field, e.to_string())
     })?;
     Ok((structure, beam_names))
 }
