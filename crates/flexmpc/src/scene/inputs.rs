@@ -7,7 +7,7 @@ use multibody_constraints::Plant;
 use nalgebra::{Vector3, Vector6};
 
 use super::error::{Ctx, SceneError};
-use super::spec::{AmplitudeSpec, NodeSpec, SceneSpec};
+use super::spec::{AmplitudeSpec, LoadFrameName, NodeSpec, SceneSpec};
 use super::{Input, InputKind};
 
 fn amplitude(
@@ -80,16 +80,9 @@ pub(super) fn inputs_of(
                 )
             }
         };
-        let frame = match ls.frame.as_str() {
-            "follower" => LoadFrame::Follower,
-            "dead" => LoadFrame::Dead,
-            other => {
-                return ctx.err(
-                    Some(span),
-                    f("frame"),
-                    format!("`{other}` (allowed: follower, dead)"),
-                )
-            }
+        let frame = match ls.frame {
+            LoadFrameName::Follower => LoadFrame::Follower,
+            LoadFrameName::Dead => LoadFrame::Dead,
         };
         let fo = ls.force.unwrap_or([0.0; 3]);
         let mo = ls.moment.unwrap_or([0.0; 3]);

@@ -9,7 +9,7 @@ use toml::Spanned;
 #[serde(deny_unknown_fields)]
 pub struct SectionSpec {
     /// `paper-2d` or `paper-3d` (theory.md §9), or absent for explicit values.
-    pub preset: Option<String>,
+    pub preset: Option<SectionPreset>,
     /// Remove all damping (default false).
     #[serde(default)]
     pub undamped: bool,
@@ -80,7 +80,7 @@ pub struct JointSpec {
     /// Unique name.
     pub name: String,
     /// `weld`, `ball`, `hinge`, `universal` or `custom`.
-    pub kind: String,
+    pub kind: JointKindName,
     /// Joints: the ends, `"beam:start"` / `"beam:end"` (at least 2).
     pub ends: Option<Vec<String>>,
     /// Supports: the end, `"beam:start"` / `"beam:end"`.
@@ -90,9 +90,9 @@ pub struct JointSpec {
     /// Frame of the hinge axis / custom axes: `global`, `each-end`, or `end-N` (N-th end).
     pub frame: Option<String>,
     /// Custom: `rigid`/`free` per translation axis.
-    pub translation: Option<[String; 3]>,
+    pub translation: Option<[FreedomName; 3]>,
     /// Custom: `rigid`/`free` per rotation axis.
-    pub rotation: Option<[String; 3]>,
+    pub rotation: Option<[FreedomName; 3]>,
     /// Custom: frame of the rotation axes (default: `frame`).
     pub rotation_frame: Option<String>,
     /// Custom: the three axes (orthonormal columns in their frame; default e1, e2, e3).
@@ -130,7 +130,7 @@ pub struct LoadSpec {
     /// Node.
     pub node: NodeSpec,
     /// `follower` (local frame) or `dead` (global frame).
-    pub frame: String,
+    pub frame: LoadFrameName,
     /// Force (3 components; default 0).
     pub force: Option<[f64; 3]>,
     /// Moment (3 components; default 0).
@@ -380,7 +380,7 @@ pub struct SceneSpec {
     /// Free text.
     pub description: Option<String>,
     /// `planar` or `spatial`.
-    pub components: String,
+    pub components: ComponentsName,
     /// Allow disconnected structures (default false).
     #[serde(default)]
     pub allow_disconnected: bool,
@@ -463,4 +463,72 @@ impl Integrator {
             Integrator::ImplicitMidpoint => IntegratorKind::ImplicitMidpoint,
         }
     }
+}
+
+/// `components`: the motion a structure has.
+#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum ComponentsName {
+    /// Motion in the e1–e3 plane, rotation about e2.
+    Planar,
+    /// Full 3D motion.
+    Spatial,
+}
+
+impl From<ComponentsName> for intrinsic_beam::Components {
+    fn from(c: ComponentsName) -> Self {
+        match c {
+            ComponentsName::Planar => intrinsic_beam::Components::Planar,
+            ComponentsName::Spatial => intrinsic_beam::Components::Spatial,
+        }
+    }
+}
+
+/// A section preset of the paper (theory.md §9).
+#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
+pub enum SectionPreset {
+    /// The 2D two-link's section (§5.2).
+    #[serde(rename = "paper-2d")]
+    Paper2d,
+    /// The 3D two-link's section (§5.3).
+    #[serde(rename = "paper-3d")]
+    Paper3d,
+}
+
+/// The kind of a joint or support (its parameters are fields of [`JointSpec`]).
+#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum JointKindName {
+    /// All six relative motions locked (also `rigid`).
+    #[serde(alias = "rigid")]
+    Weld,
+    /// Rotations free.
+    Ball,
+    /// One rotation free, about `axis`.
+    Hinge,
+    /// Two rotations free (also `wheel`).
+    #[serde(alias = "wheel")]
+    Universal,
+    /// Each translation and rotation `rigid` or `free`.
+    Custom,
+}
+
+/// A custom joint's axis: locked or free.
+#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum FreedomName {
+    /// Locked.
+    Rigid,
+    /// Free.
+    Free,
+}
+
+/// The frame of a point load.
+#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum LoadFrameName {
+    /// The node's local frame (turns with the beam).
+    Follower,
+    /// The global frame.
+    Dead,
 }

@@ -9,7 +9,7 @@ use nalgebra::{Matrix6, Vector3, Vector6};
 use toml::Spanned;
 
 use super::error::{entry_of, Ctx, SceneError};
-use super::spec::{JointSpec, SceneSpec, SectionSpec};
+use super::spec::{FreedomName, JointKindName, JointSpec, SceneSpec, SectionPreset, SectionSpec};
 
 /// Largest mesh a scene may ask for, per beam: beyond it a step system needs gigabytes, and
 /// no run of this library needs it (frequencies converge at second order, docs/intrinsic-beam.md).
@@ -24,16 +24,9 @@ fn section_of(
     let s = spec.get_ref();
     let field = |f: &str| format!("sections.{name}.{f}");
     let mut section = match (&s.preset, &s.mass, &s.stiffness) {
-        (Some(p), None, None) => match p.as_str() {
-            "paper-2d" => Section::paper_2d(),
-            "paper-3d" => Section::paper_3d(),
-            other => {
-                return ctx.err(
-                    span,
-                    field("preset"),
-                    format!("unknown preset `{other}` (allowed: paper-2d, paper-3d)"),
-                )
-            }
+        (Some(p), None, None) => match p {
+            SectionPreset::Paper2d => Section::paper_2d(),
+            SectionPreset::Paper3d => Section::paper_3d(),
         },
         (None, Some(m), Some(k)) => {
             let f = s.stiffness_factor.unwrap_or(1.0);
@@ -157,7 +150,7 @@ fn joint_kind(
         &format!("{field}.frame"),
         j.frame.as_deref().unwrap_or(default_frame),
     )?;
-    let freedoms = |f: &Option<[String; 3]>, name: &str| -> Result<[Freedom; 3], SceneError> {
+    let freedoms = |f: &Option<[FreedomName; 3]>, name: &str| -> Result<[Freedom; 3], SceneError> {
         let Some(f) = f else {
             return ctx.err(
                 Some(span.clone()),
@@ -165,27 +158,16 @@ fn joint_kind(
                 "a custom joint needs 3 entries, each `rigid` or `free`",
             );
         };
-        let mut out = [Freedom::Rigid; 3];
-        for (i, x) in f.iter().enumerate() {
-            out[i] = match x.as_str() {
-                "rigid" => Freedom::Rigid,
-                "free" => Freedom::Free,
-                other => {
-                    return ctx.err(
-                        Some(span.clone()),
-                        format!("{field}.{name}[{i}]"),
-                        format!("`{other}` (allowed: rigid, free)"),
-                    )
-                }
-            };
-        }
-        Ok(out)
+        Ok(f.map(|x| match x {
+            FreedomName::Rigid => Freedom::Rigid,
+            FreedomName::Free => Freedom::Free,
+        }))
     };
-    Ok(match j.kind.as_str() {
-        "weld" | "rigid" => JointKind::Weld,
-        "ball" => JointKind::Ball,
-        "universal" | "wheel" => JointKind::Universal,
-        "hinge" => {
+    Ok(match j.kind {
+        JointKindName::Weld => JointKind::Weld,
+        JointKindName::Ball => JointKind::Ball,
+        JointKindName::Universal => JointKind::Universal,
+        JointKindName::Hinge => {
             let Some(axis) = j.axis else {
                 return ctx.err(
                     Some(span),
@@ -195,7 +177,7 @@ fn joint_kind(
             };
             JointKind::Hinge { axis, frame }
         }
-        "custom" => {
+        JointKindName::Custom => {
             let rf = match &j.rotation_frame {
                 Some(t) => parse_frame(ctx, span.clone(), &format!("{field}.rotation_frame"), t)?,
                 None => frame,
@@ -208,15 +190,6 @@ fn joint_kind(
                 axes: j.axes,
             }
         }
-        other => {
-            return ctx.err(
-                Some(span),
-                format!("{field}.kind"),
-                format!(
-                    "unknown joint kind `{other}` (allowed: weld, ball, hinge, universal, custom)"
-                ),
-            )
-        }
     })
 }
 
@@ -226,13 +199,7 @@ pub(super) fn structure_of(
     spec: &SceneSpec,
 ) -> Result<(Structure, Vec<String>), SceneError> {
     let ctx = *ctx;
-    let components = match spec.components.as_str() {
-        "planar" => Components::Planar,
-        "spatial" => Components::Spatial,
-        other => {
-            return ctx.err(None, "components", format!("`{other}` (allowed: planar, spatial)"))
-        }
-    };
+    let components = Components::from(spec.components);
     let mut sections = std::collections::BTreeMap::new();
     for (name, s) in &spec.sections {
         sections.insert(name.clone(), section_of(&ctx, name, s)?);
