@@ -1587,21 +1587,26 @@ pub mod scene_fuzz {
         if elements > MAX_ELEMENTS {
             return Class::OverCap;
         }
-        let mut scene = match catch_unwind(|| flexmpc::scene::load_str(file, text)) {
+        let scene = match catch_unwind(|| flexmpc::scene::load_str(file, text)) {
             Err(p) => return Class::Panic(format!("load_str: {}", panic_message(p.as_ref()))),
             Ok(Err(_)) => return Class::LoadError,
             Ok(Ok(scene)) => scene,
         };
+        let mut plant = match catch_unwind(AssertUnwindSafe(|| scene.plant())) {
+            Err(p) => return Class::Panic(format!("plant: {}", panic_message(p.as_ref()))),
+            Ok(Err(_)) => return Class::LoadError,
+            Ok(Ok(plant)) => plant,
+        };
         let stepped = catch_unwind(AssertUnwindSafe(|| {
-            let p = &scene.plant;
+            let p = &plant;
             if let Some(v) = p.state().iter().find(|v| !v.is_finite()) {
                 return Err(Class::NonFinite(format!("initial state entry {v}")));
             }
             let (e, v) = (p.energy(), p.potential_energy());
             let overflow = (!(e.is_finite() && v.is_finite()))
                 .then(|| format!("initial energy {e:e}, gravity potential {v:e}"));
-            let step = scene.plant.step();
-            let p = &scene.plant;
+            let step = plant.step();
+            let p = &plant;
             if step.is_ok() {
                 if let Some(v) = p.state().iter().find(|v| !v.is_finite()) {
                     return Err(Class::NonFinite(format!("state after one step: {v}")));
