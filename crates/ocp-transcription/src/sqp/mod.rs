@@ -1,5 +1,6 @@
 //! The multiple-shooting SQP solver: settings, status, counters, warm start and shift.
 
+mod filter;
 mod linearise;
 mod settings;
 mod solve;
@@ -62,6 +63,12 @@ pub struct SqpSolver<D: Dynamics> {
     log: Vec<IterationLog>,
     stats: SqpStats,
     merit_nu: f64,
+    /// `Φ(s_k + tΔs_k, u_k + tΔu_k)` of the last line-search trial.
+    trial_phi: Vec<DVector<f64>>,
+    /// Defects and step saved around a second-order correction.
+    d_saved: Vec<DVector<f64>>,
+    step_saved: Step,
+    filter: filter::Filter,
     tmp_x: DVector<f64>,
     tmp_x2: DVector<f64>,
     tmp_u: DVector<f64>,
@@ -158,6 +165,10 @@ impl<D: Dynamics> SqpSolver<D> {
             log: Vec::with_capacity(settings.max_iterations + 1),
             stats: SqpStats::default(),
             merit_nu: 0.0,
+            trial_phi: vec![DVector::zeros(nx); n],
+            d_saved: vec![DVector::zeros(nx); n],
+            step_saved: Step::new(n, nx, nu),
+            filter: filter::Filter::with_capacity(2 * settings.max_iterations + 2),
             tmp_x: DVector::zeros(nx),
             tmp_x2: DVector::zeros(nx),
             tmp_u: DVector::zeros(nu),

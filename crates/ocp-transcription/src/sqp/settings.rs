@@ -32,7 +32,10 @@ pub enum Globalisation {
         /// Relaxation factor.
         alpha: f64,
     },
-    /// Backtracking on the ℓ1 merit `J + ν Σ‖defects‖₁` with the Armijo condition.
+    /// Backtracking on the ℓ1 merit `φ(w) = J + ν (Σ‖d_k‖₁ + ‖x0 − s_0‖₁ + state-bound
+    /// violations)` with the Armijo condition `φ(w + tΔw) ≤ φ(w) + armijo·t·Dφ(w; Δw)`,
+    /// `Dφ = ∇JᵀΔw − ν c(w)` (Nocedal & Wright, *Numerical Optimization*, 2nd ed., §18.3).
+    /// A trial integrates the intervals without sensitivities (states and cost only).
     MeritLineSearch {
         /// Armijo constant in (0, 0.5). Typical 1e-4.
         armijo: f64,
@@ -40,13 +43,62 @@ pub enum Globalisation {
         backtracking: f64,
         /// Smallest step before giving up (status [`SqpStatus::LineSearchFailed`]), in (0, 1).
         min_step: f64,
+        /// Penalty rule. `false`: `ν` only grows (`ν ← 2‖λ‖∞` whenever `ν < 1.1‖λ‖∞`) and is
+        /// kept across solves. `true`: `ν` follows the QP multipliers both ways, Powell's rule
+        /// `ν ← max(ν̄, ½(ν + ν̄))` with `ν̄ = 1.1‖(λ, μ)‖∞` (N&W (18.36)), reset at every solve;
+        /// a penalty inflated by early large multipliers otherwise makes the merit see mostly
+        /// the defects and reject steps along the curved constraint manifold.
+        adaptive_penalty: bool,
+        /// Second-order correction (N&W §18.3, (18.24)): when the full step fails the Armijo
+        /// test, the QP is solved again with the defects `d_k + d_k(w + Δw)` (same Hessian and
+        /// Jacobians; a correction of the step against the constraints' curvature, which
+        /// otherwise rejects full steps near the solution — the Maratos effect) and the
+        /// corrected full step is tried before backtracking.
+        second_order_correction: bool,
+    },
+    /// Filter line search on (cost, ℓ1 constraint violation) with the second-order
+    /// correction (the globalisation of IPOPT; see the `filter` module). A trial integrates
+    /// the intervals without sensitivities.
+    Filter {
+        /// Backtracking factor in (0, 1). Typical 0.5.
+        backtracking: f64,
+        /// Smallest step before giving up (status [`SqpStatus::LineSearchFailed`]), in (0, 1).
+        min_step: f64,
+        /// Try the second-order correction when the full step is rejected with a larger
+        /// violation.
+        second_order_correction: bool,
     },
 }
 
 impl Globalisation {
-    /// Merit line search with `armijo = 1e-4`, `backtracking = 0.5`, `min_step = 1e-6`.
+    /// Filter line search, `backtracking = 0.5`, `min_step = 1e-8`, second-order correction.
+    pub fn filter() -> Self {
+        Globalisation::Filter { backtracking: 0.5, min_step: 1e-8, second_order_correction: true }
+    }
+
+    /// Merit line search with `armijo = 1e-4`, `backtracking = 0.5`, `min_step = 1e-6`, the
+    /// growing penalty, no second-order correction (what the closed loops use).
     pub fn merit() -> Self {
-        Globalisation::MeritLineSearch { armijo: 1e-4, backtracking: 0.5, min_step: 1e-6 }
+        Globalisation::MeritLineSearch {
+            armijo: 1e-4,
+            backtracking: 0.5,
+            min_step: 1e-6,
+            adaptive_penalty: false,
+            second_order_correction: false,
+        }
+    }
+
+    /// Merit line search with the penalty following the multipliers and the second-order
+    /// correction (`armijo = 1e-4`, `backtracking = 0.5`, `min_step = 1e-8`): what
+    /// [`SqpSettings::converge`] uses.
+    pub fn merit_soc() -> Self {
+        Globalisation::MeritLineSearch {
+            armijo: 1e-4,
+            backtracking: 0.5,
+            min_step: 1e-8,
+            adaptive_penalty: true,
+            second_order_correction: true,
+        }
     }
 }
 
@@ -88,6 +140,12 @@ pub struct SqpSettings {
     pub qp_max_iterations: usize,
     /// Integrator inside the shooting intervals (default RK4, 4 substeps).
     pub integrator: IntegratorSettings,
+    /// Recovery from a failed QP (numerical failure or iteration limit, not infeasibility):
+    /// solve it again with a Levenberg–Marquardt term `μI` added to the Hessian blocks,
+    /// `μ = 10⁻⁵…10¹ × (1 + max diagonal entry)` growing tenfold per attempt (a shorter,
+    /// better conditioned step); the status is [`SqpStatus::QpFailed`] only when every attempt
+    /// fails (default false).
+    pub qp_recovery: bool,
     /// Integrate the shooting intervals of a linearisation on the rayon thread pool
     /// (Gauss–Newton path; exact-Hessian sweeps and line-search trials stay sequential) (default false).
     pub parallel_intervals: bool,
@@ -107,11 +165,27 @@ impl Default for SqpSettings {
             qp_max_iterations: 200,
             integrator: IntegratorSettings::default(),
             parallel_intervals: false,
+            qp_recovery: false,
         }
     }
 }
 
 impl SqpSettings {
+    /// A full SQP to the KKT tolerance 1e-8 (at most 60 iterations) with the
+    /// [second-order-corrected merit line search](Globalisation::merit_soc) and `integrator`:
+    /// the settings that solve one problem to convergence, whatever a real-time loop uses.
+    pub fn converge(integrator: IntegratorSettings) -> Self {
+        Self {
+            mode: SqpMode::Sqp,
+            globalisation: Globalisation::merit_soc(),
+            max_iterations: 60,
+            kkt_tolerance: 1e-8,
+            qp_recovery: true,
+            integrator,
+            ..Self::default()
+        }
+    }
+
     /// Checks every field's range.
     pub fn validate(&self) -> Result<()> {
         self.integrator.validate()?;
@@ -141,7 +215,19 @@ impl SqpSettings {
                     return Err(invalid("globalisation.alpha", alpha, "must be in (0, 1]"));
                 }
             }
-            Globalisation::MeritLineSearch { armijo, backtracking, min_step } => {
+            Globalisation::Filter { backtracking, min_step, .. } => {
+                if !(backtracking > 0.0 && backtracking < 1.0) {
+                    return Err(invalid(
+                        "globalisation.backtracking",
+                        backtracking,
+                        "must be in (0, 1)",
+                    ));
+                }
+                if !(min_step > 0.0 && min_step < 1.0) {
+                    return Err(invalid("globalisation.min_step", min_step, "must be in (0, 1)"));
+                }
+            }
+            Globalisation::MeritLineSearch { armijo, backtracking, min_step, .. } => {
                 if !(armijo > 0.0 && armijo < 0.5) {
                     return Err(invalid("globalisation.armijo", armijo, "must be in (0, 0.5)"));
                 }

@@ -1,6 +1,6 @@
 //! The SQP loop.
 
-use super::{status_of, IterationLog, SqpMode, SqpSolver, SqpStats, SqpStatus};
+use super::{status_of, Globalisation, IterationLog, SqpMode, SqpSolver, SqpStats, SqpStatus};
 use crate::dynamics::Dynamics;
 use crate::error::{check_dim, invalid, Result};
 use crate::la::{all_finite, norm_inf};
@@ -20,6 +20,11 @@ impl<D: Dynamics> SqpSolver<D> {
         let start = Instant::now();
         let calls0 = self.integrator_calls();
         self.stats = SqpStats::default();
+        if let Globalisation::MeritLineSearch { adaptive_penalty: true, .. } =
+            self.settings.globalisation
+        {
+            self.merit_nu = 0.0;
+        }
         self.log.clear();
         self.x0.copy_from_slice(x0);
         let rti = self.settings.mode == SqpMode::RealTimeIteration;
@@ -52,7 +57,7 @@ impl<D: Dynamics> SqpSolver<D> {
                 status = if rti { SqpStatus::RealTimeIteration } else { SqpStatus::MaxIterations };
                 break;
             }
-            let qp_iters = match self.solve_qp() {
+            let qp_iters = match self.solve_qp_with_recovery() {
                 Ok(q) => q,
                 Err(QpFailure::Infeasible) => {
                     status = SqpStatus::QpInfeasible;
@@ -71,7 +76,7 @@ impl<D: Dynamics> SqpSolver<D> {
                     step_norm = step_norm.max(norm_inf(self.step.du[k].as_slice()));
                 }
             }
-            let Some(t) = self.step_length() else {
+            let Some(t) = self.step_length(it == 0) else {
                 status = SqpStatus::LineSearchFailed;
                 self.log.push(IterationLog {
                     iteration: it,

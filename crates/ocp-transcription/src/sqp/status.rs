@@ -47,6 +47,11 @@ pub struct SqpStats {
     pub integrator_calls: usize,
     /// Hessian regularisations (exact Hessian only).
     pub regularisations: usize,
+    /// Second-order corrections accepted by the line search.
+    pub second_order_corrections: usize,
+    /// QPs solved again with a Levenberg–Marquardt term after a failure
+    /// ([`crate::SqpSettings::qp_recovery`]).
+    pub qp_recoveries: usize,
     /// Final KKT residual (max norm).
     pub kkt: f64,
     /// Final cost `J`.
@@ -74,6 +79,8 @@ impl Default for SqpStats {
             qp_iterations: 0,
             integrator_calls: 0,
             regularisations: 0,
+            second_order_corrections: 0,
+            qp_recoveries: 0,
             kkt: f64::NAN,
             cost: f64::NAN,
             constraint_violation: f64::NAN,
