@@ -6,11 +6,12 @@
 
 use crate::{Case, CaseOutcome, Metric, Tier};
 use faer::Mat;
+use intrinsic_beam::rotation::{quat_conj, quat_mul};
 use intrinsic_beam::{Amplitude, LoadFrame, PointLoad, Section};
 use modal_rom::exact_joints::{self, ExactJointsRom, LinkBasisSettings};
 use modal_rom::samples::{self, paper_2d_selection, paper_3d_selection};
 use modal_rom::{BasisSettings, ModalRom, ModeSelection, RomOptions, StructureModel};
-use multibody_constraints::structure::{quat_conj, quat_mul, Structure};
+use multibody_constraints::structure::Structure;
 use multibody_constraints::{Plant, PlantSettings};
 use nalgebra::{Vector3, Vector4, Vector6};
 use std::f64::consts::PI;
@@ -223,7 +224,7 @@ fn ej_angles(run: Run, rom: &ExactJointsRom, s: &Structure) -> Result<(Angles, f
 /// The paper's model (eq. 29 without quaternion states), joint angle from the two joint
 /// ends' rates as in `modal-rom/rom-vs-fe`.
 fn paper_angles(run: Run) -> Result<Angles, String> {
-    use intrinsic_beam::operators::quaternion_step;
+    use intrinsic_beam::rotation::quaternion_step;
     let s = run.structure(0.0)?;
     let model = StructureModel::new(&s).map_err(err)?;
     let basis = model.modes(&BasisSettings::default()).map_err(err)?;

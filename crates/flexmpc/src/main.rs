@@ -455,12 +455,9 @@ fn run(cli: &Cli) -> Result<()> {
                     Some(a) => (scene::load_at_angle(scene, *a)?, dir.clone()),
                     None => (scene::load(scene)?, dir.clone()),
                 };
-                let report = modes::report_with_progress(
-                    &s.structure,
-                    n_modes,
-                    cli.quiet || cli.json,
-                )
-                .map_err(|e| anyhow::anyhow!("{}: {e}", scene.display()))?;
+                let report =
+                    modes::report_with_progress(&s.structure, n_modes, cli.quiet || cli.json)
+                        .map_err(|e| anyhow::anyhow!("{}: {e}", scene.display()))?;
                 let figures = modes::plot(&report, &dir)?;
                 if !cli.json {
                     if angles.len() > 1 && !cli.quiet {

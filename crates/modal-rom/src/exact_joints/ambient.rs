@@ -23,7 +23,8 @@ use crate::structure::StructureModel;
 use crate::tensor::SparseTensor3;
 use faer::linalg::solvers::Solve;
 use faer::{Mat, MatRef, Side};
-use intrinsic_beam::operators::{l1_times, l2_times, rotation};
+use intrinsic_beam::operators::{l1_times, l2_times};
+use intrinsic_beam::rotation::rotation;
 use nalgebra::{Vector3, Vector6};
 
 /// Settings of [`LinkBasis::from_fields`].

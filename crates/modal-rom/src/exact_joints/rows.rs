@@ -18,7 +18,8 @@
 use crate::error::{invalid, Result};
 use crate::exact_joints::ambient::LinkBasis;
 use faer::Mat;
-use intrinsic_beam::operators::{rotation, tilde};
+use intrinsic_beam::operators::tilde;
+use intrinsic_beam::rotation::rotation;
 use multibody_constraints::joint::{rows, Frame, Freedom, Part, RowKind};
 use multibody_constraints::structure::Structure;
 use nalgebra::{Matrix3, Vector3, Vector4};
