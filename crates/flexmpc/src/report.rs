@@ -198,11 +198,11 @@ pub fn write(
     let cost: Vec<(f64, f64)> = result.records.iter().map(|r| (r.t, r.v_state / v0)).collect();
     plot::lines(
         &out.join("cost.svg"),
-        (900, 420),
+        (1000, 420),
         &Axes {
             title: format!("scaled cost V(t)/V(0), ω0 = {}", control.omega0),
             x: "t (s)".into(),
-            y: "V/V(0)".into(),
+            y: "V/V(0) (dimensionless)".into(),
             log_y: true,
             references: vec![(0.1, "0.1 (criterion)".into())],
             points: false,
@@ -260,7 +260,7 @@ pub fn write(
         .collect();
     plot::lines(
         &out.join("angles.svg"),
-        (900, 420),
+        (1000, 420),
         &Axes {
             title: "joint angles".into(),
             x: "t (s)".into(),
