@@ -194,8 +194,9 @@ pub fn sweep_cost(path: &Path, name: &str, runs: &[SweepRun]) -> Result<()> {
     panels(path, (620 * charts.len().max(1) as u32, 460), &charts)
 }
 
-/// Fig. 10 style: the inputs of every run of a sweep against time, one row of panels per
-/// controller, one panel per input, one curve per ω0 (each input held for τs).
+/// Fig. 10 style: the inputs of every run of a sweep against time, the panels of each
+/// controller on their own rows (at most three a row), one panel per input, one curve per ω0
+/// (each input held for τs).
 pub fn sweep_inputs(
     path: &Path,
     name: &str,
@@ -207,9 +208,14 @@ pub fn sweep_inputs(
         .iter()
         .find_map(|r| r.result.as_ref().ok())
         .map_or_else(Vec::new, |r| r.input_names.clone());
-    let cols = inputs.len().max(1);
+    // at most three panels a row, so that the figure stays readable at the page's width
+    let cols = inputs.len().clamp(1, 3);
+    let rows_per_kind = inputs.len().div_ceil(cols).max(1);
     let mut charts: Vec<(Axes, Vec<Series>)> = Vec::new();
     for k in &kinds {
+        while charts.len() % cols != 0 {
+            charts.push((Axes::default(), Vec::new()));
+        }
         for (i, input) in inputs.iter().enumerate() {
             let series = runs
                 .iter()
@@ -231,7 +237,8 @@ pub fn sweep_inputs(
             ));
         }
     }
-    grid(path, (520 * cols as u32, 360 * kinds.len().max(1) as u32), cols, &charts)
+    let rows = (rows_per_kind * kinds.len()).max(1);
+    grid(path, (520 * cols as u32, 360 * rows as u32), cols, &charts)
 }
 
 /// The unit of a control input: `N·m` for a joint torque or a pure follower moment, `N` for a
