@@ -1,6 +1,5 @@
 //! Measured timings — each sample's solve time and the loop's wall time — kept apart from
-//! every other output, so that two runs of the same scene give identical files (issue 6,
-//! must-show 4).
+//! every other output, so that two runs of the same scene give identical files.
 //!
 //! Every file a closed loop writes is a pure function of its inputs (scene, options, flexmpc
 //! version), except the timing files [`FILES`]: `timings.json`, `timings.csv` and
@@ -18,7 +17,7 @@ use serde_json::{json, Map, Value};
 use crate::plot::{self, Axes, Series};
 use crate::results::SweepRun;
 
-/// The real-time goal of issue 6 for the worst sample's solve time (s): 4× under τs = 0.2 s.
+/// The real-time goal for the worst sample's solve time (s): 4× under τs = 0.2 s.
 pub const SOLVE_TIME_GOAL_S: f64 = 0.05;
 
 /// The files that hold measured timings (everything else is reproducible).
@@ -44,7 +43,7 @@ fn strip(v: &mut Value, keys: &[&str]) {
     }
 }
 
-/// The summary of a run for `summary.json` / `sweep.json`: the issue's keys, strategy counts
+/// The summary of a run for `summary.json` / `sweep.json`: the summary keys, strategy counts
 /// and errors, the number of samples — and no measured time.
 pub fn summary_without_timings(r: &RunResult) -> Value {
     let r = r.without_timings();

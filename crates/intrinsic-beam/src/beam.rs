@@ -1,7 +1,7 @@
 //! The staggered, energy-preserving discretisation of one beam (theory.md §2) and its
 //! implicit-midpoint step rows, Jacobian, energy, powers and linearised operators.
 //!
-//! # Layout (LAYOUT.md)
+//! # Layout (theory.md §2)
 //! With `N` elements and `k` components per field ([`Components`]), the beam's vector is
 //!
 //! ```text

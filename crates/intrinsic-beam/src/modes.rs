@@ -9,7 +9,7 @@
 //!
 //! Two routes. Sections with inertia in every active direction: `ZᵀB1Z` split by its
 //! self-adjoint eigen decomposition, the scaled `ZᵀKZ` solved with faer's self-adjoint
-//! eigensolver (unchanged since session 1). Sections with massless directions (Euler–Bernoulli,
+//! eigensolver. Sections with massless directions (Euler–Bernoulli,
 //! the spatial paper-2D section): the massless directions of `Z` are the null space of `F Z`
 //! (`FᵀF = B1`), decided on its singular values, condensed statically by least squares on the
 //! strain map `L2⁻¹D_FᵀZ`, and the frequencies are the singular values of
@@ -142,8 +142,8 @@ pub fn linear_modes(problem: &BeamProblem) -> Result<Vec<LinearMode>> {
 /// The original route for constrained spaces without massless coordinates: `K = D_F B2⁻¹ D_Fᵀ`
 /// formed, `ZᵀB1Z` split by its eigenvalues (massless directions below `RANK_TOLERANCE` of
 /// the largest, condensed by a Schur complement of `ZᵀKZ`), and a self-adjoint eigensolve of
-/// the scaled stiffness. Returns `(ω, Z y)` per mode. Kept unchanged for sections with inertia
-/// in every active direction (every shape and frequency bit-identical to session 1); with a
+/// the scaled stiffness. Returns `(ω, Z y)` per mode. Used for sections with inertia
+/// in every active direction; with a
 /// positive definite `B1` its eigenvalue split only sees the conditioning of `B1` itself.
 fn massive_route(
     b1: &Mat<f64>,

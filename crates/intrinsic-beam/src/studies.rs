@@ -1,4 +1,4 @@
-//! Numerical experiments behind the "must show" items, shared by the integration
+//! Numerical experiments behind the crate's verification figures, shared by the integration
 //! tests, `cargo xtask verify` cases and benches. Each returns measured numbers; the callers
 //! compare them with tolerances.
 

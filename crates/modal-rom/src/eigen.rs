@@ -150,7 +150,7 @@ impl SecondOrderProblem {
         Ok(SecondOrderProblem { b1, b2, d, g })
     }
 
-    /// Builds the problem from the full FE operators in the LAYOUT.md ordering, given as
+    /// Builds the problem from the full FE operators in the ordering of theory.md §2, given as
     /// `(row, col, value)` entries (duplicates are summed): `B` (n_full²), the skew `A`
     /// (n_full²) and `G` (`g_rows × n_full`).
     ///

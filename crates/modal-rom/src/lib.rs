@@ -1,5 +1,5 @@
 //! Constrained linear modes and the nonlinear modal reduced-order model of intrinsic beam
-//! structures with joints (paper §3, eqs. 13–32; implementer notes theory.md §4–7).
+//! structures with joints (paper §3, eqs. 13–32; theory.md §4–§7).
 //!
 //! **Constrained modes (30)–(32).** At rest, the staggered FE model of a structure is
 //! `B Ẋ = A X`, `G X = 0`. With node velocities `X1`, element forces `X2`, the skew operator's

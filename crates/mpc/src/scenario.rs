@@ -40,7 +40,7 @@ pub struct Scenario {
     pub snapshot_interval: f64,
     /// FE plant settings (`dt` must divide `output_interval`) [dt = 1e-3].
     pub plant: PlantSettings,
-    /// Lawson RK4 steps per output interval when the ROM is the plant [16].
+    /// Lawson RK4 steps per output interval when the ROM is the plant \[16\].
     pub rom_plant_substeps: usize,
     /// Weights, horizon and timing of the MPC (paper defaults).
     pub mpc: MpcSettings,

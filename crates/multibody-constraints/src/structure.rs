@@ -1,7 +1,7 @@
 //! The [`Structure`]: beams placed in space, joints between their ends, supports to the ground;
 //! topology validation, reference configuration and the global vector layout.
 //!
-//! Global layout (LAYOUT.md): the beams' vectors `[x1_0…x1_N, x2_0…x2_{N−1}, x2_L, x2_R]`
+//! Global layout (theory.md §2): the beams' vectors `[x1_0…x1_N, x2_0…x2_{N−1}, x2_L, x2_R]`
 //! concatenated in beam order ([`Structure::offset`]). Constraint rows come in the order:
 //! joints, supports, free ends; each closes `k` end unknowns per end.
 
@@ -170,8 +170,8 @@ impl Structure {
     /// Builds and validates a structure: names unique, ends known and used once, one
     /// component set, placements resolvable and joints closed in the reference
     /// configuration, axes non-zero (and planar where needed), beams connected (unless
-    /// allowed). Redundant constraints are found by [`crate::Plant::new`] /
-    /// [`Structure::check_rank`].
+    /// allowed). Redundant constraints are found by [`crate::Plant::new`]
+    /// (its rank check).
     pub fn new(
         beams: Vec<StructureBeam>,
         joints: Vec<Joint>,
@@ -629,7 +629,7 @@ impl Structure {
         }
     }
 
-    /// Global columns of a joint's slots (see [`Structure::joint_coefficients`]).
+    /// Global columns of a joint's slots (see `Structure::joint_coefficients`).
     pub fn joint_slots(&self, j: &JointInfo) -> Vec<usize> {
         let k = self.k();
         let mut out = Vec::with_capacity(j.ends.len() * 2 * k);
