@@ -194,8 +194,9 @@ pub fn sweep_cost(path: &Path, name: &str, runs: &[SweepRun]) -> Result<()> {
     panels(path, (620 * charts.len().max(1) as u32, 460), &charts)
 }
 
-/// Fig. 10 style: the inputs of every run of a sweep against time, one row of panels per
-/// controller, one panel per input, one curve per ω0 (each input held for τs).
+/// Fig. 10 style: the inputs of every run of a sweep against time, the panels of each
+/// controller on their own rows (at most three a row), one panel per input, one curve per ω0
+/// (each input held for τs).
 pub fn sweep_inputs(
     path: &Path,
     name: &str,
@@ -207,9 +208,14 @@ pub fn sweep_inputs(
         .iter()
         .find_map(|r| r.result.as_ref().ok())
         .map_or_else(Vec::new, |r| r.input_names.clone());
-    let cols = inputs.len().max(1);
+    // at most three panels a row, so that the figure stays readable at the page's width
+    let cols = inputs.len().clamp(1, 3);
+    let rows_per_kind = inputs.len().div_ceil(cols).max(1);
     let mut charts: Vec<(Axes, Vec<Series>)> = Vec::new();
     for k in &kinds {
+        while charts.len() % cols != 0 {
+            charts.push((Axes::default(), Vec::new()));
+        }
         for (i, input) in inputs.iter().enumerate() {
             let series = runs
                 .iter()
@@ -231,7 +237,8 @@ pub fn sweep_inputs(
             ));
         }
     }
-    grid(path, (520 * cols as u32, 360 * kinds.len().max(1) as u32), cols, &charts)
+    let rows = (rows_per_kind * kinds.len()).max(1);
+    grid(path, (520 * cols as u32, 360 * rows as u32), cols, &charts)
 }
 
 /// The unit of a control input: `N·m` for a joint torque or a pure follower moment, `N` for a
@@ -348,7 +355,6 @@ pub fn energy_and_prediction(
             title: "energy of the plant's projected modal state, ½(q1ᵀq1 + q2ᵀq2)".into(),
             x: "t (s)".into(),
             y: "energy (J)".into(),
-            log_y: true,
             ..Default::default()
         },
         &[("plant".to_string(), plant.clone())],
@@ -415,14 +421,14 @@ fn prediction_chart(path: &Path, plant: &[(f64, f64)], predicted: &[(f64, f64)])
         &titled,
         &[("plant".into(), blue, false), ("model prediction".into(), red, true)],
     )?;
-    let pos = |p: &&(f64, f64)| p.1.is_finite() && p.1 > 0.0;
-    let (mut lo, mut hi, mut t1) = (f64::INFINITY, 0.0f64, 0.0f64);
+    let pos = |p: &&(f64, f64)| p.0.is_finite() && p.1.is_finite();
+    let (mut lo, mut hi, mut t1) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64);
     for p in plant.iter().chain(predicted).filter(pos) {
         lo = lo.min(p.1);
         hi = hi.max(p.1);
         t1 = t1.max(p.0);
     }
-    if !(lo.is_finite() && hi > 0.0) {
+    if !(lo.is_finite() && hi.is_finite()) {
         area.draw(&Text::new(
             "no modal state to compare",
             (20, 20),
@@ -435,7 +441,10 @@ fn prediction_chart(path: &Path, plant: &[(f64, f64)], predicted: &[(f64, f64)])
         .margin(12)
         .x_label_area_size(44)
         .y_label_area_size(78)
-        .build_cartesian_2d(0.0..t1.max(1e-9), ((lo / 1.5)..(hi * 1.5)).log_scale())?;
+        .build_cartesian_2d(0.0..t1.max(1e-9), {
+            let pad = 0.05 * (hi - lo).max(1e-12 * hi.abs().max(1e-300));
+            (lo - pad)..(hi + pad)
+        })?;
     chart
         .configure_mesh()
         .x_desc("t (s)")
@@ -443,9 +452,8 @@ fn prediction_chart(path: &Path, plant: &[(f64, f64)], predicted: &[(f64, f64)])
         .label_style(("sans-serif", crate::plot::TICK_FONT))
         .axis_desc_style(("sans-serif", crate::plot::AXIS_FONT))
         .x_labels(10)
-        .y_labels(6)
-        .light_line_style(RGBColor(240, 240, 240))
-        .y_label_formatter(&|v| format!("{v:.0e}"))
+        .y_labels(8)
+        .y_label_formatter(&|v| crate::plot::short(*v))
         .draw()?;
     chart.draw_series(LineSeries::new(
         plant.iter().copied().filter(|p| pos(&p)),

@@ -149,7 +149,8 @@ pub fn print_table(w: &mut impl Write, report: &ModeReport) -> std::io::Result<(
 
 /// Writes `components.svg` (Fig. 4: each velocity component of each elastic mode along the
 /// arc length, beams one after the other) and `shapes.svg` (Fig. 5: translational velocity
-/// mode shapes superimposed on the reference configuration, in the e1–e3 plane).
+/// mode shapes superimposed on the reference configuration, in the e1–e3 plane; spatial
+/// structures also in the e1–e2 plane).
 pub fn plot(report: &ModeReport, dir: &Path) -> Result<Vec<std::path::PathBuf>> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let elastic: Vec<_> = report.shapes.iter().skip(report.n_rigid).collect();
@@ -236,69 +237,82 @@ pub fn plot(report: &ModeReport, dir: &Path) -> Result<Vec<std::path::PathBuf>> 
         root.present()?;
     }
 
-    // Fig. 5: reference configuration (thick black) plus the global translational velocity.
+    // Fig. 5: reference configuration (thick black) plus the global translational velocity,
+    // in the x–z plane (planar) or in the x–y and x–z planes (spatial, one row each).
     let fig5 = dir.join("shapes.svg");
     {
         let n = shapes.len().max(1);
-        let root = SVGBackend::new(&fig5, (300 * n as u32, 320)).into_drawing_area();
+        let planes: &[(usize, usize)] = if k == 3 { &[(0, 2)] } else { &[(0, 1), (0, 2)] };
+        let root =
+            SVGBackend::new(&fig5, (300 * n as u32, 320 * planes.len() as u32)).into_drawing_area();
         root.fill(&WHITE)?;
-        let panels = root.split_evenly((1, n));
-        for (m, panel) in shapes.iter().zip(panels.iter()) {
-            let (mut lo_x, mut hi_x, mut lo_z, mut hi_z) =
-                (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
-            let vmax = m
-                .beams
-                .iter()
-                .flat_map(|b| b.velocity_global.iter())
-                .map(|v| (v[0] * v[0] + v[2] * v[2]).sqrt())
-                .fold(0.0_f64, f64::max)
-                .max(1e-300);
-            let span =
-                m.beams.iter().map(|b| b.s.last().copied().unwrap_or(0.0)).sum::<f64>().max(1e-12);
-            let scale = 0.25 * span / vmax;
-            for b in &m.beams {
-                for (r, v) in b.reference.iter().zip(&b.velocity_global) {
-                    for (x, z) in [(r[0], r[2]), (r[0] + scale * v[0], r[2] + scale * v[2])] {
-                        lo_x = lo_x.min(x);
-                        hi_x = hi_x.max(x);
-                        lo_z = lo_z.min(z);
-                        hi_z = hi_z.max(z);
+        let panels = root.split_evenly((planes.len(), n));
+        let axis = ["x (m)", "y (m)", "z (m)"];
+        for (row, &(a, b)) in planes.iter().enumerate() {
+            for (col, m) in shapes.iter().enumerate() {
+                let panel = &panels[row * n + col];
+                let vmax = m
+                    .beams
+                    .iter()
+                    .flat_map(|b| b.velocity_global.iter())
+                    .map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt())
+                    .fold(0.0_f64, f64::max)
+                    .max(1e-300);
+                let span = m
+                    .beams
+                    .iter()
+                    .map(|b| b.s.last().copied().unwrap_or(0.0))
+                    .sum::<f64>()
+                    .max(1e-12);
+                let scale = 0.25 * span / vmax;
+                let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+                for bm in &m.beams {
+                    for (r, v) in bm.reference.iter().zip(&bm.velocity_global) {
+                        for p in [(r[a], r[b]), (r[a] + scale * v[a], r[b] + scale * v[b])] {
+                            lo = [lo[0].min(p.0), lo[1].min(p.1)];
+                            hi = [hi[0].max(p.0), hi[1].max(p.1)];
+                        }
                     }
                 }
-            }
-            let w = (hi_x - lo_x).max(hi_z - lo_z).max(1e-12) * 0.55;
-            let (cx, cz) = (0.5 * (lo_x + hi_x), 0.5 * (lo_z + hi_z));
-            let mut chart = ChartBuilder::on(panel)
-                .caption(
-                    format!("mode {}: {} ({:.3} rad/s)", m.index + 1, m.label, m.frequency_rad_s),
-                    ("sans-serif", 13),
-                )
-                .margin(8)
-                .x_label_area_size(36)
-                .y_label_area_size(50)
-                .build_cartesian_2d((cx - w)..(cx + w), (cz - w)..(cz + w))?;
-            chart
-                .configure_mesh()
-                .x_desc("x (m)")
-                .y_desc("z (m)")
-                .label_style(("sans-serif", 13))
-                .x_labels(4)
-                .y_labels(4)
-                .x_label_formatter(&|v| crate::plot::short(*v))
-                .y_label_formatter(&|v| crate::plot::short(*v))
-                .draw()?;
-            for b in &m.beams {
-                chart.draw_series(LineSeries::new(
-                    b.reference.iter().map(|r| (r[0], r[2])),
-                    BLACK.stroke_width(4),
-                ))?;
-                chart.draw_series(LineSeries::new(
-                    b.reference
-                        .iter()
-                        .zip(&b.velocity_global)
-                        .map(|(r, v)| (r[0] + scale * v[0], r[2] + scale * v[2])),
-                    RED.stroke_width(2),
-                ))?;
+                let w = (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1e-12) * 0.55;
+                let (cx, cz) = (0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]));
+                let mut chart = ChartBuilder::on(panel)
+                    .caption(
+                        format!(
+                            "mode {}: {} ({:.3} rad/s)",
+                            m.index + 1,
+                            m.label,
+                            m.frequency_rad_s
+                        ),
+                        ("sans-serif", 13),
+                    )
+                    .margin(8)
+                    .x_label_area_size(36)
+                    .y_label_area_size(50)
+                    .build_cartesian_2d((cx - w)..(cx + w), (cz - w)..(cz + w))?;
+                chart
+                    .configure_mesh()
+                    .x_desc(axis[a])
+                    .y_desc(axis[b])
+                    .label_style(("sans-serif", 13))
+                    .x_labels(4)
+                    .y_labels(4)
+                    .x_label_formatter(&|v| crate::plot::short(*v))
+                    .y_label_formatter(&|v| crate::plot::short(*v))
+                    .draw()?;
+                for bm in &m.beams {
+                    chart.draw_series(LineSeries::new(
+                        bm.reference.iter().map(|r| (r[a], r[b])),
+                        BLACK.stroke_width(4),
+                    ))?;
+                    chart.draw_series(LineSeries::new(
+                        bm.reference
+                            .iter()
+                            .zip(&bm.velocity_global)
+                            .map(|(r, v)| (r[a] + scale * v[a], r[b] + scale * v[b])),
+                        RED.stroke_width(2),
+                    ))?;
+                }
             }
         }
         root.present()?;

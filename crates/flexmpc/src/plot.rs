@@ -323,7 +323,8 @@ where
 /// A tick label: plain for moderate magnitudes, scientific otherwise (never 12 digits).
 pub fn short(v: f64) -> String {
     let a = v.abs();
-    if a == 0.0 {
+    // a tick at zero computed as a sum of steps: round-off, not a value
+    if a < 1e-12 {
         "0".into()
     } else if (1e-3..1e4).contains(&a) {
         let s = format!("{v:.4}");
@@ -348,7 +349,8 @@ pub fn panels(path: &Path, size: (u32, u32), charts: &[(Axes, Vec<Series>)]) -> 
     grid(path, size, charts.len(), charts)
 }
 
-/// Panels on a grid of `cols` columns (`charts` row after row) into an SVG file.
+/// Panels on a grid of `cols` columns (`charts` row after row) into an SVG file; a chart with
+/// an empty title and no series leaves its cell blank.
 pub fn grid(
     path: &Path,
     size: (u32, u32),
@@ -361,7 +363,10 @@ pub fn grid(
     root.fill(&WHITE)?;
     let areas = root.split_evenly((rows, cols));
     for ((axes, series), area) in charts.iter().zip(areas.iter()) {
-        draw_lines(area, axes, series)?;
+        // an untitled chart without data is a blank cell of the grid
+        if !(axes.title.is_empty() && series.is_empty()) {
+            draw_lines(area, axes, series)?;
+        }
     }
     root.present()?;
     Ok(())

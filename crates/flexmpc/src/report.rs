@@ -198,11 +198,11 @@ pub fn write(
     let cost: Vec<(f64, f64)> = result.records.iter().map(|r| (r.t, r.v_state / v0)).collect();
     plot::lines(
         &out.join("cost.svg"),
-        (900, 420),
+        (1000, 420),
         &Axes {
             title: format!("scaled cost V(t)/V(0), ω0 = {}", control.omega0),
             x: "t (s)".into(),
-            y: "V/V(0)".into(),
+            y: "V/V(0) (dimensionless)".into(),
             log_y: true,
             references: vec![(0.1, "0.1 (criterion)".into())],
             points: false,
@@ -260,7 +260,7 @@ pub fn write(
         .collect();
     plot::lines(
         &out.join("angles.svg"),
-        (900, 420),
+        (1000, 420),
         &Axes {
             title: "joint angles".into(),
             x: "t (s)".into(),
@@ -576,7 +576,7 @@ pub fn write_sweep(
         h,
         "<h2>Runs</h2><table><tr><th>controller</th><th>ω0 (rad/s)</th><th>stabilised</th>\
          <th>V(T)/V(0)</th><th>largest joint angle (deg)</th><th>orientation error / largest \
-         (deg)</th><th>rigid rate ratio</th><th>relaxed / fallback samples</th><th>stopped \
+         (deg)</th><th>rigid rate ratio</th><th>relaxed / fallback / held samples</th><th>stopped \
          early</th><th>time series</th></tr>"
     );
     for r in runs {
@@ -586,7 +586,7 @@ pub fn write_sweep(
                 let stem = format!("{}-w{}", s.controller, s.omega0);
                 let _ = writeln!(
                     h,
-                    r#"<tr><td>{}</td><td>{}</td><td class="{}">{}</td><td>{:.3e}</td><td>{:.1}</td><td>{:.2} / {:.1}</td><td>{:.2e}</td><td>{} / {}</td><td>{}</td><td><a href="runs/{stem}.csv">csv</a>, <a href="runs/{stem}-snapshots.svg">snapshots</a></td></tr>"#,
+                    r#"<tr><td>{}</td><td>{}</td><td class="{}">{}</td><td>{:.3e}</td><td>{:.1}</td><td>{:.2} / {:.1}</td><td>{:.2e}</td><td>{} / {} / {}</td><td>{}</td><td><a href="runs/{stem}.csv">csv</a>, <a href="runs/{stem}-snapshots.svg">snapshots</a></td></tr>"#,
                     esc(&s.controller),
                     s.omega0,
                     if s.stabilised { "ok" } else { "fail" },
@@ -598,6 +598,7 @@ pub fn write_sweep(
                     s.rigid_rate_ratio,
                     s.relaxed_samples,
                     s.fallback_samples,
+                    s.held_samples,
                     esc(&s
                         .error
                         .as_ref()

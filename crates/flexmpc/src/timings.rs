@@ -149,7 +149,7 @@ pub fn write_run(r: &RunResult, sampling: f64, out: &Path) -> Result<Vec<PathBuf
     let svg = out.join(FILES[2]);
     plot::lines(
         &svg,
-        (900, 420),
+        (1000, 420),
         &solve_axes(
             format!("solve time per sample, {}", r.summary.controller.to_uppercase()),
             sampling,

@@ -71,11 +71,7 @@ fn parse_vtu(path: &Path) -> Vtu {
                     _ => {}
                 }
             }
-            Event::Text(t) => {
-                if name.is_some() {
-                    buf.push_str(&t.decode().unwrap());
-                }
-            }
+            Event::Text(t) if name.is_some() => buf.push_str(&t.decode().unwrap()),
             Event::End(e) if e.name().as_ref() == b"DataArray" => {
                 let n = name.take().unwrap();
                 let values: Vec<f64> = buf
