@@ -9,7 +9,7 @@
 //!
 //! Clippy runs in the release profile (`--release`): its build scripts and proc macros are
 //! then the same units the release test build uses, instead of a second set built with the
-//! dev profile's `opt-level = 3` for dependencies (docs/performance.md has the timings).
+//! dev profile's `opt-level = 3` for dependencies (docs/ci.md has the timings).
 
 use anyhow::{bail, Result};
 use std::path::Path;

@@ -1,6 +1,6 @@
 //! Euler–Bernoulli sections (rigid shear and massless rotation) through the constrained route.
 //!
-//! The defect of issue 8 (bench (a)): from 50 elements on, the low bending modes of the
+//! The defect these tests guard against: from 50 elements on, the low bending modes of the
 //! Euler–Bernoulli cantilever were classified as rigid, because the rigid test was relative to
 //! `max ω²`, which grows like `N⁶` for this section (node rotations slaved to deflections by
 //! the trapezoidal shear rows), and free ends left an undetected massless direction with a

@@ -1,0 +1,3 @@
+//! Integration tests of `modal-rom` (one binary).
+
+mod euler_bernoulli;
