@@ -5,7 +5,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use modal_rom::{mode_report, BasisSettings, ModeReport};
-use multibody_constraints::structure::Structure;
+use multibody_constraints::Structure;
 use plotters::prelude::*;
 
 /// The first `n_modes` modes of `structure` (fewer if the structure has fewer).

@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 
 use intrinsic_beam::rotation::axis_angle;
 use intrinsic_beam::{Amplitude, Beam, Components, LoadFrame, Mesh, PointLoad, Section};
-use multibody_constraints::joint::{End, EndRef, Frame, Freedom, Joint, JointKind, Support};
-use multibody_constraints::structure::{Placement, Structure, StructureBeam, StructureSettings};
+use multibody_constraints::{End, EndRef, Frame, Freedom, Joint, JointKind, Support};
+use multibody_constraints::{Placement, Structure, StructureBeam, StructureSettings};
 use multibody_constraints::{Plant, PlantSettings};
 use nalgebra::{Matrix6, Vector3, Vector6};
 use serde::Deserialize;

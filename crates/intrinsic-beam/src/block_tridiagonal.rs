@@ -72,16 +72,6 @@ where
         }
     }
 
-    /// Number of block rows.
-    pub fn n_blocks(&self) -> usize {
-        self.n
-    }
-
-    /// Number of scalar unknowns, `K n`.
-    pub fn dim(&self) -> usize {
-        K * self.n
-    }
-
     /// Flat storage slot of entry `(a, b)` of block `(row, col)`, or `None` if that block is
     /// outside the band (`|row − col| > 1`, except the extra block `(2, 0)`).
     pub fn slot(&self, row: usize, col: usize, a: usize, b: usize) -> Option<usize> {
@@ -117,6 +107,7 @@ where
     }
 
     /// Block `(row, col)` for reading (`None` outside the band).
+    #[cfg(test)]
     pub fn block(&self, row: usize, col: usize) -> Option<&Block<K>> {
         self.slot(row, col, 0, 0).map(|s| &self.blocks[s / (K * K)])
     }
@@ -175,13 +166,9 @@ where
         Ok(())
     }
 
-    /// Whether a valid factorisation is available.
-    pub fn is_factorized(&self) -> bool {
-        self.factorized
-    }
-
     /// Solves `A x = b` in place (`b` in block order, length `K n`); `false` if not factorised
     /// or `b` has the wrong length.
+    #[cfg(test)]
     pub fn solve_in_place(&self, b: &mut [f64]) -> bool {
         if b.len() != K * self.n {
             return false;
