@@ -72,6 +72,12 @@ where
         }
     }
 
+    /// Number of block rows.
+    #[cfg(test)]
+    pub fn n_blocks(&self) -> usize {
+        self.n
+    }
+
     /// Flat storage slot of entry `(a, b)` of block `(row, col)`, or `None` if that block is
     /// outside the band (`|row − col| > 1`, except the extra block `(2, 0)`).
     pub fn slot(&self, row: usize, col: usize, a: usize, b: usize) -> Option<usize> {
