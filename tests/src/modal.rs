@@ -7,8 +7,8 @@ use crate::{Case, CaseOutcome, Metric, Tier};
 use intrinsic_beam::{Beam, Components, Mesh, Section};
 use modal_rom::samples::{self, paper_2d_selection, paper_3d_selection};
 use modal_rom::{BasisSettings, ModalBasis, ModeKind, ModeSelection, RomOptions, StructureModel};
-use multibody_constraints::joint::{End, EndRef, JointKind, Support};
-use multibody_constraints::structure::{Placement, Structure, StructureBeam, StructureSettings};
+use multibody_constraints::{End, EndRef, JointKind, Support};
+use multibody_constraints::{Placement, Structure, StructureBeam, StructureSettings};
 use nalgebra::{Vector3, Vector4};
 use std::f64::consts::PI;
 
@@ -202,8 +202,8 @@ fn eb_beam(n: usize, clamped: bool) -> Result<Structure, String> {
 /// `ω1 = 1.8751²` at second order for 10…200 elements, the beam crate's dense route to
 /// round-off, and the free–free beam without spurious (missed massless) modes.
 fn euler_bernoulli() -> CaseOutcome {
-    use intrinsic_beam::modes::closed_form::{bending, Supports};
-    use intrinsic_beam::modes::{family, linear_modes, Family};
+    use intrinsic_beam::closed_form::{bending, Supports};
+    use intrinsic_beam::{family, linear_modes, Family};
     let exact = bending(Supports::ClampedFree, 1.0, 1.0, 1.0, 1)[0];
     let meshes = [10usize, 20, 50, 100, 200];
     let (mut errors, mut rigid, mut not_first, mut vs_dense) = (Vec::new(), 0usize, 0usize, 0f64);

@@ -13,19 +13,19 @@ use std::fmt::Display;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::time::Instant;
 
-use intrinsic_beam::modes::closed_form::{self, Supports};
-use intrinsic_beam::modes::{family, linear_modes, Family};
+use intrinsic_beam::closed_form::{self, Supports};
+use intrinsic_beam::{family, linear_modes, Family};
 use intrinsic_beam::{
     Beam, BeamProblem, Components, EndCondition, ImplicitMidpoint, Kinematics, Loads, Mesh,
     NewtonSettings, Section,
 };
 use modal_rom::{BasisSettings, StructureModel};
 use mpc::{run, ControllerKind, ControllerSettings, PlantKind, RunResult, Scenario, Setup};
-use multibody_constraints::joint::{End, EndRef, Frame, Freedom, Joint, JointKind, Support};
-use multibody_constraints::nullspace::null_space;
-use multibody_constraints::structure::{Placement, Structure, StructureBeam, StructureSettings};
+use multibody_constraints::null_space;
 use multibody_constraints::studies::beam_rigid_rotation;
 use multibody_constraints::{samples, Plant, PlantSettings};
+use multibody_constraints::{End, EndRef, Frame, Freedom, Joint, JointKind, Support};
+use multibody_constraints::{Placement, Structure, StructureBeam, StructureSettings};
 use nalgebra::{Vector3, Vector4, Vector6};
 use proptest::prelude::*;
 use proptest::strategy::ValueTree;

@@ -13,7 +13,7 @@ use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 use modal_rom::{mode_report, BasisSettings, ModeReport};
-use multibody_constraints::structure::Structure;
+use multibody_constraints::Structure;
 use plotters::prelude::*;
 
 /// Largest dense memory (bytes) the modal basis may use: 4 GiB. A structure whose

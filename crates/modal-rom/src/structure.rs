@@ -9,7 +9,7 @@ use crate::rigid::{rigid_rotation_fields, RigidRotation};
 use crate::rom::Input;
 use faer::Mat;
 use intrinsic_beam::rotation::rotation;
-use multibody_constraints::structure::{Placement, Structure};
+use multibody_constraints::{Placement, Structure};
 use nalgebra::{Matrix3, Vector3};
 
 /// Everything the modal route needs from a structure at its reference configuration.

@@ -7,7 +7,7 @@ use crate::plant::ControlInput;
 use crate::weights::{MpcSettings, Weights};
 use intrinsic_beam::Section;
 use modal_rom::{BasisSettings, ModalRom, ModeSelection, RomOptions, StructureModel};
-use multibody_constraints::structure::Structure;
+use multibody_constraints::Structure;
 use multibody_constraints::{samples, PlantSettings};
 use nalgebra::Vector4;
 

@@ -13,7 +13,7 @@ use anyhow::Result;
 use intrinsic_beam::rotation::{quat_conj, quat_mul};
 use intrinsic_beam::{Amplitude, LoadFrame, PointLoad, Section};
 use modal_rom::{BasisSettings, ModalBasis, ModalRom, ModeSelection, RomOptions, StructureModel};
-use multibody_constraints::structure::Structure;
+use multibody_constraints::Structure;
 use multibody_constraints::{Plant, PlantSettings};
 use nalgebra::{Vector3, Vector4, Vector6};
 use ocp_transcription::{Integrator, IntegratorKind, IntegratorSettings};

@@ -1,10 +1,10 @@
 //! Integration tests of `intrinsic-beam`: the "must show" items 1–7 on cheap settings
 //! (the `cargo xtask verify` cases run the same studies, some with finer settings).
 
-use intrinsic_beam::modes::closed_form::Supports;
-use intrinsic_beam::modes::Family;
+use intrinsic_beam::closed_form::Supports;
 use intrinsic_beam::samples::{self, ELASTICA_TIP_LOAD_1};
 use intrinsic_beam::studies::*;
+use intrinsic_beam::Family;
 use intrinsic_beam::*;
 use nalgebra::Vector6;
 
@@ -140,7 +140,7 @@ fn bad_input_is_rejected_with_errors() {
     for dt in [0.0, -1e-3, f64::NAN] {
         assert!(matches!(sim.step(dt), Err(BeamError::NonPositiveTime { .. })));
     }
-    let mut rk = intrinsic_beam::rk4::ExplicitRk4::new(
+    let mut rk = intrinsic_beam::ExplicitRk4::new(
         sample.problem.clone(),
         sample.state.clone(),
         sample.kinematics.clone(),
@@ -182,7 +182,7 @@ fn bad_input_is_rejected_with_errors() {
     let kin = Kinematics::straight(&problem.beam);
     let x = vec![0.0; problem.dim()];
     assert!(matches!(
-        intrinsic_beam::rk4::ExplicitRk4::new(problem, x, kin),
+        intrinsic_beam::ExplicitRk4::new(problem, x, kin),
         Err(BeamError::NotAnOde { .. })
     ));
     // planar beams reject out-of-plane section coupling
@@ -390,8 +390,7 @@ fn graded_meshes_conserve_energy_and_converge() {
         sim.step(1e-3).unwrap();
     }
     assert!(((sim.energy() - e0) / e0).abs() < 1e-11);
-    let exact =
-        intrinsic_beam::modes::closed_form::bending(Supports::ClampedFree, 1.0, 1.0, 1.0, 1)[0];
+    let exact = intrinsic_beam::closed_form::bending(Supports::ClampedFree, 1.0, 1.0, 1.0, 1)[0];
     let mut errors = Vec::new();
     for n in [16, 32, 64] {
         let beam = Beam::new(
@@ -403,7 +402,7 @@ fn graded_meshes_conserve_energy_and_converge() {
         let problem =
             BeamProblem::new(beam, EndCondition::Clamped, EndCondition::Free, Loads::none())
                 .unwrap();
-        let modes = intrinsic_beam::modes::linear_modes(&problem).unwrap();
+        let modes = intrinsic_beam::linear_modes(&problem).unwrap();
         let omega = modes.iter().find(|m| m.omega > 1.0).unwrap().omega;
         errors.push((omega - exact).abs() / exact);
     }

@@ -7,12 +7,12 @@
 //! spurious `ω² ≈ 1e20`. These tests hold the route to the closed form, to its order, to the
 //! beam crate's independent dense route, and to the exact scaling of the discrete model.
 
-use intrinsic_beam::modes::closed_form::{bending, Supports};
-use intrinsic_beam::modes::{family, linear_modes, Family};
+use intrinsic_beam::closed_form::{bending, Supports};
+use intrinsic_beam::{family, linear_modes, Family};
 use intrinsic_beam::{samples, Beam, BeamProblem, Components, EndCondition, Loads, Mesh, Section};
 use modal_rom::{BasisSettings, ModalBasis, ModeKind, StructureModel};
-use multibody_constraints::joint::{End, EndRef, JointKind, Support};
-use multibody_constraints::structure::{Placement, Structure, StructureBeam, StructureSettings};
+use multibody_constraints::{End, EndRef, JointKind, Support};
+use multibody_constraints::{Placement, Structure, StructureBeam, StructureSettings};
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed};
 
