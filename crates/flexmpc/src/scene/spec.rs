@@ -318,7 +318,7 @@ pub struct ControllerSpec {
     /// Check each NMPC plan's predicted joint angles against `plan_joint_limit_deg` and treat
     /// a plan beyond it as a failed attempt [true].
     pub joint_limit: Option<bool>,
-    /// Range of validity of the controller model for that check (deg, in (0, 180]) (default 20).
+    /// Range of validity of the controller model for that check (deg, in (0, 180]) \[20\].
     pub plan_joint_limit_deg: Option<f64>,
     /// Integrator in each shooting interval: `lawson-rk4`, `rk4` or `implicit-midpoint`
     /// [lawson-rk4].
