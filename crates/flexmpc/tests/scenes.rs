@@ -1101,3 +1101,35 @@ fn golden_cantilever_10_elements() {
 fn golden_two_link_torque() {
     golden("two-link-torque");
 }
+
+/// `flexmpc check` refuses what the commands would refuse or run wrongly (the library's own
+/// checks), and a `--duration` the closed loop's timing cannot take names the flag and the rule.
+#[test]
+fn cli_check_and_duration_override_use_the_library_rules() {
+    let dir = scratch("cli-rules");
+    let fixture = manifest_dir().join("tests/fixtures/mpc-lowest.toml");
+    let text = std::fs::read_to_string(&fixture).unwrap();
+    let bad = dir.join("lowest-10000.toml");
+    std::fs::write(&bad, text.replacen("lowest = 5", "lowest = 10000", 1)).unwrap();
+    let run = |args: &[&std::ffi::OsStr]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_flexmpc"))
+            .args(args)
+            .env("RUST_BACKTRACE", "0")
+            .output()
+            .expect("the binary runs");
+        (out.status.success(), String::from_utf8_lossy(&out.stderr).to_string())
+    };
+    let (ok, err) = run(&["check".as_ref(), bad.as_os_str()]);
+    assert!(!ok, "check accepted `lowest = 10000`");
+    assert!(err.contains("modes.lowest") && err.contains("10000"), "{err}");
+    let (ok, err) = run(&[
+        "mpc".as_ref(),
+        fixture.as_os_str(),
+        "--duration".as_ref(),
+        "0.33".as_ref(),
+        "--out".as_ref(),
+        dir.join("out").as_os_str(),
+    ]);
+    assert!(!ok, "mpc ran with --duration 0.33 (output_interval 0.05)");
+    assert!(err.contains("--duration 0.33 must be a whole multiple"), "{err}");
+}

@@ -7,7 +7,8 @@ use multibody_constraints::Plant;
 use nalgebra::{Vector3, Vector6};
 
 use super::error::{Ctx, SceneError};
-use super::spec::{AmplitudeSpec, LoadFrameName, NodeSpec, SceneSpec};
+use super::names::LoadFrameName;
+use super::spec::{AmplitudeSpec, NodeSpec, SceneSpec};
 use super::{Input, InputKind};
 
 fn amplitude(

@@ -1,10 +1,15 @@
 //! Scene files (TOML): sections, beams and meshes, joints, supports, loads and inputs,
-//! initial conditions, run settings — parsed with serde and turned into a
-//! [`multibody_constraints::Plant`]. Every error names the file, the line and the field.
+//! initial conditions, run settings, and the closed loop's `[modes]`, `[controller]`,
+//! `[scenario]` and `[sweep]` — parsed with serde into a [`Scene`]: the structure, the inputs
+//! and, for a closed loop, the `mpc` crate's own settings, each checked by that crate's
+//! `validate()`. The FE plant of `simulate` is built by [`Scene::plant`]; [`check`] builds
+//! what every command builds before it runs. Every error names the file, the line and the
+//! field (library errors through their typed field and a table of scene keys).
 
 mod control;
 mod error;
 mod inputs;
+mod names;
 mod spec;
 mod structure;
 #[cfg(test)]
@@ -20,6 +25,7 @@ use nalgebra::Vector3;
 pub use control::{controller_kind, plant_kind};
 pub use error::SceneError;
 use error::{field_at, field_from_message, table_at, Ctx};
+pub use names::*;
 pub use spec::*;
 pub use structure::MAX_ELEMENTS_PER_BEAM;
 

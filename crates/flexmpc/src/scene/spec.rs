@@ -4,6 +4,10 @@
 use serde::Deserialize;
 use toml::Spanned;
 
+use super::names::{
+    ComponentsName, FreedomName, Integrator, JointKindName, LoadFrameName, ModeSet, SectionPreset,
+};
+
 /// A section: a preset of the paper or explicit diagonals.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -418,117 +422,4 @@ pub struct SceneSpec {
     pub scenario: Option<Spanned<ScenarioSpec>>,
     /// The runs of `flexmpc sweep`.
     pub sweep: Option<Spanned<SweepSpec>>,
-}
-
-/// A named mode set of the controller model (`[modes] selection`).
-#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
-pub enum ModeSet {
-    /// 2 rigid + 4 axial + 4 bending modes (paper §5.2).
-    #[serde(rename = "paper-2d")]
-    Paper2d,
-    /// 4 rigid + 4 axial + 4 torsion + 4 + 4 bending modes (paper §5.3).
-    #[serde(rename = "paper-3d")]
-    Paper3d,
-}
-
-impl ModeSet {
-    /// The library's mode selection of this set.
-    pub fn selection(self) -> modal_rom::ModeSelection {
-        match self {
-            ModeSet::Paper2d => modal_rom::samples::paper_2d_selection(),
-            ModeSet::Paper3d => modal_rom::samples::paper_3d_selection(),
-        }
-    }
-}
-
-/// The integrator of the shooting intervals (`[controller] integrator`).
-#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
-#[serde(rename_all = "kebab-case")]
-pub enum Integrator {
-    /// Lawson exponential RK4.
-    LawsonRk4,
-    /// Classical RK4.
-    Rk4,
-    /// Implicit midpoint rule.
-    ImplicitMidpoint,
-}
-
-impl Integrator {
-    /// The library's integrator kind.
-    pub fn kind(self) -> ocp_transcription::IntegratorKind {
-        use ocp_transcription::IntegratorKind;
-        match self {
-            Integrator::LawsonRk4 => IntegratorKind::LawsonRk4,
-            Integrator::Rk4 => IntegratorKind::Rk4,
-            Integrator::ImplicitMidpoint => IntegratorKind::ImplicitMidpoint,
-        }
-    }
-}
-
-/// `components`: the motion a structure has.
-#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
-#[serde(rename_all = "lowercase")]
-pub enum ComponentsName {
-    /// Motion in the e1–e3 plane, rotation about e2.
-    Planar,
-    /// Full 3D motion.
-    Spatial,
-}
-
-impl From<ComponentsName> for intrinsic_beam::Components {
-    fn from(c: ComponentsName) -> Self {
-        match c {
-            ComponentsName::Planar => intrinsic_beam::Components::Planar,
-            ComponentsName::Spatial => intrinsic_beam::Components::Spatial,
-        }
-    }
-}
-
-/// A section preset of the paper (theory.md §9).
-#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
-pub enum SectionPreset {
-    /// The 2D two-link's section (§5.2).
-    #[serde(rename = "paper-2d")]
-    Paper2d,
-    /// The 3D two-link's section (§5.3).
-    #[serde(rename = "paper-3d")]
-    Paper3d,
-}
-
-/// The kind of a joint or support (its parameters are fields of [`JointSpec`]).
-#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
-#[serde(rename_all = "lowercase")]
-pub enum JointKindName {
-    /// All six relative motions locked (also `rigid`).
-    #[serde(alias = "rigid")]
-    Weld,
-    /// Rotations free.
-    Ball,
-    /// One rotation free, about `axis`.
-    Hinge,
-    /// Two rotations free (also `wheel`).
-    #[serde(alias = "wheel")]
-    Universal,
-    /// Each translation and rotation `rigid` or `free`.
-    Custom,
-}
-
-/// A custom joint's axis: locked or free.
-#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
-#[serde(rename_all = "lowercase")]
-pub enum FreedomName {
-    /// Locked.
-    Rigid,
-    /// Free.
-    Free,
-}
-
-/// The frame of a point load.
-#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
-#[serde(rename_all = "lowercase")]
-pub enum LoadFrameName {
-    /// The node's local frame (turns with the beam).
-    Follower,
-    /// The global frame.
-    Dead,
 }

@@ -8,7 +8,8 @@ use nalgebra::{Matrix6, Vector3, Vector6};
 use toml::Spanned;
 
 use super::error::{entry_of, Ctx, SceneError};
-use super::spec::{FreedomName, JointKindName, JointSpec, SceneSpec, SectionPreset, SectionSpec};
+use super::names::{FreedomName, JointKindName, SectionPreset};
+use super::spec::{JointSpec, SceneSpec, SectionSpec};
 
 /// Largest mesh a scene may ask for, per beam: beyond it a step system needs gigabytes, and
 /// no run of this library needs it (frequencies converge at second order, docs/intrinsic-beam.md).
