@@ -296,14 +296,24 @@ pub fn run_sweep(
 }
 
 /// `flexmpc ocp`: solves the first sample's optimal control problem alone (from the projected
-/// initial state of a run with the scene's disturbance) and returns its optimal cost, control
-/// sequence, iterations and solve time as JSON; with `export`, also writes the whole problem
-/// (modal model export plus `ocp.json`: weights, references, bounds, horizon, `Nc`,
-/// integrator, initial state) so that another solver can solve exactly the same problem.
+/// initial state of a run with the scene's disturbance) and returns its cost, control
+/// sequence, KKT residual, status, iterations and solve time as JSON; with `export`, also
+/// writes the whole problem (modal model export plus `ocp.json`: weights, references, bounds,
+/// horizon, `Nc`, integrator, initial state) so that another solver can solve exactly the
+/// same problem.
+///
+/// With `converge` (NMPC), the problem is solved to convergence from the linear MPC plan by a
+/// full SQP ([`ocp_transcription::SqpSettings::converge`]: KKT tolerance 1e-8, no fallback),
+/// whatever the scene's real-time settings; `optimum` says whether the status is `Solved`.
+/// Without it the scene's controller takes its first sample; a real-time iteration is
+/// reported as such (`real_time_iteration`): `cost` is that of the returned plan (after the
+/// step), and the KKT residual, only known at the point before the step, is
+/// `kkt_before_step` (`kkt` is then null).
 pub fn first_sample(
     scene: &Scene,
     overrides: &Overrides,
     export: Option<&Path>,
+    converge: bool,
 ) -> Result<serde_json::Value> {
     let control = control_of(scene, overrides)?;
     let setup = Setup::new(&control.scenario)
@@ -315,29 +325,98 @@ pub fn first_sample(
         }
         None => mpc::first_sample_problem(&setup, control.omega0, &control.controller)?,
     };
-    let mut ctrl = mpc::Controller::new(
-        mpc::RomDynamics::new(&setup.rom)?,
-        &setup.weights,
-        &control.scenario.mpc,
-        &control.controller,
+    let model = mpc::RomDynamics::new(&setup.rom)?;
+    let nu = problem.u_min.len();
+    let mut ocp = ocp_transcription::Ocp::new(
+        problem.x0.len(),
+        nu,
+        control.scenario.mpc.horizon,
+        control.scenario.mpc.intervals,
     )?;
-    let report = ctrl.step(0.0, &problem.x0)?;
-    let (_, controls) = ctrl.plan();
-    let controls: Vec<Vec<f64>> = controls.iter().map(|u| u.iter().copied().collect()).collect();
-    Ok(serde_json::json!({
+    ocp.q = setup.weights.q.clone();
+    ocp.r = setup.weights.r.clone();
+    ocp.x_ref = setup.weights.x_ref.clone();
+    ocp.u_ref = nalgebra::DVector::from_vec(problem.u_ref.clone());
+    ocp.u_min = nalgebra::DVector::from_vec(problem.u_min.clone());
+    ocp.u_max = nalgebra::DVector::from_vec(problem.u_max.clone());
+    let rows = |u: &[nalgebra::DVector<f64>]| -> Vec<Vec<f64>> {
+        u.iter().map(|u| u.iter().copied().collect()).collect()
+    };
+    let mut v = serde_json::json!({
         "omega0": control.omega0,
         "controller": control.controller.kind.name(),
-        "cost": report.cost,
-        "status": report.status,
-        "strategy": report.strategy,
-        "iterations": report.iterations,
-        "solve_time_s": report.solve_time,
-        "kkt": report.kkt,
         "inputs": problem.inputs,
-        "controls": controls,
         "n_state": problem.x0.len(),
         "export": export,
-    }))
+    });
+    let fields = if converge && control.controller.kind == ControllerKind::Nmpc {
+        use ocp_transcription::{Globalisation, SqpMode, SqpSettings, SqpSolver, SqpStatus};
+        let integrator = control.controller.integrator.clone();
+        let lq = SqpSettings {
+            mode: SqpMode::LinearQuadratic,
+            globalisation: Globalisation::FullStep,
+            max_iterations: 2,
+            integrator: integrator.clone(),
+            ..SqpSettings::default()
+        };
+        let mut lmpc = SqpSolver::new(model.clone(), ocp.clone(), lq)?;
+        lmpc.solve(&problem.x0)?;
+        let mut nmpc = SqpSolver::new(model, ocp, SqpSettings::converge(integrator))?;
+        for (d, s) in nmpc.states_mut().iter_mut().zip(lmpc.states()) {
+            d.copy_from(s);
+        }
+        for (d, s) in nmpc.controls_mut().iter_mut().zip(lmpc.controls()) {
+            d.copy_from(s);
+        }
+        let st = nmpc.solve(&problem.x0)?;
+        serde_json::json!({
+            "mode": "converge",
+            "optimum": st.status == SqpStatus::Solved,
+            "real_time_iteration": false,
+            "cost": st.cost,
+            "kkt": st.kkt,
+            "constraint_violation": st.constraint_violation,
+            "status": format!("{:?}", st.status),
+            "strategy": "sqp",
+            "iterations": st.iterations,
+            "solve_time_s": st.time_total,
+            "controls": rows(nmpc.controls()),
+        })
+    } else {
+        let mut ctrl = mpc::Controller::new(
+            model,
+            &setup.weights,
+            &control.scenario.mpc,
+            &control.controller,
+        )?;
+        let report = ctrl.step(0.0, &problem.x0)?;
+        let (states, controls) = ctrl.plan();
+        let rti = report.status == "RealTimeIteration";
+        let (cost, kkt) = if rti {
+            (serde_json::json!(ocp.cost(states, controls)?), serde_json::Value::Null)
+        } else {
+            (serde_json::json!(report.cost), serde_json::json!(report.kkt))
+        };
+        serde_json::json!({
+            "mode": if rti { "real-time step" } else { "scene controller" },
+            "optimum": report.status == "Solved",
+            "real_time_iteration": rti,
+            "cost": cost,
+            "kkt": kkt,
+            "kkt_before_step": if rti { serde_json::json!(report.kkt) } else { serde_json::Value::Null },
+            "status": report.status,
+            "strategy": report.strategy,
+            "iterations": report.iterations,
+            "solve_time_s": report.solve_time,
+            "controls": rows(controls),
+        })
+    };
+    if let (Some(m), Some(f)) = (v.as_object_mut(), fields.as_object()) {
+        for (k, x) in f {
+            m.insert(k.clone(), x.clone());
+        }
+    }
+    Ok(v)
 }
 
 #[cfg(test)]

@@ -127,6 +127,10 @@ enum Command {
         /// Write the modal model and `ocp.json` of the problem to this folder.
         #[arg(long)]
         export: Option<PathBuf>,
+        /// Solve the problem to convergence (full SQP, KKT tolerance 1e-8, no fallback),
+        /// whatever the scene's real-time settings.
+        #[arg(long)]
+        converge: bool,
     },
     /// Closed loops for several ω0 and controllers in parallel: table and Fig. 6-style plot.
     Sweep {
@@ -541,7 +545,7 @@ fn run(cli: &Cli) -> Result<()> {
             write_vtk(cli, &o)?;
             print_mpc(&o, cli)?;
         }
-        Some(Command::Ocp { scene, controller, omega0, export }) => {
+        Some(Command::Ocp { scene, controller, omega0, export, converge }) => {
             let s = scene::load(scene)?;
             let ov = Overrides {
                 controller: kind_of(controller.as_deref())?,
@@ -549,7 +553,7 @@ fn run(cli: &Cli) -> Result<()> {
                 ..Default::default()
             };
             check_modal_size(&s)?;
-            let mut v = control::first_sample(&s, &ov, export.as_deref())?;
+            let mut v = control::first_sample(&s, &ov, export.as_deref(), *converge)?;
             if cli.no_timings {
                 if let Some(m) = v.as_object_mut() {
                     m.remove("solve_time_s");
@@ -559,10 +563,15 @@ fn run(cli: &Cli) -> Result<()> {
                 say!("{}", serde_json::to_string_pretty(&v)?);
             } else if !cli.quiet {
                 say!(
-                    "{} first sample, ω0 = {}: cost {:.6e}, {} iterations, {}, status {} ({})",
+                    "{} first sample, ω0 = {} ({}): cost {:.6e}, KKT {}, {} iterations, {}, status {} ({})",
                     v["controller"].as_str().unwrap_or("?").to_uppercase(),
                     v["omega0"],
+                    v["mode"].as_str().unwrap_or("?"),
                     v["cost"].as_f64().unwrap_or(f64::NAN),
+                    v["kkt"].as_f64().map_or_else(
+                        || "not evaluated after the step".to_string(),
+                        |k| format!("{k:.1e}")
+                    ),
                     v["iterations"],
                     v["solve_time_s"]
                         .as_f64()

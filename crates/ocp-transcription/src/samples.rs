@@ -672,6 +672,15 @@ impl Dynamics for ModalLike {
         fu.copy_from(&self.b);
         true
     }
+    fn remainder(&self, x: &[f64], u: &[f64], g: &mut [f64]) -> bool {
+        // g = f − Wx = N(x)x + Bu
+        g.fill(0.0);
+        for &(i, l, j, v) in &self.gamma {
+            g[i] += v * x[l] * x[j];
+        }
+        crate::la::gemv(g, &self.b, u, 1.0, true);
+        true
+    }
     fn rhs_and_jacobians(
         &self,
         x: &[f64],

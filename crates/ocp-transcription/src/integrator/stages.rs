@@ -31,6 +31,9 @@ impl Integrator {
                 &mut self.fx,
                 &mut self.fu,
             );
+        // a trial without sensitivities: the model's own `g = f − Lx` when it has one
+        let remainder = remainder
+            || (!sens && self.model_linear_part && model.remainder(&self.xs, u, &mut self.k[j]));
         if !remainder {
             if sens {
                 model.rhs_and_jacobians(&self.xs, u, &mut self.k[j], &mut self.fx, &mut self.fu);

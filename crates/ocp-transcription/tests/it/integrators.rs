@@ -286,3 +286,37 @@ fn rhs_and_jacobians_agree_with_separate_calls() {
     check(&m, &x, &u);
     check(&c, &[0.1, 0.5, -0.3, 0.2], &[2.0]);
 }
+
+/// A Lawson trial without sensitivities uses the model's `remainder` (`f − Lx` without the
+/// products with `L`): it agrees with `rhs − Lx` and with the state of the pass with
+/// sensitivities to round-off (‖x‖ ≈ 1, tolerance 1e-12 relative; a missing term is O(1)).
+#[test]
+fn lawson_trial_with_the_model_remainder_matches_the_sensitivity_pass() {
+    use ocp_transcription::samples::{ModalLike, SplitMix64};
+    let m = ModalLike::rom_like(61, 5, 175.0, 0.1, 7).unwrap();
+    let (nx, nu) = (m.nx(), m.nu());
+    let w = m.linear_part().unwrap();
+    let mut rng = SplitMix64::new(5);
+    let mut int =
+        Integrator::new(&m, &IntegratorSettings::new(IntegratorKind::LawsonRk4, 16), 0.25).unwrap();
+    for _ in 0..4 {
+        let x: Vec<f64> = (0..nx).map(|_| rng.uniform(-1.0, 1.0)).collect();
+        let u: Vec<f64> = (0..nu).map(|_| rng.uniform(-1.0, 1.0)).collect();
+        let (mut g, mut f) = (vec![f64::NAN; nx], vec![0.0; nx]);
+        assert!(m.remainder(&x, &u, &mut g));
+        m.rhs(&x, &u, &mut f);
+        let wx = &w * nalgebra::DVector::from_column_slice(&x);
+        let scale = f.iter().fold(1.0_f64, |a, v| a.max(v.abs()));
+        for i in 0..nx {
+            assert!((g[i] - (f[i] - wx[i])).abs() <= 1e-12 * scale, "{i}");
+        }
+        let (mut x1, mut x2) = (vec![0.0; nx], vec![0.0; nx]);
+        int.integrate(&m, &x, &u, &mut x1).unwrap();
+        let (mut a, mut b) = (DMatrix::zeros(nx, nx), DMatrix::zeros(nx, nu));
+        int.integrate_with_sensitivities(&m, &x, &u, &mut x2, &mut a, &mut b).unwrap();
+        let n = x2.iter().fold(1.0_f64, |a, v| a.max(v.abs()));
+        for i in 0..nx {
+            assert!((x1[i] - x2[i]).abs() <= 1e-12 * n, "{i}: {} vs {}", x1[i], x2[i]);
+        }
+    }
+}
