@@ -43,7 +43,7 @@
 //! duration = 0.01
 //! "#;
 //! let scene = flexmpc::scene::load_str(Path::new("inline.toml"), text).unwrap();
-//! assert_eq!(scene.plant.structure().beams().len(), 1);
+//! assert_eq!(scene.structure.beams().len(), 1);
 //! ```
 
 pub mod control;

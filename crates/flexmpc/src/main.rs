@@ -222,7 +222,7 @@ fn write_vtk(cli: &Cli, o: &control::MpcOutput) -> Result<()> {
 /// Refuses a structure whose modal basis would not fit in memory (before anything dense is
 /// allocated).
 fn check_modal_size(s: &scene::Scene) -> Result<()> {
-    modes::check_size(s.plant.structure())
+    modes::check_size(&s.structure)
         .map(|_| ())
         .map_err(|e| anyhow::anyhow!("{}: {e}", s.file.display()))
 }
@@ -425,7 +425,7 @@ fn run(cli: &Cli) -> Result<()> {
                 if !(d.is_finite() && d > 0.0) {
                     bail!("--duration must be finite and > 0, got {d}");
                 }
-                s.steps = (d / s.plant.settings().dt).round().max(1.0) as usize;
+                s.steps = (d / s.plant_settings.dt).round().max(1.0) as usize;
             }
             let out = cli.out.clone().unwrap_or_else(|| scene_out(scene).join("simulate"));
             let summary = run::simulate_with(s, &out, cli.quiet || cli.json, cli.vtk)?;
@@ -455,12 +455,9 @@ fn run(cli: &Cli) -> Result<()> {
                     Some(a) => (scene::load_at_angle(scene, *a)?, dir.clone()),
                     None => (scene::load(scene)?, dir.clone()),
                 };
-                let report = modes::report_with_progress(
-                    s.plant.structure(),
-                    n_modes,
-                    cli.quiet || cli.json,
-                )
-                .map_err(|e| anyhow::anyhow!("{}: {e}", scene.display()))?;
+                let report =
+                    modes::report_with_progress(&s.structure, n_modes, cli.quiet || cli.json)
+                        .map_err(|e| anyhow::anyhow!("{}: {e}", scene.display()))?;
                 let figures = modes::plot(&report, &dir)?;
                 if !cli.json {
                     if angles.len() > 1 && !cli.quiet {
@@ -494,8 +491,9 @@ fn run(cli: &Cli) -> Result<()> {
             }
         }
         Some(Command::Check { scene }) => {
-            let s = scene::load(scene)?;
-            let st = s.plant.structure();
+            let checked = scene::check(scene)?;
+            let s = &checked.scene;
+            let st = &s.structure;
             let est = modes::estimate(st);
             let fits = est.bytes <= modes::MAX_DENSE_BYTES;
             if cli.json {

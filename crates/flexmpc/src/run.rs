@@ -7,6 +7,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 
+use multibody_constraints::Plant;
+
 use crate::scene::{InputKind, Scene};
 
 /// What a run produced.
@@ -30,7 +32,7 @@ pub struct RunSummary {
 
 /// Column names of the time series.
 pub fn columns(scene: &Scene) -> Vec<String> {
-    let s = scene.plant.structure();
+    let s = &scene.structure;
     let mut c = vec![
         "t".to_string(),
         "energy".into(),
@@ -59,8 +61,7 @@ pub fn columns(scene: &Scene) -> Vec<String> {
     c
 }
 
-fn row(scene: &Scene, iterations: usize) -> Vec<f64> {
-    let p = &scene.plant;
+fn row(scene: &Scene, p: &Plant, iterations: usize) -> Vec<f64> {
     let s = p.structure();
     let (e, v) = (p.energy(), p.potential_energy());
     let mut r = vec![p.time(), e, v, e + v, iterations as f64];
@@ -93,7 +94,8 @@ pub fn simulate(scene: Scene, out: &Path, quiet: bool) -> Result<RunSummary> {
 
 /// [`simulate`], and with `vtk` also `vtk/simulate-<k>.vtu` per output step and the
 /// collection `vtk/simulate.pvd` ([`crate::vtk`]).
-pub fn simulate_with(mut scene: Scene, out: &Path, quiet: bool, vtk: bool) -> Result<RunSummary> {
+pub fn simulate_with(scene: Scene, out: &Path, quiet: bool, vtk: bool) -> Result<RunSummary> {
+    let mut plant = scene.plant()?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let csv_path = out.join("timeseries.csv");
     let mut csv = csv::Writer::from_path(&csv_path)
@@ -103,12 +105,12 @@ pub fn simulate_with(mut scene: Scene, out: &Path, quiet: bool, vtk: bool) -> Re
     let mut table: Vec<Vec<f64>> = Vec::new();
     let mut frames =
         if vtk { Some(crate::vtk::Collection::new(&out.join("vtk"), "simulate")?) } else { None };
-    let first = row(&scene, 0);
+    let first = row(&scene, &plant, 0);
     let total0 = first[3];
     csv.write_record(fmt_row(&first))?;
     table.push(first);
     if let Some(c) = &mut frames {
-        c.push(&crate::vtk::frame_of_plant(&scene.plant))?;
+        c.push(&crate::vtk::frame_of_plant(&plant))?;
     }
     let bar = if quiet { ProgressBar::hidden() } else { ProgressBar::new(scene.steps as u64) };
     bar.set_style(
@@ -122,26 +124,23 @@ pub fn simulate_with(mut scene: Scene, out: &Path, quiet: bool, vtk: bool) -> Re
     let mut vv = 0.0f64;
     let mut iterations = 0;
     for step in 1..=scene.steps {
-        let t_mid = scene.plant.time() + 0.5 * scene.plant.settings().dt;
+        let t_mid = plant.time() + 0.5 * plant.settings().dt;
         for i in &scene.inputs {
             if let InputKind::Torque { joint, axis, value, amplitude } = &i.kind {
-                scene.plant.set_joint_torque(joint, *axis, value * amplitude.at(t_mid))?;
+                plant.set_joint_torque(joint, *axis, value * amplitude.at(t_mid))?;
             }
         }
-        let r = scene
-            .plant
-            .step()
-            .with_context(|| format!("step {step} of {}", scene.file.display()))?;
+        let r = plant.step().with_context(|| format!("step {step} of {}", scene.file.display()))?;
         iterations += r.iterations;
         vv = vv.max(r.velocity_violation);
         if step % scene.output_every == 0 || step == scene.steps {
-            let rw = row(&scene, iterations);
+            let rw = row(&scene, &plant, iterations);
             iterations = 0;
             total_end = rw[3];
             csv.write_record(fmt_row(&rw))?;
             table.push(rw);
             if let Some(c) = &mut frames {
-                c.push(&crate::vtk::frame_of_plant(&scene.plant))?;
+                c.push(&crate::vtk::frame_of_plant(&plant))?;
             }
             bar.set_position(step as u64);
         }

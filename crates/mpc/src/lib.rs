@@ -87,6 +87,6 @@ pub use error::{MpcError, Result};
 pub use export::{export_first_sample, first_sample_problem, OcpExport};
 pub use orientation::{chord_orientation, ChordOrientation};
 pub use plant::{ControlInput, PlantKind};
-pub use scenario::{Scenario, Setup};
+pub use scenario::{Scenario, Setup, MAX_PLANT_STEPS};
 pub use validity::JointMonitor;
 pub use weights::{ControlGrid, MpcSettings, Weights, SPATIAL_INPUT_WEIGHT};
