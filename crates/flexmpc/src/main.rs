@@ -498,8 +498,13 @@ fn run(cli: &Cli) -> Result<()> {
             let checked = scene::check(scene)?;
             let s = &checked.scene;
             let st = &s.structure;
+            let est = modes::estimate(st);
+            let fits = est.bytes <= modes::MAX_DENSE_BYTES;
             if cli.json {
                 let v = serde_json::json!({
+                    "modal_basis_bytes": est.bytes,
+                    "modal_basis_seconds": est.seconds,
+                    "modal_basis_fits": fits,
                     "scene": scene,
                     "ok": true,
                     "beams": st.beams().len(),
@@ -527,6 +532,19 @@ fn run(cli: &Cli) -> Result<()> {
                             c.omega0
                         ),
                         None => String::new(),
+                    }
+                );
+                say!(
+                    "modal basis (modes, mpc, sweep, ocp): about {}, {} on one core{}",
+                    modes::human_bytes(est.bytes),
+                    modes::human_seconds(est.seconds),
+                    if fits {
+                        String::new()
+                    } else {
+                        format!(
+                            " — over the cap of {}: those commands will refuse this mesh",
+                            modes::human_bytes(modes::MAX_DENSE_BYTES)
+                        )
                     }
                 );
             }

@@ -118,8 +118,10 @@ fn huge_mesh_modes_is_refused_with_the_cap() {
         .replace("elements = 50", "elements = 50000");
     let scene = dir.join("huge.toml");
     std::fs::write(&scene, text).unwrap();
-    let o = flexmpc().args(["check", "--quiet"]).arg(&scene).output().unwrap();
+    let o = flexmpc().args(["check", "--json"]).arg(&scene).output().unwrap();
     assert!(o.status.success(), "check accepts it: {}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["modal_basis_fits"], false, "check warns: {v}");
     let o =
         flexmpc().arg("modes").arg(&scene).arg("--out").arg(dir.join("modes")).output().unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
