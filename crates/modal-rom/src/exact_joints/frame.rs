@@ -43,7 +43,7 @@ pub(crate) fn cholesky(s: &Mat<f64>, tol: f64) -> Option<Mat<f64>> {
         for k in 0..j {
             d -= l[(j, k)] * l[(j, k)];
         }
-        if !(d > tol) {
+        if d.is_nan() || d <= tol {
             return None;
         }
         let dj = d.sqrt();
