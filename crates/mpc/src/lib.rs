@@ -67,6 +67,7 @@ mod closed_loop;
 mod controller;
 mod dynamics;
 mod error;
+mod exact_dynamics;
 mod export;
 mod orientation;
 mod plant;
@@ -84,6 +85,7 @@ pub use controller::{
 };
 pub use dynamics::RomDynamics;
 pub use error::{MpcError, Result};
+pub use exact_dynamics::{ExactDynamics, ModelKind};
 pub use export::{export_first_sample, first_sample_problem, OcpExport};
 pub use orientation::{chord_orientation, ChordOrientation};
 pub use plant::{ControlInput, PlantKind};
