@@ -11,7 +11,7 @@ use intrinsic_beam::{Amplitude, LoadFrame, PointLoad, Section};
 use modal_rom::exact_joints::{self, ExactJointsRom, LinkBasisSettings};
 use modal_rom::samples::{self, paper_2d_selection, paper_3d_selection};
 use modal_rom::{BasisSettings, ModalRom, ModeSelection, RomOptions, StructureModel};
-use multibody_constraints::structure::Structure;
+use multibody_constraints::Structure;
 use multibody_constraints::{Plant, PlantSettings};
 use nalgebra::{Vector3, Vector4, Vector6};
 use std::f64::consts::PI;

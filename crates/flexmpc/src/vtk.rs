@@ -317,7 +317,7 @@ pub fn frames_of_snapshots(snapshots: &[mpc::Snapshot]) -> Vec<Frame> {
 
 /// The current state of a constrained FE plant as a frame: positions, section axes,
 /// velocities, sectional loads and strains.
-pub fn frame_of_plant(plant: &multibody_constraints::plant::Plant) -> Frame {
+pub fn frame_of_plant(plant: &multibody_constraints::Plant) -> Frame {
     let s = plant.structure();
     let x = plant.state();
     let beams = s

@@ -192,7 +192,7 @@ mod tests {
     };
     use ocp_transcription::{Ocp, SqpSettings, SqpSolver};
 
-    fn model_2d(n: usize) -> (ExactDynamics, multibody_constraints::structure::Structure) {
+    fn model_2d(n: usize) -> (ExactDynamics, multibody_constraints::Structure) {
         let s = multibody_constraints::samples::paper_2d(Section::paper_2d(), n, 0.0).unwrap();
         let m = StructureModel::new(&s).unwrap();
         let b = m.modes(&BasisSettings::default()).unwrap();

@@ -65,7 +65,9 @@ mod structure;
 pub mod studies;
 
 pub use error::{MultibodyError, Result};
-pub use joint::{Axis, End, EndRef, Frame, Freedom, Joint, JointKind, Part, RowKind, Support};
+pub use joint::{
+    rows, Axis, End, EndRef, Frame, Freedom, Joint, JointKind, Part, Row, RowKind, Support,
+};
 pub use nullspace::{null_space, RANK_TOLERANCE};
 pub use plant::{Plant, PlantSettings, StepReport};
 pub use structure::{

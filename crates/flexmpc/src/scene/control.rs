@@ -1,7 +1,7 @@
 //! `[modes]`, `[controller]`, `[scenario]` and `[sweep]` → the closed-loop setup.
 
-use multibody_constraints::structure::Structure;
 use multibody_constraints::PlantSettings;
+use multibody_constraints::Structure;
 use serde::de::{value, IntoDeserializer};
 use serde::Deserialize;
 

@@ -2,8 +2,8 @@
 //! inputs of a closed loop.
 
 use intrinsic_beam::{Amplitude, LoadFrame, PointLoad};
-use multibody_constraints::structure::Structure;
 use multibody_constraints::Plant;
+use multibody_constraints::Structure;
 use nalgebra::{Vector3, Vector6};
 
 use super::error::{Ctx, SceneError};

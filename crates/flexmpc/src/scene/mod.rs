@@ -18,7 +18,7 @@ mod tests;
 use std::path::{Path, PathBuf};
 
 use intrinsic_beam::{Amplitude, PointLoad};
-use multibody_constraints::structure::Structure;
+use multibody_constraints::Structure;
 use multibody_constraints::{MultibodyError, Plant, PlantSettings};
 use nalgebra::Vector3;
 

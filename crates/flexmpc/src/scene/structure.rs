@@ -2,8 +2,8 @@
 
 use intrinsic_beam::rotation::axis_angle;
 use intrinsic_beam::{Beam, Components, Mesh, Section};
-use multibody_constraints::joint::{End, EndRef, Frame, Freedom, Joint, JointKind, Support};
-use multibody_constraints::structure::{Placement, Structure, StructureBeam, StructureSettings};
+use multibody_constraints::{End, EndRef, Frame, Freedom, Joint, JointKind, Support};
+use multibody_constraints::{Placement, Structure, StructureBeam, StructureSettings};
 use nalgebra::{Matrix6, Vector3, Vector6};
 use toml::Spanned;
 

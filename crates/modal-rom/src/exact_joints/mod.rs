@@ -32,7 +32,7 @@ use crate::error::Result;
 use crate::rom::Input;
 use crate::structure::StructureModel;
 use faer::Mat;
-use multibody_constraints::structure::Structure;
+use multibody_constraints::Structure;
 
 /// The exact-joints model on the paper's basis: link fields = per-link pieces of the selected
 /// constrained modes `modes` (no added rigid link motions), `Z0` = the modes' coordinates

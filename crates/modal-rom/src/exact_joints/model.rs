@@ -24,7 +24,7 @@ use crate::rom::Input;
 use faer::linalg::solvers::Solve;
 use faer::Mat;
 use intrinsic_beam::Kinematics;
-use multibody_constraints::structure::Structure;
+use multibody_constraints::Structure;
 use nalgebra::{Matrix4, Vector3, Vector4};
 
 /// `U(ω)` of eq. (8): `U(ω)ξ = ½ ξ ⊗ (0, ω)`.

@@ -20,8 +20,8 @@ use crate::exact_joints::ambient::LinkBasis;
 use faer::Mat;
 use intrinsic_beam::operators::tilde;
 use intrinsic_beam::rotation::rotation;
-use multibody_constraints::joint::{rows, Frame, Freedom, Part, RowKind};
-use multibody_constraints::structure::Structure;
+use multibody_constraints::Structure;
+use multibody_constraints::{rows, Frame, Freedom, Part, RowKind};
 use nalgebra::{Matrix3, Vector3, Vector4};
 
 /// `R(ξ)` (homogeneous form) and `∂R/∂ξ_c`, `c = 0…3`.
