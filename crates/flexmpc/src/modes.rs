@@ -17,7 +17,7 @@ pub fn report(structure: &Structure, n_modes: usize) -> Result<ModeReport> {
         Err(first) => {
             let all = modal_rom::StructureModel::new(structure)?.modes(&settings)?;
             if n_modes > all.n_modes() && all.n_modes() > 0 {
-                Ok(modal_rom::report::report_of(&all, all.n_modes())?)
+                Ok(modal_rom::report_of(&all, all.n_modes())?)
             } else {
                 Err(first.into())
             }
