@@ -131,7 +131,7 @@ pub fn report_with_progress(
         Err(first) => {
             let all = modal_rom::StructureModel::new(structure)?.modes(&settings)?;
             if n_modes > all.n_modes() && all.n_modes() > 0 {
-                Ok(modal_rom::report::report_of(&all, all.n_modes())?)
+                Ok(modal_rom::report_of(&all, all.n_modes())?)
             } else {
                 Err(first.into())
             }

@@ -1,5 +1,5 @@
 //! The pointwise operators of eqs. (3)–(4) on `k`-component vectors, behind one trait so the
-//! step Jacobian of [`crate::step_system`] is written once for planar (`k = 3`, the in-plane
+//! step Jacobian of the step system is written once for planar (`k = 3`, the in-plane
 //! restrictions of [`crate::operators::planar_ops`]) and spatial (`k = 6`) beams.
 
 use nalgebra::{SVector, Vector3};

@@ -1,6 +1,6 @@
 //! Pointwise operators of the intrinsic equations: `~`, `L1`, `L2`, `E` (eqs. 3–4), on
 //! 6-component vectors and, in [`planar_ops`], on the in-plane 3-component restrictions.
-//! The quaternion operators `U`, `Uω` and `T(ξ)` are in [`crate::rotation`].
+//! The quaternion operators `U`, `Uω` and `T(ξ)` are in the `rotation` module.
 //!
 //! Conventions (theory.md §1, §6): `x1 = [v, ω]`, `x2 = [f, m]`, components ordered
 //! `[1,2,3 | 1,2,3]`; quaternions `ξ = [ξ0, ξv]` (scalar first), `T(ξ)` maps local to global

@@ -1,5 +1,5 @@
 //! Single-beam problems: end conditions closing the `2k` end unknowns (the data that
-//! [`crate::step_system`] assembles and the implicit midpoint driver integrates).
+//! the step system assembles and the implicit midpoint driver integrates).
 //!
 //! End rows (one per active component and end), evaluated for the step `t → t + dt`:
 //! * force component `a` (free end or applied end load `F`, local frame of the end node):
