@@ -620,7 +620,7 @@ fn quaternions() -> CaseOutcome {
 /// Rotation vector of the joint's relative rotation `conj(ξa) ⊗ ξb` (in link 1's tip frame).
 /// Planar: `(0, θ, 0)` with θ the signed hinge angle about e2.
 fn relative_rotation(xa: &Vector4<f64>, xb: &Vector4<f64>) -> [f64; 3] {
-    use multibody_constraints::structure::{quat_conj, quat_mul};
+    use intrinsic_beam::rotation::{quat_conj, quat_mul};
     let mut rel = quat_mul(&quat_conj(xa), xb);
     if rel[0] < 0.0 {
         rel = -rel;
@@ -767,7 +767,7 @@ fn rom_track(
     selection: &ModeSelection,
     scene: Scene,
 ) -> Result<(Track, f64), String> {
-    use intrinsic_beam::operators::quaternion_step;
+    use intrinsic_beam::rotation::quaternion_step;
     let sel = setup.basis.select(selection).map_err(err)?;
     let inputs = if scene.spatial {
         samples::inputs_3d(&setup.structure, &setup.model)

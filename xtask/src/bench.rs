@@ -1,4 +1,4 @@
-//! `cargo xtask bench`: run time against error for the four studies of issue 8 — (a) FE mesh
+//! `cargo xtask bench`: run time against error for the four studies — (a) FE mesh
 //! against frequency error, (b) ROM mode count against trajectory error, (c) time step against
 //! error per integrator, (d) closed-loop cost against solve time per controller — written as
 //! markdown, CSV, JSON and SVG plots to `target/bench/` (`--publish`: also to `docs/perf/`).

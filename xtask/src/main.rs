@@ -1,12 +1,14 @@
-//! Project automation for flexmpc: `cargo xtask verify` (and later `bench`).
+//! Project automation for flexmpc: `cargo xtask ci`, `verify`, `bench`, `stress`, `fuzz`, `tidy`.
 //!
 //! `cargo xtask` is an alias (`.cargo/config.toml`) for `cargo run --release -p xtask --`, so
 //! every verification case runs optimised.
 
 mod bench;
+mod ci;
 mod fuzz;
 mod peers;
 mod stress;
+mod tidy;
 
 use anyhow::{bail, Result};
 use flexmpc_verification::{all_cases, run_case, Row, Tier};
@@ -32,7 +34,8 @@ run leaves the finished cases (summary.json then has complete = false).
 The exit code is non-zero if any case fails.
 
 Also: cargo xtask stress [FILTER] [--quick], cargo xtask fuzz [--cases N] [--seed S] [--show I]
-(docs/stress.md); each takes --help.";
+(docs/stress.md); each takes --help. cargo xtask ci runs the CI job (fmt, clippy, doc, tests,
+the quick tier, each step timed); cargo xtask tidy the repository checks of xtask/src/tidy.rs.";
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -47,12 +50,28 @@ fn main() -> Result<()> {
         Some("bench") => bench::main(&args[1..]),
         Some("stress") => stress::main(&args[1..]),
         Some("fuzz") => fuzz::main(&args[1..]),
+        Some("ci") => ci::main(&args[1..]),
+        Some("tidy") => tidy_main(),
         Some("-h") | Some("--help") | Some("help") | None => {
             println!("{USAGE}");
             Ok(())
         }
         Some(other) => bail!("unknown xtask command `{other}`\n{USAGE}"),
     }
+}
+
+/// `cargo xtask tidy`: the repository checks (also `#[test]`s of this crate).
+fn tidy_main() -> Result<()> {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    let problems = tidy::check_all(&root);
+    for p in &problems {
+        eprintln!("{p}");
+    }
+    if !problems.is_empty() {
+        bail!("{} tidy problem(s)", problems.len());
+    }
+    println!("tidy: references, crate edges, module cycles and file lengths are clean");
+    Ok(())
 }
 
 fn verify(args: &[String]) -> Result<()> {

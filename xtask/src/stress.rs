@@ -1,4 +1,4 @@
-//! `cargo xtask stress [--quick] [FILTER]`: the numerical stress experiments of issue 8 (long
+//! `cargo xtask stress [--quick] [FILTER]`: the numerical stress experiments (long
 //! runs, large disturbances, extreme stiffness ratios, near-singular joint angles, random
 //! structures), each sub-run inside `catch_unwind` with every output checked for finiteness.
 //! Prints a table and writes `target/stress/report.md` and `report.json`.

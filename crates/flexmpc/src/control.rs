@@ -1,7 +1,6 @@
 //! `flexmpc mpc` and `flexmpc sweep`: closed loops of a scene's `[scenario]` with the `mpc`
 //! crate (paper §4–5, eqs. 33–36), written as CSV time series and JSON solver logs.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -81,38 +80,9 @@ impl Default for OutputOptions {
     }
 }
 
-/// A progress indicator on stderr, only on a terminal and without `--quiet`.
-pub fn progress_bar(len: Option<u64>, quiet: bool, what: &str) -> indicatif::ProgressBar {
-    use std::io::IsTerminal;
-    if quiet || !std::io::stderr().is_terminal() {
-        return indicatif::ProgressBar::hidden();
-    }
-    let bar = match len {
-        Some(n) => {
-            let b = indicatif::ProgressBar::new(n);
-            b.set_style(
-                indicatif::ProgressStyle::with_template(
-                    "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {msg} ({eta} left)",
-                )
-                .expect("valid template"),
-            );
-            b
-        }
-        None => {
-            let b = indicatif::ProgressBar::new_spinner();
-            b.set_style(
-                indicatif::ProgressStyle::with_template("{spinner} [{elapsed_precise}] {msg}")
-                    .expect("valid template"),
-            );
-            b
-        }
-    };
-    bar.set_message(what.to_string());
-    bar.enable_steady_tick(std::time::Duration::from_millis(120));
-    bar
-}
+pub use crate::progress::progress_bar;
 
-/// The summary of one run with the keys of issue 6 (plus the strategy counts and errors) and
+/// The summary of one run (the closed-loop metrics, the strategy counts and errors) and
 /// its measured timings (`solve_time_*`, `wall_time_s`): what `--json` prints on stdout. The
 /// files get [`crate::timings::summary_without_timings`] instead.
 pub fn summary_json(r: &RunResult) -> serde_json::Value {
@@ -122,31 +92,6 @@ pub fn summary_json(r: &RunResult) -> serde_json::Value {
         m.insert("samples".into(), serde_json::json!(r.samples.len()));
     }
     v
-}
-
-/// Writes the time series of a run: `t, V, V/V(0), u…, joint angles (deg)…, tip xyz, q…`.
-pub fn write_timeseries(r: &RunResult, path: &Path) -> Result<()> {
-    let mut f = std::io::BufWriter::new(
-        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?,
-    );
-    let mut cols = vec!["t".to_string(), "v_state".into(), "v_ratio".into()];
-    cols.extend(r.input_names.iter().map(|n| format!("u:{n}")));
-    cols.extend(r.joint_names.iter().map(|n| format!("angle_deg:{n}")));
-    cols.extend(["tip.x", "tip.y", "tip.z"].map(String::from));
-    let nq = r.records.first().map_or(0, |x| x.q.len());
-    cols.extend((0..nq).map(|i| format!("q{i}")));
-    writeln!(f, "{}", cols.join(","))?;
-    let v0 = r.records.first().map_or(1.0, |x| x.v_state);
-    for rec in &r.records {
-        let mut row = vec![rec.t, rec.v_state, rec.v_state / v0];
-        row.extend(&rec.u);
-        row.extend(rec.joint_angles.iter().map(|a| a.to_degrees()));
-        row.extend(rec.tip);
-        row.extend(&rec.q);
-        writeln!(f, "{}", row.iter().map(|v| format!("{v:.10e}")).collect::<Vec<_>>().join(","))?;
-    }
-    f.flush()?;
-    Ok(())
 }
 
 /// What `flexmpc mpc` wrote.
@@ -211,20 +156,13 @@ pub fn run_mpc(
         crate::timings::remove(out)?;
         Vec::new()
     };
-    let report = crate::report::write(scene, &control, &result, out, opts.timings)?;
+    let report =
+        crate::report::write(scene, &control, &result, Some(&setup.rom), out, opts.timings)?;
     bar.finish_and_clear();
     Ok(MpcOutput { result, control, csv, samples, summary, report, timings })
 }
 
-/// One run of a sweep.
-pub struct SweepRun {
-    /// Controller.
-    pub controller: ControllerKind,
-    /// Disturbance.
-    pub omega0: f64,
-    /// The run, or why it could not run.
-    pub result: std::result::Result<RunResult, String>,
-}
+pub use crate::results::{write_timeseries, SweepRun};
 
 /// What `flexmpc sweep` wrote.
 pub struct SweepOutput {
@@ -314,44 +252,15 @@ pub fn run_sweep(
     let planar =
         matches!(control.scenario.structure.components(), intrinsic_beam::Components::Planar);
     let csv = out.join("sweep.csv");
-    let mut f = std::io::BufWriter::new(std::fs::File::create(&csv)?);
-    writeln!(
-        f,
-        "controller,plant,omega0,stabilised,v_ratio_final,max_joint_angle_deg,\
-         orientation_error_deg,max_orientation_deg,rigid_rate_ratio,failed_first_attempts,\
-         relaxed_samples,fallback_samples,held_samples,joint_limit_samples,\
-         max_plan_joint_angle_deg,samples,t_end,error"
-    )?;
+    crate::results::write_sweep_csv(&runs, control.plant.name(), &csv)?;
     let mut summaries = Vec::new();
     for r in &runs {
         match &r.result {
             Ok(res) => {
                 let s = &res.summary;
-                writeln!(
-                    f,
-                    "{},{},{},{},{:.6e},{:.4},{:.4},{:.4},{:.6e},{},{},{},{},{},{:.4},{},{},{}",
-                    s.controller,
-                    s.plant,
-                    s.omega0,
-                    s.stabilised,
-                    s.v_ratio_final,
-                    s.max_joint_angle_deg,
-                    s.orientation_error_deg,
-                    s.max_orientation_deg,
-                    s.rigid_rate_ratio,
-                    s.failed_first_attempts,
-                    s.relaxed_samples,
-                    s.fallback_samples,
-                    s.held_samples,
-                    s.joint_limit_samples,
-                    s.max_plan_joint_angle_deg,
-                    res.samples.len(),
-                    s.t_end,
-                    s.error.as_deref().unwrap_or("").replace([',', '\n'], ";")
-                )?;
                 let stem = format!("{}-w{}", s.controller, s.omega0);
                 write_timeseries(res, &out.join("runs").join(format!("{stem}.csv")))?;
-                crate::report::snapshots_svg(
+                crate::figures::snapshots_svg(
                     res,
                     planar,
                     &out.join("runs").join(format!("{stem}-snapshots.svg")),
@@ -359,14 +268,6 @@ pub fn run_sweep(
                 summaries.push(crate::timings::summary_without_timings(res));
             }
             Err(e) => {
-                writeln!(
-                    f,
-                    "{},{},{},false,,,,,,,,,,,{}",
-                    r.controller.name(),
-                    control.plant.name(),
-                    r.omega0,
-                    e.replace([',', '\n'], ";")
-                )?;
                 summaries.push(serde_json::json!({
                     "omega0": r.omega0,
                     "controller": r.controller.name(),
@@ -377,15 +278,14 @@ pub fn run_sweep(
             }
         }
     }
-    f.flush()?;
     let json = out.join("sweep.json");
     std::fs::write(&json, serde_json::to_string_pretty(&summaries)?)?;
     let plot = out.join("cost.svg");
-    crate::plot::sweep_cost(&plot, &scene.name, &runs)?;
+    crate::figures::sweep_cost(&plot, &scene.name, &runs)?;
     let inputs = out.join("inputs.svg");
-    crate::plot::sweep_inputs(&inputs, &scene.name, &runs)?;
+    crate::figures::sweep_inputs(&inputs, &scene.name, &control.scenario.inputs, &runs)?;
     let snapshots = out.join("snapshots.svg");
-    crate::report::sweep_snapshots_svg(&runs, planar, &snapshots)?;
+    crate::figures::sweep_snapshots_svg(&runs, planar, &snapshots)?;
     let timings = if opts.timings {
         crate::timings::write_sweep(&runs, control.scenario.mpc.sampling, out)?
     } else {

@@ -1,6 +1,5 @@
 //! Measured timings — each sample's solve time and the loop's wall time — kept apart from
-//! every other output, so that two runs of the same scene give identical files (issue 6,
-//! must-show 4).
+//! every other output, so that two runs of the same scene give identical files.
 //!
 //! Every file a closed loop writes is a pure function of its inputs (scene, options, flexmpc
 //! version), except the timing files [`FILES`]: `timings.json`, `timings.csv` and
@@ -15,10 +14,10 @@ use anyhow::{Context, Result};
 use mpc::RunResult;
 use serde_json::{json, Map, Value};
 
-use crate::control::SweepRun;
 use crate::plot::{self, Axes, Series};
+use crate::results::SweepRun;
 
-/// The real-time goal of issue 6 for the worst sample's solve time (s): 4× under τs = 0.2 s.
+/// The real-time goal for the worst sample's solve time (s): 4× under τs = 0.2 s.
 pub const SOLVE_TIME_GOAL_S: f64 = 0.05;
 
 /// The files that hold measured timings (everything else is reproducible).
@@ -44,7 +43,7 @@ fn strip(v: &mut Value, keys: &[&str]) {
     }
 }
 
-/// The summary of a run for `summary.json` / `sweep.json`: the issue's keys, strategy counts
+/// The summary of a run for `summary.json` / `sweep.json`: the summary keys, strategy counts
 /// and errors, the number of samples — and no measured time.
 pub fn summary_without_timings(r: &RunResult) -> Value {
     let r = r.without_timings();
@@ -150,7 +149,7 @@ pub fn write_run(r: &RunResult, sampling: f64, out: &Path) -> Result<Vec<PathBuf
     let svg = out.join(FILES[2]);
     plot::lines(
         &svg,
-        (900, 420),
+        (1000, 420),
         &solve_axes(
             format!("solve time per sample, {}", r.summary.controller.to_uppercase()),
             sampling,
@@ -197,7 +196,7 @@ pub fn write_sweep(runs: &[SweepRun], sampling: f64, out: &Path) -> Result<Vec<P
     }
     f.flush()?;
     let svg = out.join(FILES[2]);
-    let charts: Vec<(Axes, Vec<Series>)> = plot::sweep_kinds(runs)
+    let charts: Vec<(Axes, Vec<Series>)> = crate::results::sweep_kinds(runs)
         .into_iter()
         .map(|k| {
             let series = runs

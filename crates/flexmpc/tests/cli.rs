@@ -104,7 +104,7 @@ fn assert_summary_shape(v: &serde_json::Value) {
     assert!(v["stabilised"].is_boolean());
 }
 
-/// `flexmpc mpc` on a short loop: the issue-6 JSON summary on stdout (and only that), the
+/// `flexmpc mpc` on a short loop: the JSON summary on stdout (and only that), the
 /// CSV time series (a row every 0.05 s), the per-sample solver log (one entry per τs) and the
 /// report folder.
 #[test]
@@ -328,4 +328,53 @@ fn every_shipped_scene_runs_from_the_cli() {
             assert!(!v.is_null(), "{args:?}: empty JSON");
         }
     }
+}
+
+/// Without `--out`, every variant of a closed loop has its own folder
+/// `out/<scene>/<controller>-<plant>-w<ω0>/` (relative to the working directory): runs with
+/// another controller, plant or ω0 never overwrite each other; a sweep has its own too.
+#[test]
+fn default_output_folders_are_per_variant() {
+    let (scene, work) = small_2d_scene("variants");
+    std::fs::create_dir_all(&work).unwrap();
+    let variants: [&[&str]; 3] = [
+        &["--controller", "lmpc", "--omega0", "0.5"],
+        &["--controller", "nmpc", "--omega0", "0.5"],
+        &["--controller", "lmpc", "--omega0", "0.75", "--plant", "rom"],
+    ];
+    for v in variants {
+        let o = Command::new(env!("CARGO_BIN_EXE_flexmpc"))
+            .current_dir(&work)
+            .args(["--quiet", "--no-timings", "mpc"])
+            .arg(&scene)
+            .args(["--duration", "0.4"])
+            .args(v)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{v:?}: {}", String::from_utf8_lossy(&o.stderr));
+    }
+    let base = work.join("out/small-2d");
+    for (dir, ctrl, plant, w) in [
+        ("lmpc-fe-w0.5", "lmpc", "fe", 0.5),
+        ("nmpc-fe-w0.5", "nmpc", "fe", 0.5),
+        ("lmpc-rom-w0.75", "lmpc", "rom", 0.75),
+    ] {
+        let s: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(base.join(dir).join("summary.json"))
+                .unwrap_or_else(|e| panic!("{dir}: {e}")),
+        )
+        .unwrap();
+        assert_eq!((s["controller"].as_str(), s["plant"].as_str()), (Some(ctrl), Some(plant)));
+        assert_eq!(s["omega0"].as_f64(), Some(w));
+        assert!(base.join(dir).join("index.html").exists());
+    }
+    let o = Command::new(env!("CARGO_BIN_EXE_flexmpc"))
+        .current_dir(&work)
+        .args(["--quiet", "--no-timings", "sweep"])
+        .arg(&scene)
+        .args(["--duration", "0.4", "--omega0", "0.25,0.5", "--controller", "lmpc"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(base.join("sweep-lmpc-fe-w0.25_0.5/sweep.csv").exists());
 }

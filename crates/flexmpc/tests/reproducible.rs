@@ -1,4 +1,4 @@
-//! Issue 6, must-show 4: two runs of the same scene give identical output files.
+//! Two runs of the same scene give identical output files.
 //!
 //! Each command runs twice, into two fresh folders, on a small configuration (the shipped 2D
 //! NMPC scene with 8 elements per link instead of 50, 1 s of motion; the closed loop, its

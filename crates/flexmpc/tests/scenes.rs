@@ -133,16 +133,16 @@ fn documented_fields() -> BTreeMap<String, usize> {
     out
 }
 
-/// A `pub struct …Spec` of scene.rs: its serde field names and their Rust types.
+/// A `pub struct …Spec` of scene/spec.rs: its serde field names and their Rust types.
 struct SpecStruct {
     fields: Vec<(String, String)>,
 }
 
-/// The spec structs of crates/flexmpc/src/scene.rs (by a simple parse of `pub name: Type,`
+/// The spec structs of crates/flexmpc/src/scene/spec.rs (by a simple parse of `pub name: Type,`
 /// lines between `pub struct XxxSpec {` and the closing `}`; `#[serde(rename = "…")]` and
 /// `rename_all = "kebab-case"` are honoured).
 fn spec_structs() -> BTreeMap<String, SpecStruct> {
-    let src = std::fs::read_to_string(manifest_dir().join("src/scene.rs")).unwrap();
+    let src = std::fs::read_to_string(manifest_dir().join("src/scene/spec.rs")).unwrap();
     let mut out = BTreeMap::new();
     let mut current: Option<(String, SpecStruct, bool)> = None;
     let mut kebab_next = false;
@@ -185,7 +185,7 @@ fn spec_structs() -> BTreeMap<String, SpecStruct> {
             }
         }
     }
-    assert!(out.contains_key("SceneSpec"), "scene.rs has no `pub struct SceneSpec {{`");
+    assert!(out.contains_key("SceneSpec"), "scene/spec.rs has no `pub struct SceneSpec {{`");
     out
 }
 
@@ -265,14 +265,17 @@ fn guide_documents_exactly_the_parser_fields() {
         leaves.iter().filter(|f| !documented.contains_key(*f)).collect();
     assert!(
         undocumented.is_empty(),
-        "fields accepted by scene.rs but missing from docs/guide.md: {undocumented:?}"
+        "fields accepted by the scene parser but missing from docs/guide.md: {undocumented:?}"
     );
     let unknown: Vec<String> = documented
         .iter()
         .filter(|(f, _)| !leaves.contains(*f) && !tables.contains(*f))
         .map(|(f, l)| format!("{f} (docs/guide.md:{l})"))
         .collect();
-    assert!(unknown.is_empty(), "documented fields that scene.rs does not accept: {unknown:?}");
+    assert!(
+        unknown.is_empty(),
+        "documented fields that the scene parser does not accept: {unknown:?}"
+    );
 }
 
 /// Fields the parser reads only to reject them with a pointed message (a joint's `end`, a
@@ -546,7 +549,7 @@ fn cases() -> Vec<Case> {
             "kind = \"slider\"",
             "slider",
             "joints[0].kind",
-            "allowed: weld, ball, hinge, universal, custom",
+            "`weld`, `ball`, `hinge`, `universal`, `wheel`, `custom`",
         ),
         case(
             "joint end used twice",
@@ -562,7 +565,7 @@ fn cases() -> Vec<Case> {
             "preset = \"paper-4d\"",
             "paper-4d",
             "sections.link.preset",
-            "allowed: paper-2d, paper-3d",
+            "expected `paper-2d` or `paper-3d`",
         ),
         case(
             "NaN in a section",
@@ -684,8 +687,8 @@ fn cases() -> Vec<Case> {
             "kind = \"custom\"\ntranslation = [\"rigid\", \"loose\", \"rigid\"]\n\
              rotation = [\"rigid\", \"rigid\", \"free\"]",
             "translation = [",
-            "joints[0].translation[1]",
-            "allowed: rigid, free",
+            "joints[0].translation",
+            "`loose`, expected `rigid` or `free`",
         ),
         case(
             "custom joint without rotation freedoms",
@@ -757,7 +760,7 @@ fn cases() -> Vec<Case> {
             "frame = \"body\"",
             "frame = \"body\"",
             "loads[0].frame",
-            "allowed: follower, dead",
+            "expected `follower` or `dead`",
         ),
         case(
             "non-finite load",
@@ -797,7 +800,23 @@ fn cases() -> Vec<Case> {
             "components = \"3d\"",
             "components",
             "components",
-            "allowed: planar, spatial",
+            "expected `planar` or `spatial`",
+        ),
+        case(
+            "more steps than a run can take",
+            "duration = 0.01",
+            "duration = 1e15",
+            "duration = 1e15",
+            "run.duration",
+            "at most",
+        ),
+        case(
+            "duration not a multiple of dt (the run would end at t = 10)",
+            "dt = 1e-3\nduration = 0.01",
+            "dt = 10.0\nduration = 6.0",
+            "duration = 6.0",
+            "run.duration",
+            "whole multiple",
         ),
         case(
             "TOML syntax error",
@@ -886,6 +905,22 @@ fn mpc_cases() -> Vec<Case> {
             "at least one",
         ),
         case(
+            "more modes than the structure has",
+            "lowest = 5",
+            "lowest = 10000",
+            "lowest = 10000",
+            "modes.lowest",
+            "10000",
+        ),
+        case(
+            "closed loop with more plant steps than a run can take",
+            "duration = 0.4",
+            "duration = 1e15",
+            "duration = 1e15",
+            "scenario.duration",
+            "at most",
+        ),
+        case(
             "unknown weight",
             "[scenario]",
             "[controller.weights]\nkx3 = 1.0\n\n[scenario]",
@@ -896,7 +931,7 @@ fn mpc_cases() -> Vec<Case> {
     ]
 }
 
-/// Runs one malformed case through `scene::load` on a real file and returns the error.
+/// Runs one malformed case through `scene::check` (what `flexmpc check` runs) on a real file and returns the error.
 fn malformed_error(c: &Case, dir: &Path) -> (PathBuf, usize, scene::SceneError) {
     malformed_error_in(BASE, c, dir)
 }
@@ -913,7 +948,7 @@ fn malformed_error_in(base: &str, c: &Case, dir: &Path) -> (PathBuf, usize, scen
         .find(c.at)
         .map(|off| text[..off].matches('\n').count() + 1)
         .unwrap_or_else(|| panic!("{}: {:?} not in the edited text", c.name, c.at));
-    match scene::load(&path) {
+    match scene::check(&path) {
         Ok(_) => panic!("{}: the malformed scene was accepted:\n{text}", c.name),
         Err(e) => (path, line, e),
     }

@@ -77,7 +77,7 @@ fn main() {
                 time: sim.time(),
                 dt: 1e-3,
                 loads: &sim.problem().loads,
-                kinematics: sim.kinematics(),
+                node_quaternions: &sim.kinematics().xi,
             };
             let mut res_us = f64::INFINITY;
             for _ in 0..40 {

@@ -13,11 +13,11 @@
 //! ```
 //!
 //! plus one optional extra block `A_{2,0}` (the single-beam left end, see
-//! [`BlockTridiagonal::set_extra`]), eliminated exactly. Pivoting happens inside the blocks
-//! (partial pivoting of the `K×K` LU) but not across them: each Schur complement `S_i` must be
-//! nonsingular. [`BlockTridiagonal::factorize`] checks the 1-norm condition number of every
-//! `S_i` and reports a failing block instead of producing a meaningless factorisation, so the
-//! caller can fall back to a pivoting sparse LU.
+//! [`BlockTridiagonal::slot`] with `(row, col) = (2, 0)`), eliminated exactly. Pivoting
+//! happens inside the blocks (partial pivoting of the `K×K` LU) but not across them: each
+//! Schur complement `S_i` must be nonsingular. [`BlockTridiagonal::factorize`] checks the
+//! 1-norm condition number of every `S_i` and reports a failing block instead of producing a
+//! meaningless factorisation, so the caller can fall back to a pivoting sparse LU.
 
 use nalgebra::{Const, DimMin, SMatrix, SVector};
 

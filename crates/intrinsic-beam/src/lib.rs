@@ -34,7 +34,7 @@
 //! * [`kinematics::Kinematics`] — node quaternions/positions, advanced in time or rebuilt from
 //!   strains.
 //! * [`problem`] — single-beam problems: [`problem::EndCondition`] (free, applied end load,
-//!   clamped, pinned, prescribed motion, mixed) and [`problem::ImplicitMidpoint`] (Newton on the
+//!   clamped, pinned, prescribed motion, mixed); [`midpoint::ImplicitMidpoint`] (Newton on the
 //!   step system with the factorisation reused and refreshed once per step, counters).
 //! * [`step_system`] — the step system's linear solver: unknowns interleaved along the beam,
 //!   block-tridiagonal with `k×k` blocks, solved by the block LU of
@@ -88,13 +88,16 @@ pub(crate) mod kernels;
 pub mod kinematics;
 pub mod loads;
 pub mod mesh;
+pub mod midpoint;
 pub mod modes;
+mod null_space;
 pub mod operators;
 pub mod problem;
 #[cfg(test)]
 mod proptests;
 pub(crate) mod random;
 pub mod rk4;
+pub mod rotation;
 pub mod samples;
 pub mod section;
 pub mod sparse;
@@ -107,8 +110,8 @@ pub use error::{BeamError, Result};
 pub use kinematics::Kinematics;
 pub use loads::{Amplitude, DistributedLoad, LoadFrame, Loads, PointLoad};
 pub use mesh::Mesh;
-pub use problem::{
-    BeamProblem, Counters, End, EndCondition, ImplicitMidpoint, NewtonSettings, StepRefresh,
-};
+pub use midpoint::{Counters, ImplicitMidpoint, NewtonSettings, StepRefresh};
+pub use null_space::{null_space, NullSpace};
+pub use problem::{BeamProblem, End, EndCondition};
 pub use section::Section;
 pub use step_system::LinearSolver;

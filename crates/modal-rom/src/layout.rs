@@ -1,6 +1,6 @@
-//! Where each beam's nodal and element values sit in the stacked modal vectors (LAYOUT.md).
+//! Where each beam's nodal and element values sit in the stacked modal vectors (theory.md §2).
 //!
-//! The FE unknown vector of a structure (LAYOUT.md) is, per beam with `N` elements,
+//! The FE unknown vector of a structure (theory.md §2) is, per beam with `N` elements,
 //! `[x1_0 … x1_N, x2_0 … x2_{N−1}, x2_L, x2_R]` (length `k(2N+3)`), beams concatenated.
 //! The eigen route of theory.md §4 splits it into `X1` (all node velocities, beams
 //! concatenated) and `X2` (all element forces); the end values `x2_L/R` are reactions and do
@@ -68,7 +68,7 @@ impl BeamLayout {
         xi: [f64; 4],
     ) -> Self {
         let h = length / n_elements as f64;
-        let t = intrinsic_beam::operators::rotation(&Vector4::from_column_slice(&xi));
+        let t = intrinsic_beam::rotation::rotation(&Vector4::from_column_slice(&xi));
         let e1 = t * Vector3::x();
         let reference_positions = (0..=n_elements)
             .map(|n| {
@@ -178,7 +178,7 @@ impl Layout {
         self.k() * self.beams.iter().map(|b| b.n_elements()).sum::<usize>()
     }
 
-    /// Length of the full FE vector (LAYOUT.md): `k Σ (2 N_b + 3)`.
+    /// Length of the full FE vector (theory.md §2): `k Σ (2 N_b + 3)`.
     pub fn n_full(&self) -> usize {
         self.k() * self.beams.iter().map(|b| 2 * b.n_elements() + 3).sum::<usize>()
     }

@@ -1,5 +1,5 @@
 //! Constrained linear modes and the nonlinear modal reduced-order model of intrinsic beam
-//! structures with joints (paper §3, eqs. 13–32; implementer notes theory.md §4–7).
+//! structures with joints (paper §3, eqs. 13–32; theory.md §4–§7).
 //!
 //! **Constrained modes (30)–(32).** At rest, the staggered FE model of a structure is
 //! `B Ẋ = A X`, `G X = 0`. With node velocities `X1`, element forces `X2`, the skew operator's
@@ -55,6 +55,7 @@ pub mod basis;
 pub mod blocks;
 pub mod eigen;
 pub mod error;
+pub mod exact_joints;
 pub mod export;
 pub mod layout;
 pub mod npy;
@@ -69,6 +70,7 @@ pub mod tensor;
 pub use basis::{BasisSettings, KindCounts, ModalBasis, ModeKind, ModeSelection};
 pub use eigen::{EigenSettings, SecondOrderProblem};
 pub use error::{ModalError, Result};
+pub use exact_joints::{ExactJointsRom, LinkBasis, LinkBasisSettings};
 pub use layout::{BeamLayout, Components, Layout};
 pub use report::{mode_report, ModeReport};
 pub use rom::{Input, ModalRom, RomOptions};

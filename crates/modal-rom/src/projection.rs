@@ -9,7 +9,7 @@
 use crate::error::{shape, Result};
 use crate::layout::FullIndex;
 use crate::rom::ModalRom;
-use intrinsic_beam::operators::rotation;
+use intrinsic_beam::rotation::rotation;
 use nalgebra::{Vector3, Vector4};
 
 /// Fields rebuilt from modal coordinates.
@@ -81,7 +81,7 @@ impl ModalRom {
         Ok(q)
     }
 
-    /// Modal coordinates of a full FE vector (LAYOUT.md ordering; end values ignored).
+    /// Modal coordinates of a full FE vector (ordering of theory.md §2; end values ignored).
     pub fn project_full(&self, x: &[f64], xi: Option<&[[f64; 4]]>) -> Result<Vec<f64>> {
         let nf = self.layout.n_full();
         if x.len() != nf {
@@ -128,7 +128,7 @@ impl ModalRom {
         Ok(Fields { x1, x2, xi })
     }
 
-    /// The full FE vector (LAYOUT.md ordering, end values zero) of modal coordinates.
+    /// The full FE vector (ordering of theory.md §2, end values zero) of modal coordinates.
     pub fn reconstruct_full(&self, q: &[f64]) -> Result<Vec<f64>> {
         let f = self.reconstruct(q)?;
         let mut x = vec![0.0; self.layout.n_full()];

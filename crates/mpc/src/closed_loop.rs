@@ -1,6 +1,6 @@
 //! The closed loop: sample → project the plant state onto the modes → solve → hold the
 //! control for `τs` on the plant; time series, snapshots, per-sample reports and the summary
-//! metrics of issue 6; sweeps over `ω0` in parallel.
+//! metrics; sweeps over `ω0` in parallel.
 
 use crate::controller::{Controller, ControllerKind, ControllerSettings, SampleReport, Strategy};
 use crate::dynamics::RomDynamics;
@@ -41,7 +41,7 @@ pub struct Snapshot {
     pub positions: Vec<Vec<[f64; 3]>>,
 }
 
-/// The issue's summary of one closed loop.
+/// The summary of one closed loop.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RunSummary {
     /// Disturbance magnitude `ω0` (rad/s) per disturbed axis.
@@ -61,7 +61,7 @@ pub struct RunSummary {
     /// Rigid rotation rate at T over its initial value (`ω0`): the norm of the rigid modes'
     /// velocity coordinates `q1`, relative to t = 0.
     pub rigid_rate_ratio: f64,
-    /// The issue's criterion at T: `rigid_rate_ratio < 0.05`, orientation error within 20% of
+    /// The stabilisation criterion at T: `rigid_rate_ratio < 0.05`, orientation error within 20% of
     /// the largest excursion, `V(T)/V(0) < 0.1`, and the run completed.
     pub stabilised: bool,
     /// Worst per-sample solve time (s).

@@ -42,7 +42,7 @@ pub const DEFAULT_FALLBACK_HOLD: usize = 5;
 /// Settings of the controllers' solvers. Defaults in brackets.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ControllerSettings {
-    /// Which controller [NMPC].
+    /// Which controller \[NMPC\].
     pub kind: ControllerKind,
     /// Integrator inside each shooting interval [Lawson RK4 on `W`, 16 substeps per
     /// `Δt = 0.25 s`; theory.md §8 measured a one-interval error 1.2e-2 at ω0 = 2].
@@ -55,7 +55,7 @@ pub struct ControllerSettings {
     /// holds at ω0 = 0.25–0.75 as with the full SQP, but the 2D criterion is lost at
     /// ω0 = 1.0, 1.5, 1.75 (full SQP: all 8 of 0.25…2; RTI with a full step: ✗ at 1.5, 1.75).
     pub real_time_iteration: bool,
-    /// SQP iteration limit of the NMPC per sample [10].
+    /// SQP iteration limit of the NMPC per sample \[10\].
     pub max_iterations: usize,
     /// KKT tolerance of the NMPC (max-norm natural residual; the inputs are O(0.1–5), so
     /// 1e-4 resolves them to far below what the plant feels within `τs`) [1e-4].
@@ -66,7 +66,7 @@ pub struct ControllerSettings {
     /// small KKT residual too rejected every 3D sample at 10 iterations although those plans
     /// control the structure well.)
     pub accept_violation: f64,
-    /// Levenberg–Marquardt term of the first attempt [0]. 1e-2 helped the 2D sweep at
+    /// Levenberg–Marquardt term of the first attempt \[0\]. 1e-2 helped the 2D sweep at
     /// ω0 = 1.75–2.0 but stalled every 3D sample (no plan accepted, LMPC fallback throughout),
     /// so it is an option, not the default.
     pub levenberg_marquardt: f64,
@@ -88,8 +88,8 @@ pub struct ControllerSettings {
     /// nodes is treated as a failed attempt (→ relaxed retry → linear MPC fallback), like a
     /// solver failure. Needs the joint geometry ([`Controller::set_joint_monitor`]; the closed
     /// loop sets it); `None`: no check. [20°: 2D NMPC on the FE plant, paper weights, with
-    /// the hold, the criterion met at every ω0 = 0.25…2 with 15° and 20°, not with 25°
-    /// (✗ at 1.0, 1.5) nor without the check (✗ from 1.0, elbow 56–240°); docs/mpc.md]
+    /// the hold, the stabilisation criterion met at every ω0 = 0.25…2 with 15° and 20°, not
+    /// with 25° (✗ at 1.0, 1.5) nor without the check (✗ from 1.0, elbow 56–240°); docs/mpc.md]
     pub plan_joint_limit_deg: Option<f64>,
     /// After a fallback to the linear MPC plan, the next `fallback_hold` samples apply the
     /// linear MPC plan directly (strategy [`Strategy::Held`]) before the NMPC is tried again:
@@ -154,7 +154,7 @@ impl ControllerSettings {
     /// the NMPC's own iterate). In 3D the linear MPC itself fails from ω0 ≈ 0.75 (paper
     /// §5.3), so falling back to it hurts. Measured on the paper's 3D two-link (FE plant,
     /// docs/mpc.md, "3D NMPC up to ω0 = 1"): with `k_u ∈ {0.5, 0.7, 1, 1.25}` (option, the
-    /// paper's is 0.1) the criterion holds at every ω0 = 0.25, 0.375, …, 1.0 (28/28
+    /// paper's is 0.1) the stabilisation criterion holds at every ω0 = 0.25, 0.375, …, 1.0 (28/28
     /// runs), against 26/28 with the safeguards; with the paper's `k_u = 0.1` it fails at
     /// ω0 = 1.0.
     pub fn real_time_spatial() -> Self {
@@ -163,7 +163,12 @@ impl ControllerSettings {
 
     /// Checks the ranges (the solver settings are checked again by `ocp-transcription`).
     pub fn validate(&self) -> Result<()> {
-        self.integrator.validate()?;
+        self.integrator.validate().map_err(|e| match e {
+            ocp_transcription::OcpError::InvalidSetting { field, value, reason } => {
+                invalid(field, value, reason)
+            }
+            e => e.into(),
+        })?;
         if self.max_iterations == 0 {
             return Err(invalid("max_iterations", 0, "must be at least 1"));
         }

@@ -1,4 +1,4 @@
-//! Closed-loop NMPC and linear MPC of flexible multibody structures (paper §4–5, issue 6).
+//! Closed-loop NMPC and linear MPC of flexible multibody structures (paper §4–5).
 //!
 //! **Controller model.** The augmented modal model (29) on `q_a = [q1, q2, qξ]`
 //! ([`RomDynamics`], exact Jacobian and second derivatives, constant linear part `W` for the
@@ -41,7 +41,7 @@
 //! **Closed loops** ([`run`], [`sweep`]): the FE plant of multibody-constraints (joints as
 //! hard constraints, follower loads and joint torques as inputs) or the modal model itself;
 //! the paper's scenarios ([`Scenario::paper_2d`], [`Scenario::paper_3d`]); results with time
-//! series, snapshots, per-sample solver reports and the issue's summary metrics.
+//! series, snapshots, per-sample solver reports and the summary metrics.
 //!
 //! # Example
 //!
@@ -87,6 +87,6 @@ pub use error::{MpcError, Result};
 pub use export::{export_first_sample, first_sample_problem, OcpExport};
 pub use orientation::{chord_orientation, ChordOrientation};
 pub use plant::{ControlInput, PlantKind};
-pub use scenario::{Scenario, Setup};
+pub use scenario::{Scenario, Setup, MAX_PLANT_STEPS};
 pub use validity::JointMonitor;
 pub use weights::{ControlGrid, MpcSettings, Weights, SPATIAL_INPUT_WEIGHT};

@@ -1,11 +1,11 @@
 //! The root link's orientation by its chord, an alternative to the root node's rotation used
-//! by the issue's criterion ([`crate::RunSummary::orientation_error_deg`]).
+//! by the stabilisation criterion ([`crate::RunSummary::orientation_error_deg`]).
 //!
 //! For a flexible link hinged at the root, the root *node*'s rotation is the link's rigid
 //! orientation plus the local bending slope at the hinge: the slope from the root follower
 //! moments themselves (a moment `M` tilts the root of a link of stiffness `EI` and length `L`
 //! by ≈ `M L / (3 EI)`, 4° for `M` = 0.2 in the paper's 3D section) and from bending
-//! vibration. In the 3D two-link (issue 6, docs/mpc.md) that contribution is 5–7° at the end
+//! vibration. In the 3D two-link (docs/mpc.md) that contribution is 5–7° at the end
 //! of the runs at ω0 = 1 while the chord has returned to 3–4°. The chord (first node → last
 //! node of the root link) measures where the link points, not how its root is bent.
 
@@ -27,8 +27,8 @@ pub struct ChordOrientation {
 }
 
 impl ChordOrientation {
-    /// The issue's orientation condition read on the chord: back within `fraction` (0.2) of
-    /// its largest excursion.
+    /// The stabilisation criterion's orientation condition read on the chord: back within
+    /// `fraction` (0.2) of its largest excursion.
     pub fn within(&self, fraction: f64) -> bool {
         self.final_deg <= fraction * self.max_deg
     }

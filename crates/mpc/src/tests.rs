@@ -280,9 +280,9 @@ fn nmpc_on_the_fe_plant_short_run() {
     assert!(r.summary.rigid_rate_ratio < 0.5, "{:?}", r.summary);
 }
 
-/// Issue 6, must-show 2 at its hardest point: the paper's 3D two-link (paper mesh, FE plant)
+/// The 3D stabilisation at its hardest point: the paper's 3D two-link (paper mesh, FE plant)
 /// after the diagonal disturbance ω0 = 1 (√2 rad/s), under the real-time spatial NMPC with the
-/// `k_u` option, meets the issue's criterion at t = 7.5 s with every sample's iteration
+/// `k_u` option, meets the stabilisation criterion at t = 7.5 s with every sample's iteration
 /// accepted (no failed first attempt), and keeps the elbow within the 0°-mode model's range
 /// (measured 24.9°; with the paper's `k_u` = 0.1 it reaches 92° and the criterion fails).
 #[test]
@@ -434,8 +434,8 @@ fn predictor_is_consistent() {
 /// With the absolute grid a sample's state is predicted to the grid time by the controller's
 /// model; when that prediction diverges (here: the 3D LMPC far outside its range at a large
 /// disturbance, inputs saturated) the sample plans from the measured state itself, so the run
-/// keeps its results to the end instead of returning `Err` and losing the run (issue 6: the 3D
-/// sweeps reported nothing for such runs), and nothing non-finite reaches the records.
+/// keeps its results to the end instead of returning `Err` and losing the run, and nothing
+/// non-finite reaches the records.
 #[test]
 fn diverging_prediction_keeps_the_run_and_its_results() {
     let mut sc = setup_3d().scenario.clone();

@@ -34,13 +34,13 @@ pub struct MpcSettings {
     pub k_xi_rigid: f64,
     /// Entries of `Kξ` for the elastic modes' quaternion modes [0.01].
     pub k_xi_elastic: f64,
-    /// Prediction horizon `τp` (s) [6].
+    /// Prediction horizon `τp` (s) \[6\].
     pub horizon: f64,
     /// Sampling time `τs` (s): each control is held on the plant for `τs` [0.2].
     pub sampling: f64,
-    /// Number of piecewise-constant control intervals `Nc` over `τp` [24].
+    /// Number of piecewise-constant control intervals `Nc` over `τp` \[24\].
     pub intervals: usize,
-    /// Input bound: `|u_i| ≤ u_max` [5].
+    /// Input bound: `|u_i| ≤ u_max` \[5\].
     pub u_max: f64,
     /// Where the control intervals of each sample's plan start [`ControlGrid::Absolute`].
     pub control_grid: ControlGrid,
@@ -56,7 +56,7 @@ pub struct MpcSettings {
 /// pairs in 2D even with the modal model as plant, against 0 with aligned intervals), and
 /// the lightly damped modes (periods 0.1–0.55 s, comparable to `Δt`) are re-excited; see
 /// docs/mpc.md. [`ControlGrid::Absolute`] (the default) fixes that: in 2D the LMPC on the FE
-/// plant meets the criterion at every ω0 = 0.25…2 (4 of 8 with `Sample`), the NMPC
+/// plant meets the stabilisation criterion at every ω0 = 0.25…2 (4 of 8 with `Sample`), the NMPC
 /// (with its safeguards) at every ω0 (1 of 8 with `Sample`), in 3D the NMPC at ω0 = 0.5 and
 /// 0.75 (neither with `Sample`); it is worse for the 3D LMPC at ω0 = 0.5 (orientation 20.6%
 /// of its excursion against the criterion's 20%; ✓ with `Sample`) and the 3D NMPC at ω0 = 1

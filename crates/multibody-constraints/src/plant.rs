@@ -14,14 +14,15 @@ use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::solvers::{Lu, SymbolicLu};
 use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
 use faer::Mat;
-use intrinsic_beam::operators::{halves, quaternion_step, rotation};
+use intrinsic_beam::operators::halves;
+use intrinsic_beam::rotation::{quat_conj, quat_mul, quaternion_step, rotation, rotation_angle};
 use intrinsic_beam::{Kinematics, LoadFrame, Loads, StepInput};
 use nalgebra::{Matrix3, Vector3, Vector4, Vector6};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{MultibodyError, Result};
-use crate::joint::{rows, Freedom, Part, RowKind};
-use crate::structure::{end_load_global, quat_conj, quat_mul, JointInfo, Structure};
+use crate::joint::{rows, RowKind};
+use crate::structure::{end_load_global, JointInfo, Structure};
 
 /// Settings of the plant's time stepping.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -357,23 +358,7 @@ impl Plant {
                 j.ends.len()
             )));
         }
-        let free: Vec<usize> = j
-            .axes
-            .iter()
-            .enumerate()
-            .filter(|(_, a)| a.part == Part::Angular && a.freedom == Freedom::Free)
-            .map(|(i, _)| i)
-            .collect();
-        let axis = match axis {
-            Some(a) if free.contains(&a) => a,
-            Some(a) => {
-                return Err(bad(format!("axis {a} is not a free rotation axis (free: {free:?})")))
-            }
-            None if free.len() == 1 => free[0],
-            None => {
-                return Err(bad(format!("{} free rotation axes; say which ({free:?})", free.len())))
-            }
-        };
+        let axis = j.free_rotation_axis(axis)?;
         if let Some(t) = self.torques.iter_mut().find(|t| t.joint == ji && t.axis == axis) {
             t.value = value;
         } else {
@@ -477,7 +462,7 @@ impl Plant {
                 time: self.time,
                 dt,
                 loads: &self.step_loads[b],
-                kinematics: &self.kinematics[b],
+                node_quaternions: &self.kinematics[b].xi,
             };
             sb.beam.step_residual(
                 &input,
@@ -527,7 +512,7 @@ impl Plant {
                 time: self.time,
                 dt,
                 loads: &self.step_loads[b],
-                kinematics: &self.kinematics[b],
+                node_quaternions: &self.kinematics[b].xi,
             };
             let (start, len) = self.beam_nnz[b];
             sb.beam.jacobian_values(
@@ -757,17 +742,13 @@ impl Plant {
                     quat_mul(&quat_conj(&q(0)), &q(1))
                 };
                 // signed angle about the (single) free rotation axis, else the magnitude
-                let free: Vec<_> = j
-                    .axes
-                    .iter()
-                    .filter(|a| a.part == Part::Angular && a.freedom == Freedom::Free)
-                    .collect();
+                let free = j.free_rotation_axes();
                 let raw = if planar || free.len() == 1 {
-                    let axis = if planar { Vector3::y() } else { free[0].direction };
+                    let axis = if planar { Vector3::y() } else { j.axes[free[0]].direction };
                     let s = Vector3::new(rel[1], rel[2], rel[3]).dot(&axis);
                     2.0 * s.atan2(rel[0])
                 } else {
-                    crate::structure::rotation_angle(&rel)
+                    rotation_angle(&rel)
                 };
                 match previous {
                     Some(p) if planar || free.len() == 1 => {

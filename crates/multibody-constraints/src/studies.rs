@@ -1,4 +1,4 @@
-//! Numerical experiments behind the must-show items, shared by the verification cases
+//! Numerical experiments behind the crate's verification figures, shared by the verification cases
 //! (`cargo xtask verify multibody-constraints/`), the benches and the docs tables.
 
 use std::time::Instant;

@@ -1,6 +1,6 @@
 //! Optimal control problems over ODE models (paper eqs. 33–34): multiple shooting,
 //! integrators with exact sensitivities, SQP with QPs solved by a dense interior point or
-//! Clarabel (issue 5). This crate knows nothing about beams: a model is anything that
+//! Clarabel. This crate knows nothing about beams: a model is anything that
 //! implements [`Dynamics`].
 //!
 //! # The problem (33)–(34)

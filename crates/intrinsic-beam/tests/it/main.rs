@@ -154,7 +154,7 @@ fn bad_input_is_rejected_with_errors() {
             .unwrap_err();
     assert!(matches!(err, BeamError::NodeOutOfRange { node: 7, last: 4, .. }), "{err}");
     let kin = Kinematics::straight(&beam);
-    let input = StepInput { time: 0.0, dt: 1e-3, loads: &loads, kinematics: &kin };
+    let input = StepInput { time: 0.0, dt: 1e-3, loads: &loads, node_quaternions: &kin.xi };
     let mut res = vec![0.0; beam.n_rows()];
     let x = vec![0.0; beam.dim()];
     assert!(beam.step_residual(&input, &x, &x, &mut res).is_err());
@@ -251,7 +251,7 @@ fn dead_loads_balance_per_step() {
             time: sim.time() - 2e-3,
             dt: 2e-3,
             loads: &sim.problem().loads,
-            kinematics: &kin,
+            node_quaternions: &kin.xi,
         };
         let p = sim.problem().beam.step_power(&input, &old, sim.state()).unwrap();
         let lhs = sim.energy() - e;
@@ -322,8 +322,12 @@ fn prescribed_end_motion_does_boundary_work() {
         let old = sim.state().to_vec();
         let kin = sim.kinematics().clone();
         sim.step(dt).unwrap();
-        let input =
-            StepInput { time: sim.time() - dt, dt, loads: &sim.problem().loads, kinematics: &kin };
+        let input = StepInput {
+            time: sim.time() - dt,
+            dt,
+            loads: &sim.problem().loads,
+            node_quaternions: &kin.xi,
+        };
         work += dt * sim.problem().beam.step_power(&input, &old, sim.state()).unwrap().boundary;
     }
     assert!(work > 1e-3, "the root did work: {work}");

@@ -1,7 +1,7 @@
 //! Integrator sensitivities and second derivatives against central finite differences.
 
 use nalgebra::DMatrix;
-use ocp_transcription::samples::{CartPole, LinearModel, ModalLike};
+use ocp_transcription::samples::{self, CartPole, LinearModel, ModalLike};
 use ocp_transcription::{Dynamics, Integrator, IntegratorKind, IntegratorSettings};
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed};
@@ -30,32 +30,7 @@ pub(crate) fn fd_sensitivity_error_of<D: Dynamics>(
     x: &[f64],
     u: &[f64],
 ) -> f64 {
-    let (nx, nu) = (model.nx(), model.nu());
-    let mut xe = vec![0.0; nx];
-    let mut a = DMatrix::zeros(nx, nx);
-    let mut b = DMatrix::zeros(nx, nu);
-    int.integrate_with_sensitivities(model, x, u, &mut xe, &mut a, &mut b).unwrap();
-    let eps = 1e-6;
-    let mut err = 0.0_f64;
-    let (mut xp, mut xm) = (vec![0.0; nx], vec![0.0; nx]);
-    for j in 0..nx + nu {
-        let (mut x1, mut u1, mut x2, mut u2) = (x.to_vec(), u.to_vec(), x.to_vec(), u.to_vec());
-        if j < nx {
-            x1[j] += eps;
-            x2[j] -= eps;
-        } else {
-            u1[j - nx] += eps;
-            u2[j - nx] -= eps;
-        }
-        int.integrate(model, &x1, &u1, &mut xp).unwrap();
-        int.integrate(model, &x2, &u2, &mut xm).unwrap();
-        for i in 0..nx {
-            let fd = (xp[i] - xm[i]) / (2.0 * eps);
-            let an = if j < nx { a[(i, j)] } else { b[(i, j - nx)] };
-            err = err.max((fd - an).abs() / (1.0 + an.abs()));
-        }
-    }
-    err
+    samples::fd_sensitivity_error(int, model, x, u).unwrap()
 }
 
 /// Exact Hessian of λᵀΦ against central differences of the exact gradient Φ_zᵀλ.
