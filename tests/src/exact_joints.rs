@@ -1,4 +1,4 @@
-//! Verification cases of the exact-joints reduced model (theory §10; names
+//! Verification cases of the exact-joints reduced model (theory.md §10; names
 //! `modal-rom/exact-joints-*`): accuracy against the FE plant open loop (spin plus tip kick,
 //! 2D and 3D; free whip of link 2), energy and compatibility over long implicit-midpoint
 //! runs with the elbow swinging past 90°, and a table of error against state count for the
@@ -156,7 +156,7 @@ fn inputs(run: Run, s: &Structure, m: &StructureModel) -> Result<Vec<modal_rom::
     if run.spatial { samples::inputs_3d(s, m) } else { samples::inputs_2d(s, m) }.map_err(err)
 }
 
-/// Candidate bases of theory §10.6.
+/// Candidate bases of theory.md §10.6.
 #[derive(Clone, Debug)]
 enum Basis {
     /// Rigid link motions + per-link pieces of the 0° constrained modes (rigid + `n` elastic).

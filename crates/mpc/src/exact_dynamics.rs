@@ -1,4 +1,4 @@
-//! The exact-joints reduced model (theory §10) as an [`ocp_transcription::Dynamics`], its
+//! The exact-joints reduced model (theory.md §10) as an [`ocp_transcription::Dynamics`], its
 //! cost, and the choice between the paper's model and it ([`ModelKind`]).
 //!
 //! State `x = [p, p2, ξ_root, ξ_j…]` (see [`modal_rom::ExactJointsRom`]). The cost measures the
@@ -29,7 +29,7 @@ pub enum ModelKind {
     /// The paper's model (14)–(29), modes and joint rows linearised at the reference angle.
     #[default]
     Paper,
-    /// The exact-joints model (theory §10): joint rows at the current relative rotation.
+    /// The exact-joints model (theory.md §10): joint rows at the current relative rotation.
     ExactJoints,
 }
 
@@ -52,7 +52,7 @@ impl ModelKind {
     }
 }
 
-/// [`ExactJointsRom`] as OCP dynamics, with its exact Jacobian (theory §10.5). A state outside
+/// [`ExactJointsRom`] as OCP dynamics, with its exact Jacobian (theory.md §10.5). A state outside
 /// the model's range (joint rotation the fields cannot represent) yields NaN, which the SQP
 /// treats as a failed trial point.
 #[derive(Clone, Debug)]

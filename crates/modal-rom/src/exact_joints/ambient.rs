@@ -1,4 +1,4 @@
-//! Per-link fields and their Galerkin operators (theory §10.2).
+//! Per-link fields and their Galerkin operators (theory.md §10.2).
 //!
 //! A [`LinkBasis`] holds velocity fields `Φ1` and force fields `Φ2`, each supported on one link
 //! only, in that link's local components (the FE unknowns `X1`, `X2` of theory.md §2), with
@@ -14,7 +14,7 @@
 //! ```
 //!
 //! without the joints' reactions: those enter the reduced model as workless constraint
-//! forces (theory §10.3). `q1ᵀf1 + q2ᵀf2 = q1ᵀΣq1 + q1ᵀB_u u` for every `(q1, q2)`.
+//! forces (theory.md §10.3). `q1ᵀf1 + q2ᵀf2 = q1ᵀΣq1 + q1ᵀB_u u` for every `(q1, q2)`.
 
 use crate::error::{invalid, shape, ModalError, Result};
 use crate::layout::Layout;
@@ -54,7 +54,7 @@ impl LinkBasisSettings {
     }
 }
 
-/// Per-link orthonormal velocity and force fields (theory §10.2).
+/// Per-link orthonormal velocity and force fields (theory.md §10.2).
 #[derive(Clone, Debug)]
 pub struct LinkBasis {
     pub(crate) layout: Layout,

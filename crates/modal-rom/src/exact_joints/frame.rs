@@ -1,5 +1,5 @@
 //! The null-space basis `Z(ξ)` of the current compatibility rows and its derivatives
-//! (theory §10.4).
+//! (theory.md §10.4).
 //!
 //! With `A = A(ξ)` (`r × na`, full row rank), `G = (AAᵀ)⁻¹`, `P = I − AᵀGA` and a fixed
 //! orthonormal `Z0` (`na × m`) with `A(ξ̄) Z0 = 0`:

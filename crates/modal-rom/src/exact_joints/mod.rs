@@ -1,14 +1,14 @@
-//! The exact-joints reduced model (theory §10): the modal model of (14)–(21) on per-link
+//! The exact-joints reduced model (theory.md §10): the modal model of (14)–(21) on per-link
 //! fields, with each joint's relative rotation a state and velocity compatibility (11)
 //! imposed at the current relative rotation.
 //!
 //! * [`LinkBasis`]: velocity and force fields supported on one link each, in local
-//!   components, orthonormal (theory §10.2).
-//! * Joint rows `A(ξ) q1 = 0`, linear in each joint's relative rotation matrix (theory §10.3).
+//!   components, orthonormal (theory.md §10.2).
+//! * Joint rows `A(ξ) q1 = 0`, linear in each joint's relative rotation matrix (theory.md §10.3).
 //! * [`ExactJointsRom`]: `q1 = Z(ξ) p` with `Z` an orthonormal basis of `null A(ξ)` that moves
 //!   smoothly from a reference basis `Z0`; `ṗ = Zᵀf − ZᵀŻ p`, the reactions `Aᵀλ` eliminated
 //!   (`ZᵀAᵀ = 0`), `ZᵀŻ` skew so the energy `½|p|² + ½|p2|²` is conserved exactly; joint and
-//!   root quaternions advanced with the model's own body rates (theory §10.4–10.5).
+//!   root quaternions advanced with the model's own body rates (theory.md §10.4–10.5).
 //!
 //! With the paper's constrained modes as fields and `Z0` their coordinates
 //! ([`paper_reduction`]), the model at the reference joint rotations is the paper's model

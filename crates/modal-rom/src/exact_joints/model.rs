@@ -1,5 +1,5 @@
 //! The exact-joints reduced model: state, right-hand side, exact Jacobian, implicit
-//! midpoint (theory §10).
+//! midpoint (theory.md §10).
 //!
 //! State `x = [p (m), p2 (m2), ξ_root (4, when the structure has a support), ξ_j (4 per joint)]`
 //! with link-field coordinates `q1 = Z(ξ) p`, `q2 = Z2 p2`:
@@ -81,7 +81,7 @@ fn col(m: &Mat<f64>, j: usize) -> Vec<f64> {
     (0..m.nrows()).map(|i| m[(i, j)]).collect()
 }
 
-/// The exact-joints reduced model (module docs; theory §10).
+/// The exact-joints reduced model (module docs; theory.md §10).
 #[derive(Clone, Debug)]
 pub struct ExactJointsRom {
     basis: LinkBasis,
@@ -415,7 +415,7 @@ impl ExactJointsRom {
     }
 
     /// Right-hand side and exact Jacobians `∂f/∂x` (n × n) and `∂f/∂u` (n × inputs), both
-    /// column-major (theory §10.5).
+    /// column-major (theory.md §10.5).
     pub fn rhs_and_jacobian(
         &self,
         x: &[f64],
@@ -618,7 +618,7 @@ impl ExactJointsRom {
         })
     }
 
-    /// The state of an FE configuration: full FE vector `x_fe` (LAYOUT.md) and node
+    /// The state of an FE configuration: full FE vector `x_fe` (theory.md §2) and node
     /// kinematics. Velocities and forces are projected (`q1 = Φ1ᵀB1X1`, `p = Zᵀq1`,
     /// `p2 = Z2ᵀΦ2ᵀB2X2`), rotations taken from the end nodes.
     pub fn project_fe(&self, x_fe: &[f64], kinematics: &[Kinematics]) -> Result<Vec<f64>> {

@@ -1,5 +1,5 @@
 //! Velocity-compatibility rows (11) on per-link fields at the current relative rotation of
-//! each joint (theory §10.3).
+//! each joint (theory.md §10.3).
 //!
 //! For a two-end joint with ends `a` (its first end) and `b`, let `R = T_aᵀT_b` be the relative
 //! rotation of the two end frames. Evaluating the joint's rows with end rotations `(I, R)`

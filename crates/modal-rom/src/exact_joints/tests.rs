@@ -1,4 +1,4 @@
-//! Identities of the exact-joints model (theory §10): reduction to the paper's model at the
+//! Identities of the exact-joints model (theory.md §10): reduction to the paper's model at the
 //! reference rotation, energy neutrality, compatibility, exact Jacobian against finite
 //! differences, energy conservation of the implicit midpoint rule.
 
@@ -16,7 +16,7 @@ fn paper_options() -> RomOptions {
 }
 
 /// Link fields from the constrained modes (rigid + `elastic` lowest) at `angles`, plus rigid
-/// link motions: the multi-angle basis of theory §10.6.
+/// link motions: the multi-angle basis of theory.md §10.6.
 fn multi_angle(
     spatial: bool,
     n: usize,
