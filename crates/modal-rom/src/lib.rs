@@ -58,6 +58,7 @@ mod error;
 pub mod exact_joints;
 mod export;
 mod layout;
+mod midpoint;
 pub mod npy;
 mod projection;
 mod report;

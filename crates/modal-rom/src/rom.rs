@@ -756,46 +756,18 @@ impl ModalRom {
         if !(dt.is_finite() && dt > 0.0) {
             return Err(invalid("dt", dt, "must be finite and > 0"));
         }
-        let n = self.n_state();
-        let q0 = q.to_vec();
-        let mut z = q0.clone();
-        let mut f = vec![0.0; n];
-        let mut mid = vec![0.0; n];
-        let mut jq = vec![0.0; n * n];
-        let mut ju = vec![0.0; n * self.n_inputs()];
-        let scale = q0.iter().fold(1.0f64, |a, v| a.max(v.abs()));
-        for it in 1..=max_iter {
-            for i in 0..n {
-                mid[i] = 0.5 * (q0[i] + z[i]);
-            }
-            self.rhs_unchecked(&mid, u, &mut f);
-            self.jacobian(&mid, u, &mut jq, &mut ju)?;
-            let mut a = Mat::<f64>::from_fn(n, n, |i, j| -0.5 * dt * jq[j * n + i]);
-            for i in 0..n {
-                a[(i, i)] += 1.0;
-            }
-            let mut r = Mat::<f64>::from_fn(n, 1, |i, _| -(z[i] - q0[i] - dt * f[i]));
-            a.partial_piv_lu().solve_in_place(r.as_mut());
-            let mut step = 0.0f64;
-            for i in 0..n {
-                z[i] += r[(i, 0)];
-                step = step.max(r[(i, 0)].abs());
-            }
-            if !step.is_finite() {
-                return Err(ModalError::Numerical {
-                    stage: "implicit midpoint Newton".into(),
-                    reason: "non-finite update".into(),
-                });
-            }
-            if step <= tol * scale {
-                q.copy_from_slice(&z);
-                return Ok(it);
-            }
-        }
-        Err(ModalError::Numerical {
-            stage: "implicit midpoint Newton".into(),
-            reason: format!("no convergence in {max_iter} iterations"),
-        })
+        let mut ju = vec![0.0; q.len() * self.n_inputs()];
+        crate::midpoint::newton_step(
+            q,
+            dt,
+            tol,
+            max_iter,
+            "implicit midpoint Newton",
+            |mid, f, jq| {
+                self.rhs_unchecked(mid, u, f);
+                self.jacobian(mid, u, jq, &mut ju)
+            },
+        )
     }
 
     /// One classical RK4 step with `u` held constant.

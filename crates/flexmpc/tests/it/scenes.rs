@@ -3,7 +3,7 @@
 //! malformed scenes give `file:line: field` errors that say what is allowed, and golden CSV
 //! outputs of two small fixtures.
 //!
-//! `FLEXMPC_BLESS=1 cargo test --release -p flexmpc --test scenes` rewrites the goldens.
+//! `UPDATE_GOLDEN=1 cargo test --release -p flexmpc --test it scenes` rewrites the goldens.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -1047,7 +1047,7 @@ fn cli_check_reports_file_line_and_field() {
 /// roundoff noise around an exact zero (e.g. the clamped end's position, ~1e-35: the noise
 /// there depends on the linear solver's operation order, not on the physics; the smallest
 /// physical values, e.g. a 4e-11 axial reaction in the first rows, are thereby still checked
-/// to 1e-15 absolute). `FLEXMPC_BLESS=1` rewrites the golden file.
+/// to 1e-15 absolute). `UPDATE_GOLDEN=1` rewrites the golden file.
 fn golden(name: &str) {
     const ABS_FLOOR: f64 = 1e-15;
     let scene_path = manifest_dir().join(format!("tests/fixtures/{name}.toml"));
@@ -1056,12 +1056,12 @@ fn golden(name: &str) {
     let out = scratch(&format!("golden-{name}"));
     let summary = flexmpc::run::simulate(s, &out, true).unwrap();
     let produced = std::fs::read_to_string(&summary.csv).unwrap();
-    if std::env::var("FLEXMPC_BLESS").is_ok_and(|v| v == "1") {
+    if std::env::var("UPDATE_GOLDEN").is_ok_and(|v| v == "1") {
         std::fs::write(&golden_path, &produced).unwrap();
         return;
     }
     let expected = std::fs::read_to_string(&golden_path).unwrap_or_else(|e| {
-        panic!("{}: {e} (run with FLEXMPC_BLESS=1 to create it)", golden_path.display())
+        panic!("{}: {e} (run with UPDATE_GOLDEN=1 to create it)", golden_path.display())
     });
     if produced == expected {
         return;

@@ -21,7 +21,6 @@ use crate::exact_joints::ambient::{AmbientOps, LinkBasis};
 use crate::exact_joints::frame::{spd_inverse, NullFrame};
 use crate::exact_joints::rows::{relative_quaternion, Constraints};
 use crate::rom::Input;
-use faer::linalg::solvers::Solve;
 use faer::Mat;
 use intrinsic_beam::Kinematics;
 use multibody_constraints::Structure;
@@ -681,44 +680,14 @@ impl ExactJointsRom {
         if !(dt.is_finite() && dt > 0.0) {
             return Err(invalid("dt", dt, "must be finite and > 0"));
         }
-        let n = self.n_state();
-        let x0 = x.to_vec();
-        let mut z = x0.clone();
-        let mut mid = vec![0.0; n];
-        let mut f = vec![0.0; n];
-        let mut jx = vec![0.0; n * n];
-        let mut ju = vec![0.0; n * self.n_inputs()];
-        let scale = x0.iter().fold(1.0f64, |a, v| a.max(v.abs()));
-        for it in 1..=max_iter {
-            for i in 0..n {
-                mid[i] = 0.5 * (x0[i] + z[i]);
-            }
-            self.rhs_and_jacobian(&mid, u, &mut f, &mut jx, &mut ju)?;
-            let mut a = Mat::<f64>::from_fn(n, n, |i, j| -0.5 * dt * jx[j * n + i]);
-            for i in 0..n {
-                a[(i, i)] += 1.0;
-            }
-            let mut r = Mat::<f64>::from_fn(n, 1, |i, _| -(z[i] - x0[i] - dt * f[i]));
-            a.partial_piv_lu().solve_in_place(r.as_mut());
-            let mut step = 0.0f64;
-            for i in 0..n {
-                z[i] += r[(i, 0)];
-                step = step.max(r[(i, 0)].abs());
-            }
-            if !step.is_finite() {
-                return Err(ModalError::Numerical {
-                    stage: "exact-joints implicit midpoint".into(),
-                    reason: "non-finite update".into(),
-                });
-            }
-            if step <= tol * scale {
-                x.copy_from_slice(&z);
-                return Ok(it);
-            }
-        }
-        Err(ModalError::Numerical {
-            stage: "exact-joints implicit midpoint".into(),
-            reason: format!("no convergence in {max_iter} iterations"),
-        })
+        let mut ju = vec![0.0; x.len() * self.n_inputs()];
+        crate::midpoint::newton_step(
+            x,
+            dt,
+            tol,
+            max_iter,
+            "exact-joints implicit midpoint",
+            |mid, f, jx| self.rhs_and_jacobian(mid, u, f, jx, &mut ju),
+        )
     }
 }
