@@ -8,6 +8,7 @@
 //! Each crate contributes its cases in its own module; [`all_cases`] gathers them.
 
 pub mod beam;
+pub mod exact_joints;
 pub mod modal;
 pub mod mpc;
 pub mod multibody;
@@ -99,6 +100,7 @@ pub fn all_cases() -> Vec<Case> {
     cases.extend(beam::cases());
     cases.extend(multibody::cases());
     cases.extend(modal::cases());
+    cases.extend(exact_joints::cases());
     cases.extend(ocp::cases());
     cases.extend(mpc::cases());
     cases.extend(stress::cases());

@@ -7,8 +7,8 @@ use crate::{Case, CaseOutcome, Metric, Tier};
 use intrinsic_beam::{Beam, Components, Mesh, Section};
 use modal_rom::samples::{self, paper_2d_selection, paper_3d_selection};
 use modal_rom::{BasisSettings, ModalBasis, ModeKind, ModeSelection, RomOptions, StructureModel};
-use multibody_constraints::joint::{End, EndRef, JointKind, Support};
-use multibody_constraints::structure::{Placement, Structure, StructureBeam, StructureSettings};
+use multibody_constraints::{End, EndRef, JointKind, Support};
+use multibody_constraints::{Placement, Structure, StructureBeam, StructureSettings};
 use nalgebra::{Vector3, Vector4};
 use std::f64::consts::PI;
 
@@ -202,8 +202,8 @@ fn eb_beam(n: usize, clamped: bool) -> Result<Structure, String> {
 /// `ω1 = 1.8751²` at second order for 10…200 elements, the beam crate's dense route to
 /// round-off, and the free–free beam without spurious (missed massless) modes.
 fn euler_bernoulli() -> CaseOutcome {
-    use intrinsic_beam::modes::closed_form::{bending, Supports};
-    use intrinsic_beam::modes::{family, linear_modes, Family};
+    use intrinsic_beam::closed_form::{bending, Supports};
+    use intrinsic_beam::{family, linear_modes, Family};
     let exact = bending(Supports::ClampedFree, 1.0, 1.0, 1.0, 1)[0];
     let meshes = [10usize, 20, 50, 100, 200];
     let (mut errors, mut rigid, mut not_first, mut vs_dense) = (Vec::new(), 0usize, 0usize, 0f64);
@@ -620,7 +620,7 @@ fn quaternions() -> CaseOutcome {
 /// Rotation vector of the joint's relative rotation `conj(ξa) ⊗ ξb` (in link 1's tip frame).
 /// Planar: `(0, θ, 0)` with θ the signed hinge angle about e2.
 fn relative_rotation(xa: &Vector4<f64>, xb: &Vector4<f64>) -> [f64; 3] {
-    use multibody_constraints::structure::{quat_conj, quat_mul};
+    use intrinsic_beam::rotation::{quat_conj, quat_mul};
     let mut rel = quat_mul(&quat_conj(xa), xb);
     if rel[0] < 0.0 {
         rel = -rel;
@@ -767,7 +767,7 @@ fn rom_track(
     selection: &ModeSelection,
     scene: Scene,
 ) -> Result<(Track, f64), String> {
-    use intrinsic_beam::operators::quaternion_step;
+    use intrinsic_beam::rotation::quaternion_step;
     let sel = setup.basis.select(selection).map_err(err)?;
     let inputs = if scene.spatial {
         samples::inputs_3d(&setup.structure, &setup.model)

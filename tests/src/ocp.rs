@@ -2,7 +2,7 @@
 
 use crate::{Case, CaseOutcome, Metric, Tier};
 use nalgebra::{DMatrix, DVector};
-use ocp_transcription::samples::{CartPole, LinearModel, ModalLike, SplitMix64};
+use ocp_transcription::samples::{self, CartPole, Fragile, LinearModel, ModalLike, SplitMix64};
 use ocp_transcription::{
     interval_error, AdaptiveSubsteps, Dynamics, Globalisation, HessianApproximation, Integrator,
     IntegratorKind, IntegratorSettings, Ocp, QpForm, SqpSettings, SqpSolver, SqpStatus,
@@ -42,38 +42,16 @@ fn err<E: std::fmt::Display>(e: E) -> String {
     e.to_string()
 }
 
-/// Max relative deviation of `A`, `B` from central differences (step 1e-6).
+/// Max relative deviation of `A`, `B` from central differences (step 1e-6), three substeps
+/// over 0.1.
 fn fd_error<D: Dynamics>(
     model: &D,
     kind: IntegratorKind,
     x: &[f64],
     u: &[f64],
 ) -> Result<f64, String> {
-    let (nx, nu) = (model.nx(), model.nu());
     let mut int = Integrator::new(model, &IntegratorSettings::new(kind, 3), 0.1).map_err(err)?;
-    let (mut xe, mut xp, mut xm) = (vec![0.0; nx], vec![0.0; nx], vec![0.0; nx]);
-    let mut a = DMatrix::zeros(nx, nx);
-    let mut b = DMatrix::zeros(nx, nu);
-    int.integrate_with_sensitivities(model, x, u, &mut xe, &mut a, &mut b).map_err(err)?;
-    let eps = 1e-6;
-    let mut e = 0.0_f64;
-    for j in 0..nx + nu {
-        let (mut x1, mut u1, mut x2, mut u2) = (x.to_vec(), u.to_vec(), x.to_vec(), u.to_vec());
-        if j < nx {
-            x1[j] += eps;
-            x2[j] -= eps;
-        } else {
-            u1[j - nx] += eps;
-            u2[j - nx] -= eps;
-        }
-        int.integrate(model, &x1, &u1, &mut xp).map_err(err)?;
-        int.integrate(model, &x2, &u2, &mut xm).map_err(err)?;
-        for i in 0..nx {
-            let an = if j < nx { a[(i, j)] } else { b[(i, j - nx)] };
-            e = e.max(((xp[i] - xm[i]) / (2.0 * eps) - an).abs() / (1.0 + an.abs()));
-        }
-    }
-    Ok(e)
+    samples::fd_sensitivity_error(&mut int, model, x, u).map_err(err)
 }
 
 fn sensitivities() -> CaseOutcome {
@@ -261,25 +239,6 @@ fn swing_up() -> CaseOutcome {
         }
     }
     Ok(out)
-}
-
-struct Fragile(CartPole);
-impl Dynamics for Fragile {
-    fn nx(&self) -> usize {
-        4
-    }
-    fn nu(&self) -> usize {
-        1
-    }
-    fn rhs(&self, x: &[f64], u: &[f64], xdot: &mut [f64]) {
-        self.0.rhs(x, u, xdot);
-        if x[0].abs() > 0.5 {
-            xdot[2] = f64::NAN;
-        }
-    }
-    fn jacobians(&self, x: &[f64], u: &[f64], fx: &mut DMatrix<f64>, fu: &mut DMatrix<f64>) {
-        self.0.jacobians(x, u, fx, fu)
-    }
 }
 
 fn statuses() -> CaseOutcome {

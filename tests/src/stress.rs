@@ -13,19 +13,19 @@ use std::fmt::Display;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::time::Instant;
 
-use intrinsic_beam::modes::closed_form::{self, Supports};
-use intrinsic_beam::modes::{family, linear_modes, Family};
+use intrinsic_beam::closed_form::{self, Supports};
+use intrinsic_beam::{family, linear_modes, Family};
 use intrinsic_beam::{
     Beam, BeamProblem, Components, EndCondition, ImplicitMidpoint, Kinematics, Loads, Mesh,
     NewtonSettings, Section,
 };
 use modal_rom::{BasisSettings, StructureModel};
 use mpc::{run, ControllerKind, ControllerSettings, PlantKind, RunResult, Scenario, Setup};
-use multibody_constraints::joint::{End, EndRef, Frame, Freedom, Joint, JointKind, Support};
-use multibody_constraints::nullspace::null_space;
-use multibody_constraints::structure::{Placement, Structure, StructureBeam, StructureSettings};
+use multibody_constraints::null_space;
 use multibody_constraints::studies::beam_rigid_rotation;
 use multibody_constraints::{samples, Plant, PlantSettings};
+use multibody_constraints::{End, EndRef, Frame, Freedom, Joint, JointKind, Support};
+use multibody_constraints::{Placement, Structure, StructureBeam, StructureSettings};
 use nalgebra::{Vector3, Vector4, Vector6};
 use proptest::prelude::*;
 use proptest::strategy::ValueTree;
@@ -1177,23 +1177,25 @@ pub mod scene_fuzz {
     /// [`Class::OverCap`] and not loaded.
     pub const MAX_ELEMENTS: usize = 1000;
 
-    /// SplitMix64 (Steele, Lea & Flood 2014): a tiny, well-mixed seeded generator.
+    /// The fuzzer's draws on the shared seeded generator
+    /// ([`ocp_transcription::samples::SplitMix64`]).
     #[derive(Clone, Debug)]
-    pub struct SplitMix(pub u64);
+    pub struct SplitMix(ocp_transcription::samples::SplitMix64);
 
     impl SplitMix {
-        /// Next 64 random bits.
-        pub fn next_u64(&mut self) -> u64 {
-            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = self.0;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            z ^ (z >> 31)
+        /// Seeded stream.
+        pub fn new(seed: u64) -> Self {
+            Self(ocp_transcription::samples::SplitMix64::new(seed))
         }
 
-        /// Uniform in `0..n` (`n ≥ 1`).
+        /// Next 64 random bits.
+        pub fn next_u64(&mut self) -> u64 {
+            self.0.next_u64()
+        }
+
+        /// Uniform in `0..n` (`n = 0` is treated as 1).
         pub fn below(&mut self, n: usize) -> usize {
-            (self.next_u64() % n.max(1) as u64) as usize
+            self.0.index(n.max(1))
         }
 
         /// One element of a non-empty slice.
@@ -1357,7 +1359,7 @@ pub mod scene_fuzz {
 
     /// The input of case `index` of the stream `seed`.
     pub fn generate(seed: u64, index: u64) -> (Source, String) {
-        let mut rng = SplitMix(seed ^ index.wrapping_mul(0xD1B5_4A32_D192_ED03));
+        let mut rng = SplitMix::new(seed ^ index.wrapping_mul(0xD1B5_4A32_D192_ED03));
         rng.next_u64();
         match rng.below(10) {
             0 => {
@@ -1585,21 +1587,26 @@ pub mod scene_fuzz {
         if elements > MAX_ELEMENTS {
             return Class::OverCap;
         }
-        let mut scene = match catch_unwind(|| flexmpc::scene::load_str(file, text)) {
+        let scene = match catch_unwind(|| flexmpc::scene::load_str(file, text)) {
             Err(p) => return Class::Panic(format!("load_str: {}", panic_message(p.as_ref()))),
             Ok(Err(_)) => return Class::LoadError,
             Ok(Ok(scene)) => scene,
         };
+        let mut plant = match catch_unwind(AssertUnwindSafe(|| scene.plant())) {
+            Err(p) => return Class::Panic(format!("plant: {}", panic_message(p.as_ref()))),
+            Ok(Err(_)) => return Class::LoadError,
+            Ok(Ok(plant)) => plant,
+        };
         let stepped = catch_unwind(AssertUnwindSafe(|| {
-            let p = &scene.plant;
+            let p = &plant;
             if let Some(v) = p.state().iter().find(|v| !v.is_finite()) {
                 return Err(Class::NonFinite(format!("initial state entry {v}")));
             }
             let (e, v) = (p.energy(), p.potential_energy());
             let overflow = (!(e.is_finite() && v.is_finite()))
                 .then(|| format!("initial energy {e:e}, gravity potential {v:e}"));
-            let step = scene.plant.step();
-            let p = &scene.plant;
+            let step = plant.step();
+            let p = &plant;
             if step.is_ok() {
                 if let Some(v) = p.state().iter().find(|v| !v.is_finite()) {
                     return Err(Class::NonFinite(format!("state after one step: {v}")));

@@ -6,6 +6,7 @@
 mod bench;
 mod ci;
 mod fuzz;
+mod peers;
 mod stress;
 mod tidy;
 
@@ -43,6 +44,9 @@ fn main() -> Result<()> {
     faer::set_global_parallelism(faer::Par::Seq);
     match args.first().map(String::as_str) {
         Some("verify") => verify(&args[1..]),
+        Some("bench") if args.get(1).map(String::as_str) == Some("peers") => {
+            peers::main(&args[2..])
+        }
         Some("bench") => bench::main(&args[1..]),
         Some("stress") => stress::main(&args[1..]),
         Some("fuzz") => fuzz::main(&args[1..]),

@@ -1,7 +1,6 @@
 //! `flexmpc mpc` and `flexmpc sweep`: closed loops of a scene's `[scenario]` with the `mpc`
 //! crate (paper §4–5, eqs. 33–36), written as CSV time series and JSON solver logs.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -47,18 +46,17 @@ pub fn control_of(scene: &Scene, overrides: &Overrides) -> Result<Control> {
         c.omega0 = w;
     }
     if let Some(d) = overrides.duration {
-        if !(d.is_finite() && d > 0.0) {
-            bail!("--duration must be finite and > 0, got {d}");
-        }
         c.scenario.duration = d;
     }
-    c.scenario.validate().map_err(|e| {
-        anyhow::anyhow!(
-            "{}: the scenario with the command-line overrides is invalid: {e} \
-             (the duration must be a multiple of [scenario] output_interval = {} s)",
-            scene.file.display(),
-            c.scenario.output_interval
-        )
+    // the library's rules; a rule on the duration is the flag's
+    c.scenario.validate().map_err(|e| match &e {
+        mpc::MpcError::Invalid { field, value, reason } if field == "duration" => {
+            anyhow::anyhow!("{}: --duration {value} {reason}", scene.file.display())
+        }
+        _ => anyhow::anyhow!(
+            "{}: the scenario with the command-line overrides is invalid: {e}",
+            scene.file.display()
+        ),
     })?;
     Ok(c)
 }
@@ -81,38 +79,9 @@ impl Default for OutputOptions {
     }
 }
 
-/// A progress indicator on stderr, only on a terminal and without `--quiet`.
-pub fn progress_bar(len: Option<u64>, quiet: bool, what: &str) -> indicatif::ProgressBar {
-    use std::io::IsTerminal;
-    if quiet || !std::io::stderr().is_terminal() {
-        return indicatif::ProgressBar::hidden();
-    }
-    let bar = match len {
-        Some(n) => {
-            let b = indicatif::ProgressBar::new(n);
-            b.set_style(
-                indicatif::ProgressStyle::with_template(
-                    "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {msg} ({eta} left)",
-                )
-                .expect("valid template"),
-            );
-            b
-        }
-        None => {
-            let b = indicatif::ProgressBar::new_spinner();
-            b.set_style(
-                indicatif::ProgressStyle::with_template("{spinner} [{elapsed_precise}] {msg}")
-                    .expect("valid template"),
-            );
-            b
-        }
-    };
-    bar.set_message(what.to_string());
-    bar.enable_steady_tick(std::time::Duration::from_millis(120));
-    bar
-}
+pub use crate::progress::progress_bar;
 
-/// The summary of one run with the summary keys (plus the strategy counts and errors) and
+/// The summary of one run (the closed-loop metrics, the strategy counts and errors) and
 /// its measured timings (`solve_time_*`, `wall_time_s`): what `--json` prints on stdout. The
 /// files get [`crate::timings::summary_without_timings`] instead.
 pub fn summary_json(r: &RunResult) -> serde_json::Value {
@@ -122,31 +91,6 @@ pub fn summary_json(r: &RunResult) -> serde_json::Value {
         m.insert("samples".into(), serde_json::json!(r.samples.len()));
     }
     v
-}
-
-/// Writes the time series of a run: `t, V, V/V(0), u…, joint angles (deg)…, tip xyz, q…`.
-pub fn write_timeseries(r: &RunResult, path: &Path) -> Result<()> {
-    let mut f = std::io::BufWriter::new(
-        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?,
-    );
-    let mut cols = vec!["t".to_string(), "v_state".into(), "v_ratio".into()];
-    cols.extend(r.input_names.iter().map(|n| format!("u:{n}")));
-    cols.extend(r.joint_names.iter().map(|n| format!("angle_deg:{n}")));
-    cols.extend(["tip.x", "tip.y", "tip.z"].map(String::from));
-    let nq = r.records.first().map_or(0, |x| x.q.len());
-    cols.extend((0..nq).map(|i| format!("q{i}")));
-    writeln!(f, "{}", cols.join(","))?;
-    let v0 = r.records.first().map_or(1.0, |x| x.v_state);
-    for rec in &r.records {
-        let mut row = vec![rec.t, rec.v_state, rec.v_state / v0];
-        row.extend(&rec.u);
-        row.extend(rec.joint_angles.iter().map(|a| a.to_degrees()));
-        row.extend(rec.tip);
-        row.extend(&rec.q);
-        writeln!(f, "{}", row.iter().map(|v| format!("{v:.10e}")).collect::<Vec<_>>().join(","))?;
-    }
-    f.flush()?;
-    Ok(())
 }
 
 /// What `flexmpc mpc` wrote.
@@ -211,20 +155,13 @@ pub fn run_mpc(
         crate::timings::remove(out)?;
         Vec::new()
     };
-    let report = crate::report::write(scene, &control, &result, out, opts.timings)?;
+    let report =
+        crate::report::write(scene, &control, &result, Some(&setup.rom), out, opts.timings)?;
     bar.finish_and_clear();
     Ok(MpcOutput { result, control, csv, samples, summary, report, timings })
 }
 
-/// One run of a sweep.
-pub struct SweepRun {
-    /// Controller.
-    pub controller: ControllerKind,
-    /// Disturbance.
-    pub omega0: f64,
-    /// The run, or why it could not run.
-    pub result: std::result::Result<RunResult, String>,
-}
+pub use crate::results::{write_timeseries, SweepRun};
 
 /// What `flexmpc sweep` wrote.
 pub struct SweepOutput {
@@ -314,44 +251,15 @@ pub fn run_sweep(
     let planar =
         matches!(control.scenario.structure.components(), intrinsic_beam::Components::Planar);
     let csv = out.join("sweep.csv");
-    let mut f = std::io::BufWriter::new(std::fs::File::create(&csv)?);
-    writeln!(
-        f,
-        "controller,plant,omega0,stabilised,v_ratio_final,max_joint_angle_deg,\
-         orientation_error_deg,max_orientation_deg,rigid_rate_ratio,failed_first_attempts,\
-         relaxed_samples,fallback_samples,held_samples,joint_limit_samples,\
-         max_plan_joint_angle_deg,samples,t_end,error"
-    )?;
+    crate::results::write_sweep_csv(&runs, control.plant.name(), &csv)?;
     let mut summaries = Vec::new();
     for r in &runs {
         match &r.result {
             Ok(res) => {
                 let s = &res.summary;
-                writeln!(
-                    f,
-                    "{},{},{},{},{:.6e},{:.4},{:.4},{:.4},{:.6e},{},{},{},{},{},{:.4},{},{},{}",
-                    s.controller,
-                    s.plant,
-                    s.omega0,
-                    s.stabilised,
-                    s.v_ratio_final,
-                    s.max_joint_angle_deg,
-                    s.orientation_error_deg,
-                    s.max_orientation_deg,
-                    s.rigid_rate_ratio,
-                    s.failed_first_attempts,
-                    s.relaxed_samples,
-                    s.fallback_samples,
-                    s.held_samples,
-                    s.joint_limit_samples,
-                    s.max_plan_joint_angle_deg,
-                    res.samples.len(),
-                    s.t_end,
-                    s.error.as_deref().unwrap_or("").replace([',', '\n'], ";")
-                )?;
                 let stem = format!("{}-w{}", s.controller, s.omega0);
                 write_timeseries(res, &out.join("runs").join(format!("{stem}.csv")))?;
-                crate::report::snapshots_svg(
+                crate::figures::snapshots_svg(
                     res,
                     planar,
                     &out.join("runs").join(format!("{stem}-snapshots.svg")),
@@ -359,14 +267,6 @@ pub fn run_sweep(
                 summaries.push(crate::timings::summary_without_timings(res));
             }
             Err(e) => {
-                writeln!(
-                    f,
-                    "{},{},{},false,,,,,,,,,,,{}",
-                    r.controller.name(),
-                    control.plant.name(),
-                    r.omega0,
-                    e.replace([',', '\n'], ";")
-                )?;
                 summaries.push(serde_json::json!({
                     "omega0": r.omega0,
                     "controller": r.controller.name(),
@@ -377,15 +277,14 @@ pub fn run_sweep(
             }
         }
     }
-    f.flush()?;
     let json = out.join("sweep.json");
     std::fs::write(&json, serde_json::to_string_pretty(&summaries)?)?;
     let plot = out.join("cost.svg");
-    crate::plot::sweep_cost(&plot, &scene.name, &runs)?;
+    crate::figures::sweep_cost(&plot, &scene.name, &runs)?;
     let inputs = out.join("inputs.svg");
-    crate::plot::sweep_inputs(&inputs, &scene.name, &runs)?;
+    crate::figures::sweep_inputs(&inputs, &scene.name, &control.scenario.inputs, &runs)?;
     let snapshots = out.join("snapshots.svg");
-    crate::report::sweep_snapshots_svg(&runs, planar, &snapshots)?;
+    crate::figures::sweep_snapshots_svg(&runs, planar, &snapshots)?;
     let timings = if opts.timings {
         crate::timings::write_sweep(&runs, control.scenario.mpc.sampling, out)?
     } else {
@@ -397,14 +296,24 @@ pub fn run_sweep(
 }
 
 /// `flexmpc ocp`: solves the first sample's optimal control problem alone (from the projected
-/// initial state of a run with the scene's disturbance) and returns its optimal cost, control
-/// sequence, iterations and solve time as JSON; with `export`, also writes the whole problem
-/// (modal model export plus `ocp.json`: weights, references, bounds, horizon, `Nc`,
-/// integrator, initial state) so that another solver can solve exactly the same problem.
+/// initial state of a run with the scene's disturbance) and returns its cost, control
+/// sequence, KKT residual, status, iterations and solve time as JSON; with `export`, also
+/// writes the whole problem (modal model export plus `ocp.json`: weights, references, bounds,
+/// horizon, `Nc`, integrator, initial state) so that another solver can solve exactly the
+/// same problem.
+///
+/// With `converge` (NMPC), the problem is solved to convergence from the linear MPC plan by a
+/// full SQP ([`ocp_transcription::SqpSettings::converge`]: KKT tolerance 1e-8, no fallback),
+/// whatever the scene's real-time settings; `optimum` says whether the status is `Solved`.
+/// Without it the scene's controller takes its first sample; a real-time iteration is
+/// reported as such (`real_time_iteration`): `cost` is that of the returned plan (after the
+/// step), and the KKT residual, only known at the point before the step, is
+/// `kkt_before_step` (`kkt` is then null).
 pub fn first_sample(
     scene: &Scene,
     overrides: &Overrides,
     export: Option<&Path>,
+    converge: bool,
 ) -> Result<serde_json::Value> {
     let control = control_of(scene, overrides)?;
     let setup = Setup::new(&control.scenario)
@@ -416,29 +325,98 @@ pub fn first_sample(
         }
         None => mpc::first_sample_problem(&setup, control.omega0, &control.controller)?,
     };
-    let mut ctrl = mpc::Controller::new(
-        mpc::RomDynamics::new(&setup.rom)?,
-        &setup.weights,
-        &control.scenario.mpc,
-        &control.controller,
+    let model = mpc::RomDynamics::new(&setup.rom)?;
+    let nu = problem.u_min.len();
+    let mut ocp = ocp_transcription::Ocp::new(
+        problem.x0.len(),
+        nu,
+        control.scenario.mpc.horizon,
+        control.scenario.mpc.intervals,
     )?;
-    let report = ctrl.step(0.0, &problem.x0)?;
-    let (_, controls) = ctrl.plan();
-    let controls: Vec<Vec<f64>> = controls.iter().map(|u| u.iter().copied().collect()).collect();
-    Ok(serde_json::json!({
+    ocp.q = setup.weights.q.clone();
+    ocp.r = setup.weights.r.clone();
+    ocp.x_ref = setup.weights.x_ref.clone();
+    ocp.u_ref = nalgebra::DVector::from_vec(problem.u_ref.clone());
+    ocp.u_min = nalgebra::DVector::from_vec(problem.u_min.clone());
+    ocp.u_max = nalgebra::DVector::from_vec(problem.u_max.clone());
+    let rows = |u: &[nalgebra::DVector<f64>]| -> Vec<Vec<f64>> {
+        u.iter().map(|u| u.iter().copied().collect()).collect()
+    };
+    let mut v = serde_json::json!({
         "omega0": control.omega0,
         "controller": control.controller.kind.name(),
-        "cost": report.cost,
-        "status": report.status,
-        "strategy": report.strategy,
-        "iterations": report.iterations,
-        "solve_time_s": report.solve_time,
-        "kkt": report.kkt,
         "inputs": problem.inputs,
-        "controls": controls,
         "n_state": problem.x0.len(),
         "export": export,
-    }))
+    });
+    let fields = if converge && control.controller.kind == ControllerKind::Nmpc {
+        use ocp_transcription::{Globalisation, SqpMode, SqpSettings, SqpSolver, SqpStatus};
+        let integrator = control.controller.integrator.clone();
+        let lq = SqpSettings {
+            mode: SqpMode::LinearQuadratic,
+            globalisation: Globalisation::FullStep,
+            max_iterations: 2,
+            integrator: integrator.clone(),
+            ..SqpSettings::default()
+        };
+        let mut lmpc = SqpSolver::new(model.clone(), ocp.clone(), lq)?;
+        lmpc.solve(&problem.x0)?;
+        let mut nmpc = SqpSolver::new(model, ocp, SqpSettings::converge(integrator))?;
+        for (d, s) in nmpc.states_mut().iter_mut().zip(lmpc.states()) {
+            d.copy_from(s);
+        }
+        for (d, s) in nmpc.controls_mut().iter_mut().zip(lmpc.controls()) {
+            d.copy_from(s);
+        }
+        let st = nmpc.solve(&problem.x0)?;
+        serde_json::json!({
+            "mode": "converge",
+            "optimum": st.status == SqpStatus::Solved,
+            "real_time_iteration": false,
+            "cost": st.cost,
+            "kkt": st.kkt,
+            "constraint_violation": st.constraint_violation,
+            "status": format!("{:?}", st.status),
+            "strategy": "sqp",
+            "iterations": st.iterations,
+            "solve_time_s": st.time_total,
+            "controls": rows(nmpc.controls()),
+        })
+    } else {
+        let mut ctrl = mpc::Controller::new(
+            model,
+            &setup.weights,
+            &control.scenario.mpc,
+            &control.controller,
+        )?;
+        let report = ctrl.step(0.0, &problem.x0)?;
+        let (states, controls) = ctrl.plan();
+        let rti = report.status == "RealTimeIteration";
+        let (cost, kkt) = if rti {
+            (serde_json::json!(ocp.cost(states, controls)?), serde_json::Value::Null)
+        } else {
+            (serde_json::json!(report.cost), serde_json::json!(report.kkt))
+        };
+        serde_json::json!({
+            "mode": if rti { "real-time step" } else { "scene controller" },
+            "optimum": report.status == "Solved",
+            "real_time_iteration": rti,
+            "cost": cost,
+            "kkt": kkt,
+            "kkt_before_step": if rti { serde_json::json!(report.kkt) } else { serde_json::Value::Null },
+            "status": report.status,
+            "strategy": report.strategy,
+            "iterations": report.iterations,
+            "solve_time_s": report.solve_time,
+            "controls": rows(controls),
+        })
+    };
+    if let (Some(m), Some(f)) = (v.as_object_mut(), fields.as_object()) {
+        for (k, x) in f {
+            m.insert(k.clone(), x.clone());
+        }
+    }
+    Ok(v)
 }
 
 #[cfg(test)]

@@ -11,7 +11,11 @@
 //!   first sample's optimal control problem (`flexmpc ocp`) of a
 //!   scene's `[scenario]` with the `mpc` crate, written as CSV/JSON.
 //! - [`report`]: the offline HTML report (`index.html` + SVG figures) of a closed loop.
-//! - [`plot`]: SVG plots (plotters).
+//! - [`figures`]: the figures of closed loops and sweeps (snapshots, cost, inputs).
+//! - [`plot`]: generic SVG charts (plotters).
+//! - [`results`]: run results as data (`SweepRun`) and their CSV files.
+//! - [`progress`]: progress indicators on stderr.
+//! - [`vtk`]: the deformed structure over time as VTK files for ParaView (`--vtk`).
 //! - [`timings`]: the measured timings, kept in their own files so that every other output
 //!   is a pure function of the inputs (`--no-timings` leaves them out).
 //!
@@ -39,16 +43,20 @@
 //! duration = 0.01
 //! "#;
 //! let scene = flexmpc::scene::load_str(Path::new("inline.toml"), text).unwrap();
-//! assert_eq!(scene.plant.structure().beams().len(), 1);
+//! assert_eq!(scene.structure.beams().len(), 1);
 //! ```
 
 pub mod control;
+pub mod figures;
 pub mod modes;
 pub mod plot;
+pub mod progress;
 pub mod report;
+pub mod results;
 pub mod run;
 pub mod scene;
 pub mod timings;
+pub mod vtk;
 
 /// Path (relative to the repository root) of the default scene, used in messages and for the
 /// output folder `out/paper-2d-mpc`.

@@ -2,7 +2,10 @@
 //! sweeps, reports.
 //!
 //! Without arguments it runs the built-in default scene, the paper's 2D NMPC example
-//! (`scenes/paper-2d-mpc.toml`), and writes its report to `out/paper-2d-mpc/index.html`.
+//! (`scenes/paper-2d-mpc.toml`), and writes its report to
+//! `out/paper-2d-mpc/nmpc-fe-w1/index.html`. Every closed loop writes to its own folder
+//! `out/<scene>/<controller>-<plant>-w<ω0>/` (or `--out DIR`), so runs of other variants never
+//! overwrite each other.
 //! `flexmpc mpc <scene.toml>` runs one closed loop (CSV, per-sample solver log, report),
 //! `flexmpc sweep <scene.toml>` runs ω0 × controllers in parallel (table, Fig. 6-style plot),
 //! `flexmpc ocp <scene.toml>` solves (and `--export`s) the first sample's problem alone,
@@ -10,12 +13,19 @@
 //! plots the constrained modes, `flexmpc check` validates a scene. Global flags: `--quiet`
 //! (no progress, no extra prints), `--json` (machine-readable summary on stdout),
 //! `--threads N` (rayon pool), `--no-timings` (no measured-time files: the outputs of two runs
-//! are byte-identical; without it only `timings.*` and `solve_times.svg` differ).
+//! are byte-identical; without it only `timings.*` and `solve_times.svg` differ), `--out DIR`.
+//!
+//! Errors: a mistake in the input (scene, option, file) prints `error: …` and its causes, one
+//! line each, whatever `RUST_BACKTRACE` says, and exits with 1; an internal error (a panic)
+//! prints where to report it and exits with 101. A closed stdout (`flexmpc … | head -1`) ends
+//! the run quietly.
 
 use flexmpc::control::{self, Overrides};
 use flexmpc::{modes, run, scene};
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::process::ExitCode;
 
 use anyhow::{bail, Result};
 use clap::{Parser, Subcommand};
@@ -29,7 +39,7 @@ use flexmpc::{DEFAULT_SCENE, DEFAULT_SCENE_PATH};
     about = "Simulation and control of very flexible multibody structures",
     long_about = "Simulation and control of very flexible multibody structures.\n\nWithout a \
                   command, runs the paper's 2D NMPC example (scenes/paper-2d-mpc.toml, built \
-                  in) and writes its report to out/paper-2d-mpc/index.html."
+                  in) and writes its report to out/paper-2d-mpc/nmpc-fe-w1/index.html."
 )]
 struct Cli {
     #[command(subcommand)]
@@ -48,6 +58,15 @@ struct Cli {
     /// `ocp`, no `solve_time_s`; two runs of the same inputs then write byte-identical files.
     #[arg(long, global = true)]
     no_timings: bool,
+    /// Output folder (default: `out/<scene>/<controller>-<plant>-w<ω0>/` for `mpc` and the
+    /// default run, `out/<scene>/sweep-<controllers>-<plant>-w<ω0 list>/` for `sweep`,
+    /// `out/<scene>/simulate/` and `out/<scene>/modes/`).
+    #[arg(long, global = true)]
+    out: Option<PathBuf>,
+    /// Also write the deformed structure over time as VTK files for ParaView (`mpc`,
+    /// `simulate`, default run): `vtk/<name>-<step>.vtu` and the collection `vtk/<name>.pvd`.
+    #[arg(long, global = true)]
+    vtk: bool,
 }
 
 #[derive(Subcommand)]
@@ -56,9 +75,6 @@ enum Command {
     Simulate {
         /// Scene file (TOML).
         scene: PathBuf,
-        /// Output folder (default `out/<scene name>`).
-        #[arg(long)]
-        out: Option<PathBuf>,
         /// Simulated time (s; default: `[run] duration`).
         #[arg(long)]
         duration: Option<f64>,
@@ -74,9 +90,6 @@ enum Command {
         /// Number of modes, rigid ones included (default: `[modes] count`, else 8).
         #[arg(long)]
         modes: Option<usize>,
-        /// Output folder for the plots (default `out/<scene name>/modes`).
-        #[arg(long)]
-        out: Option<PathBuf>,
     },
     /// Validate a scene file without running it.
     Check {
@@ -99,9 +112,6 @@ enum Command {
         /// Duration of the loop (s; default: `[scenario] duration`).
         #[arg(long)]
         duration: Option<f64>,
-        /// Output folder (default `out/<scene name>`).
-        #[arg(long)]
-        out: Option<PathBuf>,
     },
     /// The first sample's optimal control problem alone: optimal cost, controls, iterations,
     /// solve time; `--export DIR` also writes the whole problem for other solvers.
@@ -117,6 +127,10 @@ enum Command {
         /// Write the modal model and `ocp.json` of the problem to this folder.
         #[arg(long)]
         export: Option<PathBuf>,
+        /// Solve the problem to convergence (full SQP, KKT tolerance 1e-8, no fallback),
+        /// whatever the scene's real-time settings.
+        #[arg(long)]
+        converge: bool,
     },
     /// Closed loops for several ω0 and controllers in parallel: table and Fig. 6-style plot.
     Sweep {
@@ -134,18 +148,87 @@ enum Command {
         /// Duration of each loop (s; default: `[scenario] duration`).
         #[arg(long)]
         duration: Option<f64>,
-        /// Output folder (default `out/<scene name>/sweep`).
-        #[arg(long)]
-        out: Option<PathBuf>,
     },
 }
 
-fn default_out(scene: &Path) -> PathBuf {
+/// Prints a line on stdout; a write error (a closed pipe) becomes an error of the run.
+macro_rules! say {
+    ($($arg:tt)*) => {
+        writeln!(std::io::stdout().lock(), $($arg)*)?
+    };
+}
+
+/// `out/<scene file stem>`, the folder of every output of a scene.
+fn scene_out(scene: &Path) -> PathBuf {
     let stem = scene
         .file_stem()
         .map(|s| s.to_string_lossy().to_string())
         .unwrap_or_else(|| "scene".into());
     PathBuf::from("out").join(stem)
+}
+
+/// The output folder of one closed loop: `--out`, else
+/// `out/<scene>/<controller>-<plant>-w<ω0>/`.
+fn mpc_out(cli: &Cli, scene: &Path, c: &flexmpc::scene::Control) -> PathBuf {
+    cli.out.clone().unwrap_or_else(|| {
+        scene_out(scene).join(format!(
+            "{}-{}-w{}",
+            c.controller.kind.name(),
+            c.plant.name(),
+            c.omega0
+        ))
+    })
+}
+
+/// The output folder of a sweep: `--out`, else
+/// `out/<scene>/sweep-<controllers joined by +>-<plant>-w<ω0 joined by _>/` (more than eight
+/// ω0: first, last, count and a hash of the list).
+fn sweep_out(
+    cli: &Cli,
+    scene: &Path,
+    kinds: &[mpc::ControllerKind],
+    plant: mpc::PlantKind,
+    omegas: &[f64],
+) -> PathBuf {
+    cli.out.clone().unwrap_or_else(|| {
+        let ctrl: Vec<&str> = kinds.iter().map(|k| k.name()).collect();
+        let w = if omegas.len() <= 8 {
+            omegas.iter().map(|w| w.to_string()).collect::<Vec<_>>().join("_")
+        } else {
+            // FNV-1a of the values' bits: the same list, the same folder
+            let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+            for b in omegas.iter().flat_map(|w| w.to_bits().to_le_bytes()) {
+                h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+            }
+            format!("{}-{}-n{}-{:08x}", omegas[0], omegas[omegas.len() - 1], omegas.len(), h as u32)
+        };
+        scene_out(scene).join(format!("sweep-{}-{}-w{w}", ctrl.join("+"), plant.name()))
+    })
+}
+
+/// With `--vtk`, writes the closed loop's snapshots as `vtk/mpc-<k>.vtu` and `vtk/mpc.pvd` into
+/// its output folder.
+fn write_vtk(cli: &Cli, o: &control::MpcOutput) -> Result<()> {
+    if cli.vtk {
+        let dir = o.report.parent().unwrap_or(Path::new(".")).join("vtk");
+        let pvd = flexmpc::vtk::write(
+            &dir,
+            "mpc",
+            &flexmpc::vtk::frames_of_snapshots(&o.result.snapshots),
+        )?;
+        if chatty(cli) {
+            say!("ParaView: {}", pvd.display());
+        }
+    }
+    Ok(())
+}
+
+/// Refuses a structure whose modal basis would not fit in memory (before anything dense is
+/// allocated).
+fn check_modal_size(s: &scene::Scene) -> Result<()> {
+    modes::check_size(&s.structure)
+        .map(|_| ())
+        .map_err(|e| anyhow::anyhow!("{}: {e}", s.file.display()))
 }
 
 /// How runs write their files.
@@ -168,10 +251,11 @@ fn print_simulation(summary: &run::RunSummary, cli: &Cli) -> Result<()> {
             "velocity_violation": summary.velocity_violation,
             "csv": summary.csv,
             "plot": summary.plot,
+            "vtk": summary.vtk,
         });
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        say!("{}", serde_json::to_string_pretty(&v)?);
     } else if chatty(cli) {
-        println!(
+        say!(
             "{} steps in {:.2} s; energy + potential {:.6e} → {:.6e}; max velocity-constraint \
              violation {:.1e}; wrote {}",
             summary.steps,
@@ -182,7 +266,10 @@ fn print_simulation(summary: &run::RunSummary, cli: &Cli) -> Result<()> {
             summary.csv.display()
         );
         if let Some(p) = &summary.plot {
-            println!("plot: {}", p.display());
+            say!("plot: {}", p.display());
+        }
+        if let Some(p) = &summary.vtk {
+            say!("ParaView: {}", p.display());
         }
     }
     Ok(())
@@ -190,14 +277,14 @@ fn print_simulation(summary: &run::RunSummary, cli: &Cli) -> Result<()> {
 
 fn print_mpc(o: &control::MpcOutput, cli: &Cli) -> Result<()> {
     if cli.json {
-        println!("{}", serde_json::to_string_pretty(&control::summary_json(&o.result))?);
+        say!("{}", serde_json::to_string_pretty(&control::summary_json(&o.result))?);
         return Ok(());
     }
     if !chatty(cli) {
         return Ok(());
     }
     let s = &o.result.summary;
-    println!(
+    say!(
         "{} on the {} plant, ω0 = {}: {} — V(T)/V(0) = {:.3e}, largest joint angle {:.1}°, \
          orientation error {:.2}° (largest {:.1}°), rigid rate ratio {:.2e}",
         s.controller.to_uppercase(),
@@ -210,7 +297,7 @@ fn print_mpc(o: &control::MpcOutput, cli: &Cli) -> Result<()> {
         s.max_orientation_deg,
         s.rigid_rate_ratio
     );
-    println!(
+    say!(
         "{} samples: solve time median {:.3} s, worst {:.3} s (τs = {} s); relaxed {}, LMPC \
          fallback {} (then held {}; plans beyond the joint limit in {}); loop wall time {:.1} s{}",
         o.result.samples.len(),
@@ -224,7 +311,7 @@ fn print_mpc(o: &control::MpcOutput, cli: &Cli) -> Result<()> {
         o.result.wall_time_s,
         s.error.as_ref().map(|e| format!("; stopped at {} s: {e}", s.t_end)).unwrap_or_default()
     );
-    println!(
+    say!(
         "wrote {}, {}, {}; report: {}",
         o.csv.display(),
         o.samples.display(),
@@ -232,10 +319,10 @@ fn print_mpc(o: &control::MpcOutput, cli: &Cli) -> Result<()> {
         o.report.display()
     );
     if o.timings.is_empty() {
-        println!("timings not written (--no-timings)");
+        say!("timings not written (--no-timings)");
     } else {
         let t: Vec<String> = o.timings.iter().map(|p| p.display().to_string()).collect();
-        println!("measured timings: {}", t.join(", "));
+        say!("measured timings: {}", t.join(", "));
     }
     Ok(())
 }
@@ -268,8 +355,62 @@ fn modes_json(report: &modal_rom::ModeReport) -> serde_json::Value {
     })
 }
 
-fn main() -> Result<()> {
+/// Where internal errors are reported.
+const REPORT_AT: &str = concat!(env!("CARGO_PKG_REPOSITORY"), "/issues");
+
+/// An internal error (a panic) says that it is one and where to report it; no stack trace
+/// unless `RUST_BACKTRACE` asks for one.
+fn install_panic_hook() {
+    std::panic::set_hook(Box::new(|info| {
+        let msg = info
+            .payload()
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| info.payload().downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "(no message)".into());
+        let at =
+            info.location().map(|l| format!(" at {}:{}", l.file(), l.line())).unwrap_or_default();
+        let mut e = std::io::stderr().lock();
+        let _ = writeln!(
+            e,
+            "internal error in flexmpc {}: {msg}{at}\nThis is a bug in flexmpc, not in your \
+             input: please report it at {REPORT_AT} with the command line and the scene file.",
+            env!("CARGO_PKG_VERSION")
+        );
+        let bt = std::backtrace::Backtrace::capture();
+        if bt.status() == std::backtrace::BacktraceStatus::Captured {
+            let _ = writeln!(e, "{bt}");
+        }
+    }));
+}
+
+/// Whether `e` comes from writing to a closed stdout.
+fn is_broken_pipe(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        c.downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+    })
+}
+
+fn main() -> ExitCode {
+    install_panic_hook();
     let cli = Cli::parse();
+    match run(&cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        // the reader went away (`| head`): nothing more to say, and no one to say it to
+        Err(e) if is_broken_pipe(&e) => ExitCode::SUCCESS,
+        Err(e) => {
+            let mut err = std::io::stderr().lock();
+            let _ = writeln!(err, "error: {e}");
+            for cause in e.chain().skip(1) {
+                let _ = writeln!(err, "  caused by: {cause}");
+            }
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: &Cli) -> Result<()> {
     // faer's dense kernels (eigen, SVD, QR, products in modal-rom / intrinsic-beam) would
     // otherwise split their work over the rayon pool, so their rounding, and a chaotic closed
     // loop's whole trajectory, would depend on `--threads`; the runs of a sweep are what runs
@@ -282,19 +423,19 @@ fn main() -> Result<()> {
         rayon::ThreadPoolBuilder::new().num_threads(n).build_global()?;
     }
     match &cli.command {
-        Some(Command::Simulate { scene, out, duration }) => {
+        Some(Command::Simulate { scene, duration }) => {
             let mut s = scene::load(scene)?;
             if let Some(d) = *duration {
                 if !(d.is_finite() && d > 0.0) {
                     bail!("--duration must be finite and > 0, got {d}");
                 }
-                s.steps = (d / s.plant.settings().dt).round().max(1.0) as usize;
+                s.steps = (d / s.plant_settings.dt).round().max(1.0) as usize;
             }
-            let out = out.clone().unwrap_or_else(|| default_out(scene));
-            let summary = run::simulate(s, &out, cli.quiet || cli.json)?;
-            print_simulation(&summary, &cli)?;
+            let out = cli.out.clone().unwrap_or_else(|| scene_out(scene).join("simulate"));
+            let summary = run::simulate_with(s, &out, cli.quiet || cli.json, cli.vtk)?;
+            print_simulation(&summary, cli)?;
         }
-        Some(Command::Modes { scene, angle, modes: n_modes, out }) => {
+        Some(Command::Modes { scene, angle, modes: n_modes }) => {
             let base = scene::load(scene)?;
             let n_modes = n_modes.unwrap_or(base.mode_count);
             if n_modes == 0 {
@@ -307,7 +448,8 @@ fn main() -> Result<()> {
                 }
                 None => vec![None],
             };
-            let dir = out.clone().unwrap_or_else(|| default_out(scene).join("modes"));
+            check_modal_size(&base)?;
+            let dir = cli.out.clone().unwrap_or_else(|| scene_out(scene).join("modes"));
             let mut all = Vec::new();
             for a in &angles {
                 let (s, dir) = match a {
@@ -317,16 +459,18 @@ fn main() -> Result<()> {
                     Some(a) => (scene::load_at_angle(scene, *a)?, dir.clone()),
                     None => (scene::load(scene)?, dir.clone()),
                 };
-                let report = modes::report(s.plant.structure(), n_modes)?;
+                let report =
+                    modes::report_with_progress(&s.structure, n_modes, cli.quiet || cli.json)
+                        .map_err(|e| anyhow::anyhow!("{}: {e}", scene.display()))?;
                 let figures = modes::plot(&report, &dir)?;
                 if !cli.json {
                     if angles.len() > 1 && !cli.quiet {
-                        println!("reference angle {}°:", a.unwrap_or(0.0));
+                        say!("reference angle {}°:", a.unwrap_or(0.0));
                     }
                     if !cli.quiet {
-                        modes::print_table(&report);
+                        modes::print_table(&mut std::io::stdout().lock(), &report)?;
                         for f in figures {
-                            println!("plot: {}", f.display());
+                            say!("plot: {}", f.display());
                         }
                     }
                 }
@@ -347,14 +491,20 @@ fn main() -> Result<()> {
                             .collect::<Vec<_>>()
                     })
                 };
-                println!("{}", serde_json::to_string_pretty(&v)?);
+                say!("{}", serde_json::to_string_pretty(&v)?);
             }
         }
         Some(Command::Check { scene }) => {
-            let s = scene::load(scene)?;
-            let st = s.plant.structure();
+            let checked = scene::check(scene)?;
+            let s = &checked.scene;
+            let st = &s.structure;
+            let est = modes::estimate(st);
+            let fits = est.bytes <= modes::MAX_DENSE_BYTES;
             if cli.json {
                 let v = serde_json::json!({
+                    "modal_basis_bytes": est.bytes,
+                    "modal_basis_seconds": est.seconds,
+                    "modal_basis_fits": fits,
                     "scene": scene,
                     "ok": true,
                     "beams": st.beams().len(),
@@ -364,9 +514,9 @@ fn main() -> Result<()> {
                     "controlled": s.control.is_some(),
                     "control_inputs": s.control.as_ref().map_or(0, |c| c.scenario.inputs.len()),
                 });
-                println!("{}", serde_json::to_string_pretty(&v)?);
+                say!("{}", serde_json::to_string_pretty(&v)?);
             } else if !cli.quiet {
-                println!(
+                say!(
                     "{}: ok ({} beams, {} joints/supports, {} unknowns, {} steps{})",
                     scene.display(),
                     st.beams().len(),
@@ -384,9 +534,22 @@ fn main() -> Result<()> {
                         None => String::new(),
                     }
                 );
+                say!(
+                    "modal basis (modes, mpc, sweep, ocp): about {}, {} on one core{}",
+                    modes::human_bytes(est.bytes),
+                    modes::human_seconds(est.seconds),
+                    if fits {
+                        String::new()
+                    } else {
+                        format!(
+                            " — over the cap of {}: those commands will refuse this mesh",
+                            modes::human_bytes(modes::MAX_DENSE_BYTES)
+                        )
+                    }
+                );
             }
         }
-        Some(Command::Mpc { scene, controller, plant, omega0, duration, out }) => {
+        Some(Command::Mpc { scene, controller, plant, omega0, duration }) => {
             let s = scene::load(scene)?;
             let ov = Overrides {
                 controller: kind_of(controller.as_deref())?,
@@ -394,31 +557,39 @@ fn main() -> Result<()> {
                 omega0: *omega0,
                 duration: *duration,
             };
-            let out = out.clone().unwrap_or_else(|| default_out(scene));
-            let o = control::run_mpc(&s, &ov, &out, output_options(&cli))?;
-            print_mpc(&o, &cli)?;
+            let out = mpc_out(cli, scene, &control::control_of(&s, &ov)?);
+            check_modal_size(&s)?;
+            let o = control::run_mpc(&s, &ov, &out, output_options(cli))?;
+            write_vtk(cli, &o)?;
+            print_mpc(&o, cli)?;
         }
-        Some(Command::Ocp { scene, controller, omega0, export }) => {
+        Some(Command::Ocp { scene, controller, omega0, export, converge }) => {
             let s = scene::load(scene)?;
             let ov = Overrides {
                 controller: kind_of(controller.as_deref())?,
                 omega0: *omega0,
                 ..Default::default()
             };
-            let mut v = control::first_sample(&s, &ov, export.as_deref())?;
+            check_modal_size(&s)?;
+            let mut v = control::first_sample(&s, &ov, export.as_deref(), *converge)?;
             if cli.no_timings {
                 if let Some(m) = v.as_object_mut() {
                     m.remove("solve_time_s");
                 }
             }
             if cli.json {
-                println!("{}", serde_json::to_string_pretty(&v)?);
+                say!("{}", serde_json::to_string_pretty(&v)?);
             } else if !cli.quiet {
-                println!(
-                    "{} first sample, ω0 = {}: cost {:.6e}, {} iterations, {}, status {} ({})",
+                say!(
+                    "{} first sample, ω0 = {} ({}): cost {:.6e}, KKT {}, {} iterations, {}, status {} ({})",
                     v["controller"].as_str().unwrap_or("?").to_uppercase(),
                     v["omega0"],
+                    v["mode"].as_str().unwrap_or("?"),
                     v["cost"].as_f64().unwrap_or(f64::NAN),
+                    v["kkt"].as_f64().map_or_else(
+                        || "not evaluated after the step".to_string(),
+                        |k| format!("{k:.1e}")
+                    ),
                     v["iterations"],
                     v["solve_time_s"]
                         .as_f64()
@@ -427,17 +598,17 @@ fn main() -> Result<()> {
                     v["strategy"].as_str().unwrap_or("?")
                 );
                 if let Some(c) = v["controls"].as_array() {
-                    println!("u over the horizon ({} intervals, inputs {}):", c.len(), v["inputs"]);
+                    say!("u over the horizon ({} intervals, inputs {}):", c.len(), v["inputs"]);
                     for (k, u) in c.iter().enumerate() {
-                        println!("{k:>4} {u}");
+                        say!("{k:>4} {u}");
                     }
                 }
                 if let Some(d) = export {
-                    println!("exported the problem to {}", d.display());
+                    say!("exported the problem to {}", d.display());
                 }
             }
         }
-        Some(Command::Sweep { scene, omega0, controller, plant, duration, out }) => {
+        Some(Command::Sweep { scene, omega0, controller, plant, duration }) => {
             let s = scene::load(scene)?;
             let Some(c) = &s.control else {
                 bail!("{}: no [scenario] section (see scenes/paper-2d-mpc.toml)", scene.display());
@@ -453,7 +624,11 @@ fn main() -> Result<()> {
             let kinds = match controller {
                 Some(list) => list
                     .split(',')
-                    .map(|k| kind_of(Some(k.trim())).map(|k| k.expect("some")))
+                    .map(|k| {
+                        scene::controller_kind(k.trim()).ok_or_else(|| {
+                            anyhow::anyhow!("--controller `{}` (allowed: nmpc, lmpc)", k.trim())
+                        })
+                    })
                     .collect::<Result<Vec<_>>>()?,
                 None => c.sweep_controllers.clone(),
             };
@@ -463,8 +638,10 @@ fn main() -> Result<()> {
                 omega0: None,
                 duration: *duration,
             };
-            let out = out.clone().unwrap_or_else(|| default_out(scene).join("sweep"));
-            let o = control::run_sweep(&s, &ov, &omegas, &kinds, &out, output_options(&cli))?;
+            let plant = ov.plant.unwrap_or(c.plant);
+            let out = sweep_out(cli, scene, &kinds, plant, &omegas);
+            check_modal_size(&s)?;
+            let o = control::run_sweep(&s, &ov, &omegas, &kinds, &out, output_options(cli))?;
             if cli.json {
                 let v: Vec<serde_json::Value> = o
                     .runs
@@ -477,9 +654,9 @@ fn main() -> Result<()> {
                         }),
                     })
                     .collect();
-                println!("{}", serde_json::to_string_pretty(&v)?);
+                say!("{}", serde_json::to_string_pretty(&v)?);
             } else if !cli.quiet {
-                println!(
+                say!(
                     "{:>5} {:>6} {:>11} {:>9} {:>12} {:>11} {:>8} {:>8}  stabilised",
                     "ctrl",
                     "ω0",
@@ -494,7 +671,7 @@ fn main() -> Result<()> {
                     match &r.result {
                         Ok(res) => {
                             let s = &res.summary;
-                            println!(
+                            say!(
                                 "{:>5} {:>6} {:>11.3e} {:>9.1} {:>12.2} {:>11.2e} {:>8} {:>8}  {}{}",
                                 s.controller,
                                 s.omega0,
@@ -512,11 +689,11 @@ fn main() -> Result<()> {
                             );
                         }
                         Err(e) => {
-                            println!("{:>5} {:>6} failed: {e}", r.controller.name(), r.omega0)
+                            say!("{:>5} {:>6} failed: {e}", r.controller.name(), r.omega0)
                         }
                     }
                 }
-                println!(
+                say!(
                     "wrote {}, {}, {} (V(t)/V(0) per ω0), {}, runs/*.csv, runs/*-snapshots.svg",
                     o.csv.display(),
                     o.json.display(),
@@ -528,31 +705,32 @@ fn main() -> Result<()> {
                         .join(", ")
                 );
                 if o.timings.is_empty() {
-                    println!("timings not written (--no-timings)");
+                    say!("timings not written (--no-timings)");
                 } else {
                     let t: Vec<String> =
                         o.timings.iter().map(|p| p.display().to_string()).collect();
-                    println!("measured timings: {}", t.join(", "));
+                    say!("measured timings: {}", t.join(", "));
                 }
-                println!("report: {}", o.report.display());
+                say!("report: {}", o.report.display());
             }
         }
         None => {
             let path = Path::new(DEFAULT_SCENE_PATH);
             let s = scene::load_str(path, DEFAULT_SCENE)?;
-            let out = default_out(path);
-            if chatty(&cli) {
-                println!(
+            let out = mpc_out(cli, path, &control::control_of(&s, &Overrides::default())?);
+            if chatty(cli) {
+                say!(
                     "flexmpc {}: running the default scene {} ({}) — the paper's 2D NMPC example",
                     env!("CARGO_PKG_VERSION"),
                     path.display(),
                     s.description.trim()
                 );
             }
-            let o = control::run_mpc(&s, &Overrides::default(), &out, output_options(&cli))?;
-            print_mpc(&o, &cli)?;
-            if chatty(&cli) {
-                println!(
+            let o = control::run_mpc(&s, &Overrides::default(), &out, output_options(cli))?;
+            write_vtk(cli, &o)?;
+            print_mpc(&o, cli)?;
+            if chatty(cli) {
+                say!(
                     "open {} in a browser; `flexmpc --help` lists the commands (mpc, sweep, ocp, \
                      simulate, modes, check)",
                     o.report.display()

@@ -1,41 +1,159 @@
 //! `flexmpc modes`: constrained linear modes of a scene's structure (paper §3.2, eqs. 30–32),
 //! printed as a table or JSON and drawn in the style of the paper's Figs. 4–5.
+//!
+//! The modal basis is a dense computation (`docs/theory.md §4`): the blocks `B1`, `B2`, `D` of
+//! the linearised problem are assembled as dense matrices and the null space and eigenvectors
+//! come from dense SVDs and eigen decompositions, `O(n²)` memory and `O(n³)` time in the
+//! number `n` of node unknowns. [`estimate`] predicts both from the mesh before anything is
+//! allocated, and [`check_size`] refuses a structure whose estimate is above
+//! [`MAX_DENSE_BYTES`].
 
+use std::io::Write;
 use std::path::Path;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use modal_rom::{mode_report, BasisSettings, ModeReport};
-use multibody_constraints::structure::Structure;
+use multibody_constraints::Structure;
 use plotters::prelude::*;
 
-/// The first `n_modes` modes of `structure` (fewer if the structure has fewer).
+/// Largest dense memory (bytes) the modal basis may use: 4 GiB. A structure whose
+/// [`estimate`] is above it is refused before anything is allocated (a mesh of more than about
+/// 2,100 planar or 1,050 spatial elements in all).
+pub const MAX_DENSE_BYTES: f64 = 4.0 * 1024.0 * 1024.0 * 1024.0;
+
+/// Seconds per `n1³` (cubed node unknowns) of the dense modal computation, measured on one
+/// core of the development machine (a planar two-link of 2 × 300 elements, `n1 = 1806`, took
+/// 3.2 s and 380 MB; 2 × 600 elements, estimated 28 s and 1.3 GB, took 37 s and 1.4 GB on a
+/// loaded machine).
+const SECONDS_PER_N3: f64 = 6e-10;
+
+/// An estimate, from the mesh alone, of what the dense modal computation costs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SolveEstimate {
+    /// Node unknowns `n1 = k Σ (N_b + 1)` (the velocity block `B1` is `n1 × n1`).
+    pub n1: usize,
+    /// Element unknowns `n2 = k Σ N_b`.
+    pub n2: usize,
+    /// Constraint rows (joints and supports).
+    pub constraint_rows: usize,
+    /// Peak dense memory (bytes): the dense blocks `B1`, damping (`n1²` each), `B2` (`n2²`),
+    /// `D`, `Dᵀ` (`n1 n2` each), and eight `nz × nz` work matrices of the SVDs on the
+    /// constrained space, `nz = n1 − constraint rows`; 8 bytes per entry.
+    pub bytes: f64,
+    /// Expected wall time (s) on one core: [`SECONDS_PER_N3`]` · n1³`.
+    pub seconds: f64,
+}
+
+/// Memory and time of the modal basis of `structure`, from its mesh and constraint count.
+pub fn estimate(structure: &Structure) -> SolveEstimate {
+    let k = structure.k();
+    let elements: usize = structure.beams().iter().map(|b| b.beam.n_elements()).sum();
+    let n1 = k * (elements + structure.beams().len());
+    let n2 = k * elements;
+    let constraint_rows = structure.joints().iter().map(|j| j.n_rows).sum::<usize>();
+    let nz = n1.saturating_sub(constraint_rows) as f64;
+    let (a, b) = (n1 as f64, n2 as f64);
+    let bytes = 8.0 * (2.0 * a * a + b * b + 2.0 * a * b + 8.0 * nz * nz);
+    SolveEstimate { n1, n2, constraint_rows, bytes, seconds: SECONDS_PER_N3 * a * a * a }
+}
+
+/// `bytes` as `12.3 GB` / `456 MB`.
+pub fn human_bytes(bytes: f64) -> String {
+    if bytes >= 1e9 {
+        format!("{:.1} GB", bytes / 1e9)
+    } else {
+        format!("{:.0} MB", bytes / 1e6)
+    }
+}
+
+/// `s` seconds as `under a second`, `12 s`, `3.4 min`, `5.6 h`.
+pub fn human_seconds(s: f64) -> String {
+    if s < 1.0 {
+        "under a second".into()
+    } else if s < 120.0 {
+        format!("{s:.0} s")
+    } else if s < 7200.0 {
+        format!("{:.1} min", s / 60.0)
+    } else {
+        format!("{:.1} h", s / 3600.0)
+    }
+}
+
+/// The [`estimate`] of `structure`, or an error naming the estimate and the cap
+/// [`MAX_DENSE_BYTES`] when it is above the cap.
+pub fn check_size(structure: &Structure) -> Result<SolveEstimate> {
+    let e = estimate(structure);
+    if e.bytes > MAX_DENSE_BYTES {
+        let elements: usize = structure.beams().iter().map(|b| b.beam.n_elements()).sum();
+        bail!(
+            "the modal basis of this structure ({elements} elements, {} node unknowns, {} \
+             constraint rows) is a dense computation that would need about {} of memory and \
+             {} on one core; the cap is {} (flexmpc::modes::MAX_DENSE_BYTES): use fewer \
+             `elements` per beam (the modes converge with a few dozen per link)",
+            e.n1,
+            e.constraint_rows,
+            human_bytes(e.bytes),
+            human_seconds(e.seconds),
+            human_bytes(MAX_DENSE_BYTES)
+        );
+    }
+    Ok(e)
+}
+
+/// The first `n_modes` modes of `structure` (fewer if the structure has fewer), after
+/// [`check_size`], without a progress indicator.
 pub fn report(structure: &Structure, n_modes: usize) -> Result<ModeReport> {
+    report_with_progress(structure, n_modes, false)
+}
+
+/// [`report`] with a progress spinner unless `quiet` (shown on a terminal only, for solves
+/// expected to take more than a second).
+pub fn report_with_progress(
+    structure: &Structure,
+    n_modes: usize,
+    quiet: bool,
+) -> Result<ModeReport> {
+    let est = check_size(structure)?;
+    let bar = crate::progress::progress_bar(
+        None,
+        quiet || est.seconds < 1.0,
+        &format!(
+            "modes: dense eigenproblem of {} unknowns (about {}, {})",
+            est.n1,
+            human_seconds(est.seconds),
+            human_bytes(est.bytes)
+        ),
+    );
     let settings = BasisSettings::default();
     // Ask for what exists: the basis knows its size only once solved.
-    match mode_report(structure, n_modes, &settings) {
+    let r = match mode_report(structure, n_modes, &settings) {
         Ok(r) => Ok(r),
         Err(first) => {
             let all = modal_rom::StructureModel::new(structure)?.modes(&settings)?;
             if n_modes > all.n_modes() && all.n_modes() > 0 {
-                Ok(modal_rom::report::report_of(&all, all.n_modes())?)
+                Ok(modal_rom::report_of(&all, all.n_modes())?)
             } else {
                 Err(first.into())
             }
         }
-    }
+    };
+    bar.finish_and_clear();
+    r
 }
 
-/// Prints the frequency table.
-pub fn print_table(report: &ModeReport) {
-    println!("{:>4}  {:>14}  {:>10}  label", "mode", "ω (rad/s)", "f (Hz)");
-    for (i, (w, l)) in report.frequencies_rad_s.iter().zip(&report.labels).enumerate() {
-        println!("{:>4}  {:>14.6}  {:>10.5}  {}", i + 1, w, w / std::f64::consts::TAU, l);
+/// Writes the frequency table to `w`.
+pub fn print_table(w: &mut impl Write, report: &ModeReport) -> std::io::Result<()> {
+    writeln!(w, "{:>4}  {:>14}  {:>10}  label", "mode", "ω (rad/s)", "f (Hz)")?;
+    for (i, (f, l)) in report.frequencies_rad_s.iter().zip(&report.labels).enumerate() {
+        writeln!(w, "{:>4}  {:>14.6}  {:>10.5}  {}", i + 1, f, f / std::f64::consts::TAU, l)?;
     }
+    Ok(())
 }
 
 /// Writes `components.svg` (Fig. 4: each velocity component of each elastic mode along the
 /// arc length, beams one after the other) and `shapes.svg` (Fig. 5: translational velocity
-/// mode shapes superimposed on the reference configuration, in the e1–e3 plane).
+/// mode shapes superimposed on the reference configuration, in the e1–e3 plane; spatial
+/// structures also in the e1–e2 plane).
 pub fn plot(report: &ModeReport, dir: &Path) -> Result<Vec<std::path::PathBuf>> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let elastic: Vec<_> = report.shapes.iter().skip(report.n_rigid).collect();
@@ -51,11 +169,23 @@ pub fn plot(report: &ModeReport, dir: &Path) -> Result<Vec<std::path::PathBuf>> 
     // Fig. 4: components against the cumulative arc length.
     let fig4 = dir.join("components.svg");
     {
-        let root = SVGBackend::new(&fig4, (900, 260 * k.max(1) as u32)).into_drawing_area();
+        let root = SVGBackend::new(&fig4, (1100, 280 * k.max(1) as u32)).into_drawing_area();
         root.fill(&WHITE)?;
-        let panels = root.split_evenly((k.max(1), 1));
+        let entries: Vec<(String, RGBColor, bool)> = shapes
+            .iter()
+            .enumerate()
+            .map(|(j, m)| {
+                (
+                    format!("mode {} ({}, {:.3} rad/s)", m.index + 1, m.label, m.frequency_rad_s),
+                    palette[j % palette.len()],
+                    false,
+                )
+            })
+            .collect();
+        let plot_area = crate::plot::with_legend(&root, &entries)?;
+        let panels = plot_area.split_evenly((k.max(1), 1));
         for (c, panel) in panels.iter().enumerate() {
-            let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+            let mut series: Vec<Vec<(f64, f64)>> = Vec::new();
             let mut lo = f64::INFINITY;
             let mut hi = f64::NEG_INFINITY;
             let mut s_max: f64 = 0.0;
@@ -74,23 +204,30 @@ pub fn plot(report: &ModeReport, dir: &Path) -> Result<Vec<std::path::PathBuf>> 
                     pts.push((f64::NAN, f64::NAN));
                 }
                 s_max = s_max.max(offset);
-                series.push((
-                    format!("mode {} ({}, {:.3} rad/s)", m.index + 1, m.label, m.frequency_rad_s),
-                    pts,
-                ));
+                series.push(pts);
             }
             if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
                 hi = lo + 1.0;
             }
             let pad = 0.05 * (hi - lo);
+            let name = names.get(c).copied().unwrap_or("?");
             let mut chart = ChartBuilder::on(panel)
-                .caption(format!("φ_{}", names.get(c).copied().unwrap_or("?")), ("sans-serif", 16))
+                .caption(format!("φ_{name}"), ("sans-serif", crate::plot::AXIS_FONT))
                 .margin(10)
-                .x_label_area_size(30)
-                .y_label_area_size(55)
+                .x_label_area_size(40)
+                .y_label_area_size(70)
                 .build_cartesian_2d(0.0..s_max.max(1e-12), (lo - pad)..(hi + pad))?;
-            chart.configure_mesh().x_desc("s along the beams").draw()?;
-            for (j, (label, pts)) in series.into_iter().enumerate() {
+            chart
+                .configure_mesh()
+                .x_desc("s along the beams (m)")
+                .y_desc(format!("φ_{name} (B1-normalised)"))
+                .label_style(("sans-serif", crate::plot::TICK_FONT))
+                .axis_desc_style(("sans-serif", crate::plot::TICK_FONT))
+                .x_labels(8)
+                .y_labels(5)
+                .y_label_formatter(&|v| crate::plot::short(*v))
+                .draw()?;
+            for (j, pts) in series.into_iter().enumerate() {
                 let color = palette[j % palette.len()];
                 for segment in pts.split(|p| p.0.is_nan()) {
                     chart.draw_series(LineSeries::new(
@@ -98,80 +235,87 @@ pub fn plot(report: &ModeReport, dir: &Path) -> Result<Vec<std::path::PathBuf>> 
                         color.stroke_width(2),
                     ))?;
                 }
-                if c == 0 {
-                    chart
-                        .draw_series(std::iter::once(PathElement::new(vec![], color)))?
-                        .label(label)
-                        .legend(move |(x, y)| {
-                            PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-                        });
-                }
-            }
-            if c == 0 {
-                chart
-                    .configure_series_labels()
-                    .background_style(WHITE.mix(0.8))
-                    .border_style(BLACK)
-                    .draw()?;
             }
         }
         root.present()?;
     }
 
-    // Fig. 5: reference configuration (thick black) plus the global translational velocity.
+    // Fig. 5: reference configuration (thick black) plus the global translational velocity,
+    // in the x–z plane (planar) or in the x–y and x–z planes (spatial, one row each).
     let fig5 = dir.join("shapes.svg");
     {
         let n = shapes.len().max(1);
-        let root = SVGBackend::new(&fig5, (300 * n as u32, 320)).into_drawing_area();
+        let planes: &[(usize, usize)] = if k == 3 { &[(0, 2)] } else { &[(0, 1), (0, 2)] };
+        let root =
+            SVGBackend::new(&fig5, (300 * n as u32, 320 * planes.len() as u32)).into_drawing_area();
         root.fill(&WHITE)?;
-        let panels = root.split_evenly((1, n));
-        for (m, panel) in shapes.iter().zip(panels.iter()) {
-            let (mut lo_x, mut hi_x, mut lo_z, mut hi_z) =
-                (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
-            let vmax = m
-                .beams
-                .iter()
-                .flat_map(|b| b.velocity_global.iter())
-                .map(|v| (v[0] * v[0] + v[2] * v[2]).sqrt())
-                .fold(0.0_f64, f64::max)
-                .max(1e-300);
-            let span =
-                m.beams.iter().map(|b| b.s.last().copied().unwrap_or(0.0)).sum::<f64>().max(1e-12);
-            let scale = 0.25 * span / vmax;
-            for b in &m.beams {
-                for (r, v) in b.reference.iter().zip(&b.velocity_global) {
-                    for (x, z) in [(r[0], r[2]), (r[0] + scale * v[0], r[2] + scale * v[2])] {
-                        lo_x = lo_x.min(x);
-                        hi_x = hi_x.max(x);
-                        lo_z = lo_z.min(z);
-                        hi_z = hi_z.max(z);
+        let panels = root.split_evenly((planes.len(), n));
+        let axis = ["x (m)", "y (m)", "z (m)"];
+        for (row, &(a, b)) in planes.iter().enumerate() {
+            for (col, m) in shapes.iter().enumerate() {
+                let panel = &panels[row * n + col];
+                let vmax = m
+                    .beams
+                    .iter()
+                    .flat_map(|b| b.velocity_global.iter())
+                    .map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt())
+                    .fold(0.0_f64, f64::max)
+                    .max(1e-300);
+                let span = m
+                    .beams
+                    .iter()
+                    .map(|b| b.s.last().copied().unwrap_or(0.0))
+                    .sum::<f64>()
+                    .max(1e-12);
+                let scale = 0.25 * span / vmax;
+                let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+                for bm in &m.beams {
+                    for (r, v) in bm.reference.iter().zip(&bm.velocity_global) {
+                        for p in [(r[a], r[b]), (r[a] + scale * v[a], r[b] + scale * v[b])] {
+                            lo = [lo[0].min(p.0), lo[1].min(p.1)];
+                            hi = [hi[0].max(p.0), hi[1].max(p.1)];
+                        }
                     }
                 }
-            }
-            let w = (hi_x - lo_x).max(hi_z - lo_z).max(1e-12) * 0.55;
-            let (cx, cz) = (0.5 * (lo_x + hi_x), 0.5 * (lo_z + hi_z));
-            let mut chart = ChartBuilder::on(panel)
-                .caption(
-                    format!("mode {}: {} ({:.3} rad/s)", m.index + 1, m.label, m.frequency_rad_s),
-                    ("sans-serif", 13),
-                )
-                .margin(8)
-                .x_label_area_size(20)
-                .y_label_area_size(30)
-                .build_cartesian_2d((cx - w)..(cx + w), (cz - w)..(cz + w))?;
-            chart.configure_mesh().x_desc("x").y_desc("z").draw()?;
-            for b in &m.beams {
-                chart.draw_series(LineSeries::new(
-                    b.reference.iter().map(|r| (r[0], r[2])),
-                    BLACK.stroke_width(4),
-                ))?;
-                chart.draw_series(LineSeries::new(
-                    b.reference
-                        .iter()
-                        .zip(&b.velocity_global)
-                        .map(|(r, v)| (r[0] + scale * v[0], r[2] + scale * v[2])),
-                    RED.stroke_width(2),
-                ))?;
+                let w = (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1e-12) * 0.55;
+                let (cx, cz) = (0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]));
+                let mut chart = ChartBuilder::on(panel)
+                    .caption(
+                        format!(
+                            "mode {}: {} ({:.3} rad/s)",
+                            m.index + 1,
+                            m.label,
+                            m.frequency_rad_s
+                        ),
+                        ("sans-serif", 13),
+                    )
+                    .margin(8)
+                    .x_label_area_size(36)
+                    .y_label_area_size(50)
+                    .build_cartesian_2d((cx - w)..(cx + w), (cz - w)..(cz + w))?;
+                chart
+                    .configure_mesh()
+                    .x_desc(axis[a])
+                    .y_desc(axis[b])
+                    .label_style(("sans-serif", 13))
+                    .x_labels(4)
+                    .y_labels(4)
+                    .x_label_formatter(&|v| crate::plot::short(*v))
+                    .y_label_formatter(&|v| crate::plot::short(*v))
+                    .draw()?;
+                for bm in &m.beams {
+                    chart.draw_series(LineSeries::new(
+                        bm.reference.iter().map(|r| (r[a], r[b])),
+                        BLACK.stroke_width(4),
+                    ))?;
+                    chart.draw_series(LineSeries::new(
+                        bm.reference
+                            .iter()
+                            .zip(&bm.velocity_global)
+                            .map(|(r, v)| (r[a] + scale * v[a], r[b] + scale * v[b])),
+                        RED.stroke_width(2),
+                    ))?;
+                }
             }
         }
         root.present()?;

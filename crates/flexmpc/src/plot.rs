@@ -1,11 +1,54 @@
-//! SVG plots of time series (plotters).
+//! Generic SVG charts (plotters): curves against time with units on both axes, readable
+//! tick labels, and the legend in a column beside the plot, never on the data.
 
 use std::path::Path;
 
 use anyhow::{bail, Result};
 use plotters::prelude::*;
 
-/// Plots the named columns of `table` against the first column (time) into an SVG file.
+/// The unit of a time-series column of `flexmpc simulate` (see [`crate::run::columns`]).
+pub fn column_unit(name: &str) -> &'static str {
+    let field = name.rsplit('.').next().unwrap_or(name);
+    if name.starts_with("angle:") {
+        "rad"
+    } else if name.starts_with("reaction:") {
+        if field.starts_with('m') {
+            "N·m"
+        } else {
+            "N"
+        }
+    } else if name.starts_with("input:") {
+        "N or N·m"
+    } else if matches!(name, "energy" | "potential" | "total") {
+        "J"
+    } else if name == "newton_iterations" {
+        "iterations"
+    } else if matches!(field, "x" | "y" | "z") {
+        "m"
+    } else {
+        "—"
+    }
+}
+
+/// The y-axis title of `names`: `angle:elbow (rad)`, or `energy, potential (J)`, or with mixed
+/// units each name with its own.
+pub fn y_title(names: &[String]) -> String {
+    let units: Vec<&str> = names.iter().map(|n| column_unit(n)).collect();
+    let joined = names.join(", ");
+    if units.windows(2).all(|w| w[0] == w[1]) {
+        let u = units.first().copied().unwrap_or("—");
+        if joined.chars().count() > 40 {
+            format!("value ({u})")
+        } else {
+            format!("{joined} ({u})")
+        }
+    } else {
+        "value (units in the legend)".into()
+    }
+}
+
+/// Plots the named columns of `table` against the first column (time) into an SVG file; the
+/// y axis and the legend carry the units of the columns.
 pub fn time_series(
     path: &Path,
     title: &str,
@@ -20,43 +63,20 @@ pub fn time_series(
             None => bail!("plot column `{n}` does not exist (columns: {})", columns.join(", ")),
         }
     }
-    let t_max = table.last().map(|r| r[0]).unwrap_or(1.0).max(1e-12);
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for r in table {
-        for &i in &idx {
-            lo = lo.min(r[i]);
-            hi = hi.max(r[i]);
-        }
-    }
-    if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
-        hi = lo + 1.0;
-    }
-    let pad = 0.05 * (hi - lo);
-    let root = SVGBackend::new(path, (900, 500)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 20))
-        .margin(15)
-        .x_label_area_size(40)
-        .y_label_area_size(60)
-        .build_cartesian_2d(0.0..t_max, (lo - pad)..(hi + pad))?;
-    chart.configure_mesh().x_desc("t (s)").y_desc("value").draw()?;
-    let palette = [RED, BLUE, GREEN, MAGENTA, CYAN, BLACK];
-    for (k, &i) in idx.iter().enumerate() {
-        let color = palette[k % palette.len()];
-        chart
-            .draw_series(LineSeries::new(
-                table.iter().map(|r| (r[0], r[i])),
-                color.stroke_width(2),
-            ))?
-            .label(names[k].clone())
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-            });
-    }
-    chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
-    root.present()?;
-    Ok(())
+    let series: Vec<Series> = idx
+        .iter()
+        .zip(names)
+        .map(|(&i, n)| {
+            (format!("{n} ({})", column_unit(n)), table.iter().map(|r| (r[0], r[i])).collect())
+        })
+        .collect();
+    let axes = Axes {
+        title: title.to_string(),
+        x: "t (s)".into(),
+        y: y_title(names),
+        ..Default::default()
+    };
+    lines(path, (1000, 500), &axes, &series)
 }
 
 /// A named curve `(x, y)`.
@@ -120,7 +140,73 @@ fn range_of(series: &[Series], f: impl Fn(&(f64, f64)) -> f64) -> (f64, f64) {
     (lo, hi)
 }
 
-/// Draws `series` into one drawing area.
+/// How a legend entry is drawn.
+#[derive(Clone, Copy)]
+enum Mark {
+    Line,
+    Dashed,
+    Dot,
+}
+
+/// Font sizes of tick labels, axis titles and chart titles: readable at the size the report
+/// shows the figures.
+pub const TICK_FONT: u32 = 15;
+/// Axis title font size.
+pub const AXIS_FONT: u32 = 16;
+/// Chart title font size.
+pub const TITLE_FONT: u32 = 18;
+
+/// Splits `area` into the plot (left) and, when there are `entries`, a legend column (right)
+/// wide enough for the longest label; draws the legend there. Returns the plot area.
+pub fn with_legend<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    entries: &[(String, RGBColor, bool)],
+) -> Result<DrawingArea<DB, plotters::coord::Shift>>
+where
+    DB::ErrorType: 'static,
+{
+    let marks: Vec<(String, RGBColor, Mark)> = entries
+        .iter()
+        .map(|(l, c, dashed)| (l.clone(), *c, if *dashed { Mark::Dashed } else { Mark::Line }))
+        .collect();
+    legend_column(area, &marks)
+}
+
+fn legend_column<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    entries: &[(String, RGBColor, Mark)],
+) -> Result<DrawingArea<DB, plotters::coord::Shift>>
+where
+    DB::ErrorType: 'static,
+{
+    if entries.is_empty() {
+        return Ok(area.clone());
+    }
+    let (w, _) = area.dim_in_pixel();
+    let longest = entries.iter().map(|e| e.0.chars().count()).max().unwrap_or(0) as u32;
+    let lw = (longest * 8 + 44).clamp(90, (w as f64 * 0.42) as u32);
+    let (plot, legend) = area.split_horizontally(w.saturating_sub(lw));
+    let font = ("sans-serif", TICK_FONT).into_font();
+    for (k, (label, c, mark)) in entries.iter().enumerate() {
+        let y = 40 + 22 * k as i32;
+        match mark {
+            Mark::Line => {
+                legend.draw(&PathElement::new(vec![(6, y), (30, y)], c.stroke_width(2)))?
+            }
+            Mark::Dashed => {
+                for x in [6, 16, 26] {
+                    legend.draw(&PathElement::new(vec![(x, y), (x + 6, y)], c.stroke_width(1)))?;
+                }
+            }
+            Mark::Dot => legend.draw(&Circle::new((18, y), 4, c.filled()))?,
+        }
+        legend.draw(&Text::new(label.clone(), (36, y - 8), font.clone()))?;
+    }
+    Ok(plot)
+}
+
+/// Draws `series` into one drawing area, the legend (when there is more than one curve or a
+/// reference line) in a column to the right of the plot, never on the data.
 fn draw_lines<DB: DrawingBackend>(
     area: &DrawingArea<DB, plotters::coord::Shift>,
     axes: &Axes,
@@ -129,6 +215,24 @@ fn draw_lines<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
+    let mut entries: Vec<(String, RGBColor, Mark)> = Vec::new();
+    if series.iter().any(|(n, _)| !n.is_empty()) || !axes.references.is_empty() {
+        for (k, (name, _)) in series.iter().enumerate() {
+            entries.push((
+                name.clone(),
+                color(k),
+                if axes.points { Mark::Dot } else { Mark::Line },
+            ));
+        }
+        for (k, (r, label)) in axes.references.iter().enumerate() {
+            if !axes.log_y || *r > 0.0 {
+                entries.push((label.clone(), reference_color(k), Mark::Dashed));
+            }
+        }
+    }
+    let titled = area.titled(&axes.title, ("sans-serif", TITLE_FONT))?;
+    let plot = legend_column(&titled, &entries)?;
+    let area = &plot;
     let (x0, x1) = range_of(series, |p| p.0);
     if axes.log_y {
         let pos: Vec<Series> = series
@@ -144,46 +248,34 @@ where
         }
         let (lo, hi) = (lo.max(1e-300) / 1.5, hi.max(1e-300) * 1.5);
         let mut chart = ChartBuilder::on(area)
-            .caption(&axes.title, ("sans-serif", 18))
             .margin(12)
-            .x_label_area_size(38)
-            .y_label_area_size(70)
+            .x_label_area_size(44)
+            .y_label_area_size(78)
             .build_cartesian_2d(x0..x1, (lo..hi).log_scale())?;
         chart
             .configure_mesh()
             .x_desc(axes.x.as_str())
             .y_desc(axes.y.as_str())
+            .label_style(("sans-serif", TICK_FONT))
+            .axis_desc_style(("sans-serif", AXIS_FONT))
+            .x_labels(8)
+            .y_labels(6)
+            .light_line_style(RGBColor(240, 240, 240))
             .y_label_formatter(&|v| format!("{v:.0e}"))
             .draw()?;
-        for (k, (name, pts)) in pos.iter().enumerate() {
-            let c = color(k);
-            chart
-                .draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(2)))?
-                .label(name.clone())
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
-                });
+        for (k, (_, pts)) in pos.iter().enumerate() {
+            chart.draw_series(LineSeries::new(pts.iter().copied(), color(k).stroke_width(2)))?;
         }
-        for (k, (r, label)) in axes.references.iter().enumerate() {
+        for (k, (r, _)) in axes.references.iter().enumerate() {
             if *r > 0.0 {
                 let c = reference_color(k);
-                chart
-                    .draw_series(DashedLineSeries::new(
-                        [(x0, *r), (x1, *r)],
-                        6,
-                        4,
-                        c.stroke_width(1),
-                    ))?
-                    .label(label.clone())
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
+                chart.draw_series(DashedLineSeries::new(
+                    [(x0, *r), (x1, *r)],
+                    6,
+                    4,
+                    c.stroke_width(1),
+                ))?;
             }
-        }
-        if series.len() > 1 || !axes.references.is_empty() {
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .draw()?;
         }
     } else {
         let (mut lo, mut hi) = range_of(series, |p| p.1);
@@ -193,44 +285,54 @@ where
         }
         let pad = 0.05 * (hi - lo);
         let mut chart = ChartBuilder::on(area)
-            .caption(&axes.title, ("sans-serif", 18))
             .margin(12)
-            .x_label_area_size(38)
-            .y_label_area_size(70)
+            .x_label_area_size(44)
+            .y_label_area_size(78)
             .build_cartesian_2d(x0..x1, (lo - pad)..(hi + pad))?;
-        chart.configure_mesh().x_desc(axes.x.as_str()).y_desc(axes.y.as_str()).draw()?;
-        for (k, (name, pts)) in series.iter().enumerate() {
+        chart
+            .configure_mesh()
+            .x_desc(axes.x.as_str())
+            .y_desc(axes.y.as_str())
+            .label_style(("sans-serif", TICK_FONT))
+            .axis_desc_style(("sans-serif", AXIS_FONT))
+            .x_labels(8)
+            .y_labels(8)
+            .y_label_formatter(&|v| short(*v))
+            .draw()?;
+        for (k, (_, pts)) in series.iter().enumerate() {
             let c = color(k);
             if axes.points {
-                chart
-                    .draw_series(pts.iter().map(|&p| Circle::new(p, 3, c.filled())))?
-                    .label(name.clone())
-                    .legend(move |(x, y)| Circle::new((x + 10, y), 3, c.filled()));
+                chart.draw_series(pts.iter().map(|&p| Circle::new(p, 3, c.filled())))?;
             } else {
-                chart
-                    .draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(2)))?
-                    .label(name.clone())
-                    .legend(move |(x, y)| {
-                        PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
-                    });
+                chart.draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(2)))?;
             }
         }
-        for (k, (r, label)) in axes.references.iter().enumerate() {
+        for (k, (r, _)) in axes.references.iter().enumerate() {
             let c = reference_color(k);
-            chart
-                .draw_series(DashedLineSeries::new([(x0, *r), (x1, *r)], 6, 4, c.stroke_width(1)))?
-                .label(label.clone())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
-        }
-        if series.len() > 1 || !axes.references.is_empty() {
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .draw()?;
+            chart.draw_series(DashedLineSeries::new(
+                [(x0, *r), (x1, *r)],
+                6,
+                4,
+                c.stroke_width(1),
+            ))?;
         }
     }
     Ok(())
+}
+
+/// A tick label: plain for moderate magnitudes, scientific otherwise (never 12 digits).
+pub fn short(v: f64) -> String {
+    let a = v.abs();
+    // a tick at zero computed as a sum of steps: round-off, not a value
+    if a < 1e-12 {
+        "0".into()
+    } else if (1e-3..1e4).contains(&a) {
+        let s = format!("{v:.4}");
+        let s = s.trim_end_matches('0').trim_end_matches('.');
+        s.to_string()
+    } else {
+        format!("{v:.1e}")
+    }
 }
 
 /// One chart of `series` into an SVG file of `size` pixels.
@@ -247,7 +349,8 @@ pub fn panels(path: &Path, size: (u32, u32), charts: &[(Axes, Vec<Series>)]) -> 
     grid(path, size, charts.len(), charts)
 }
 
-/// Panels on a grid of `cols` columns (`charts` row after row) into an SVG file.
+/// Panels on a grid of `cols` columns (`charts` row after row) into an SVG file; a chart with
+/// an empty title and no series leaves its cell blank.
 pub fn grid(
     path: &Path,
     size: (u32, u32),
@@ -260,7 +363,10 @@ pub fn grid(
     root.fill(&WHITE)?;
     let areas = root.split_evenly((rows, cols));
     for ((axes, series), area) in charts.iter().zip(areas.iter()) {
-        draw_lines(area, axes, series)?;
+        // an untitled chart without data is a blank cell of the grid
+        if !(axes.title.is_empty() && series.is_empty()) {
+            draw_lines(area, axes, series)?;
+        }
     }
     root.present()?;
     Ok(())
@@ -276,85 +382,4 @@ pub fn steps(pts: &[(f64, f64)]) -> Vec<(f64, f64)> {
         }
     }
     out
-}
-
-/// Fig. 6 style: the scaled cost `V(t)/V(0)` (state part) against time, one curve per ω0,
-/// one panel per controller.
-pub fn sweep_cost(path: &Path, name: &str, runs: &[crate::control::SweepRun]) -> Result<()> {
-    let kinds = sweep_kinds(runs);
-    let charts: Vec<(Axes, Vec<Series>)> = kinds
-        .iter()
-        .map(|k| {
-            let series = runs
-                .iter()
-                .filter(|r| r.controller == *k)
-                .filter_map(|r| r.result.as_ref().ok())
-                .map(|res| {
-                    let v0 = res.records.first().map_or(1.0, |x| x.v_state);
-                    (
-                        format!("ω0 = {}", res.summary.omega0),
-                        res.records.iter().map(|x| (x.t, x.v_state / v0)).collect(),
-                    )
-                })
-                .collect();
-            (
-                Axes {
-                    title: format!("{name}: {} — V(t)/V(0)", k.name().to_uppercase()),
-                    x: "t (s)".into(),
-                    y: "V/V(0)".into(),
-                    log_y: true,
-                    references: vec![(0.1, "0.1 (criterion)".into())],
-                    points: false,
-                },
-                series,
-            )
-        })
-        .collect();
-    panels(path, (620 * charts.len().max(1) as u32, 460), &charts)
-}
-
-/// The controllers of a sweep in order of first appearance.
-pub fn sweep_kinds(runs: &[crate::control::SweepRun]) -> Vec<mpc::ControllerKind> {
-    let mut kinds: Vec<mpc::ControllerKind> = Vec::new();
-    for r in runs {
-        if !kinds.contains(&r.controller) {
-            kinds.push(r.controller);
-        }
-    }
-    kinds
-}
-
-/// Fig. 10 style: the inputs of every run of a sweep against time, one row of panels per
-/// controller, one panel per input, one curve per ω0 (each input held for τs).
-pub fn sweep_inputs(path: &Path, name: &str, runs: &[crate::control::SweepRun]) -> Result<()> {
-    let kinds = sweep_kinds(runs);
-    let inputs: Vec<String> = runs
-        .iter()
-        .find_map(|r| r.result.as_ref().ok())
-        .map_or_else(Vec::new, |r| r.input_names.clone());
-    let cols = inputs.len().max(1);
-    let mut charts: Vec<(Axes, Vec<Series>)> = Vec::new();
-    for k in &kinds {
-        for (i, input) in inputs.iter().enumerate() {
-            let series = runs
-                .iter()
-                .filter(|r| r.controller == *k)
-                .filter_map(|r| r.result.as_ref().ok())
-                .map(|res| {
-                    let pts: Vec<(f64, f64)> = res.records.iter().map(|x| (x.t, x.u[i])).collect();
-                    (format!("ω0 = {}", res.summary.omega0), steps(&pts))
-                })
-                .collect();
-            charts.push((
-                Axes {
-                    title: format!("{name}: {} — {input}", k.name().to_uppercase()),
-                    x: "t (s)".into(),
-                    y: "u (N, N·m)".into(),
-                    ..Default::default()
-                },
-                series,
-            ));
-        }
-    }
-    grid(path, (420 * cols as u32, 340 * kinds.len().max(1) as u32), cols, &charts)
 }

@@ -1,16 +1,18 @@
 //! The offline HTML report of a closed loop: `index.html` (hand-written HTML, no external
 //! URLs) next to its SVG figures (plotters, plus one hand-written animated SVG): scene
 //! summary, mode table and mode shapes (paper Figs. 4–5), snapshots of the deformed structure
-//! (Fig. 7), the scaled cost `V(t)/V(0)` (Fig. 6), inputs (Fig. 10), joint angles, solve time
-//! per sample against `τs`, and the closed-loop summary.
+//! in three time windows (Figs. 7, 9), the scaled cost `V(t)/V(0)` (Figs. 6, 8), inputs
+//! (Fig. 10), joint angles, which path produced each sample's control, the modal energy and
+//! the reduced model's prediction against the plant, solve time per sample against `τs`, and
+//! the closed-loop summary.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use mpc::RunResult;
-use plotters::prelude::*;
 
+use crate::figures::{planes, snapshots_svg, window};
 use crate::plot::{self, Axes, Series};
 use crate::scene::{Control, Scene};
 
@@ -28,127 +30,6 @@ pub fn esc(s: &str) -> String {
         }
     }
     o
-}
-
-/// The planes in which snapshots are drawn: `(name, horizontal axis, vertical axis)`.
-fn planes(planar: bool) -> Vec<(&'static str, usize, usize)> {
-    if planar {
-        vec![("x–z", 0, 2)]
-    } else {
-        vec![("x–y", 0, 1), ("x–z", 0, 2)]
-    }
-}
-
-/// A square window `(center, half width)` around every snapshot in plane `(a, b)`.
-fn window(result: &RunResult, a: usize, b: usize) -> ((f64, f64), f64) {
-    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for s in &result.snapshots {
-        for beam in &s.positions {
-            for p in beam {
-                for (k, c) in [a, b].into_iter().enumerate() {
-                    lo[k] = lo[k].min(p[c]);
-                    hi[k] = hi[k].max(p[c]);
-                }
-            }
-        }
-    }
-    if !lo[0].is_finite() {
-        return ((0.0, 0.0), 1.0);
-    }
-    let w = 0.55 * (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1e-9);
-    ((0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])), w)
-}
-
-/// Colour of snapshot `k` of `n`: blue (t = 0) to red (end).
-fn time_color(k: usize, n: usize) -> RGBColor {
-    let f = if n > 1 { k as f64 / (n - 1) as f64 } else { 0.0 };
-    RGBColor((30.0 + 200.0 * f) as u8, 60, (220.0 - 190.0 * f) as u8)
-}
-
-/// Draws every snapshot of `result` in plane `(a, b)` into `area`, coloured by time.
-fn draw_snapshots<DB: DrawingBackend>(
-    area: &DrawingArea<DB, plotters::coord::Shift>,
-    result: &RunResult,
-    (name, a, b): (&str, usize, usize),
-    title: &str,
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
-    let n = result.snapshots.len();
-    let axis = ["x", "y", "z"];
-    let ((ca, cb), w) = window(result, a, b);
-    let mut chart = ChartBuilder::on(area)
-        .caption(format!("{title} ({name} plane)"), ("sans-serif", 16))
-        .margin(10)
-        .x_label_area_size(30)
-        .y_label_area_size(45)
-        .build_cartesian_2d((ca - w)..(ca + w), (cb - w)..(cb + w))?;
-    chart.configure_mesh().x_desc(axis[a]).y_desc(axis[b]).draw()?;
-    for (k, s) in result.snapshots.iter().enumerate() {
-        let c = time_color(k, n);
-        let width = if k == 0 || k + 1 == n { 3 } else { 1 };
-        for beam in &s.positions {
-            chart.draw_series(LineSeries::new(
-                beam.iter().map(|p| (p[a], p[b])),
-                c.stroke_width(width),
-            ))?;
-        }
-    }
-    Ok(())
-}
-
-/// Fig. 7 style: every snapshot of the deformed structure, coloured by time, one panel per
-/// plane.
-pub fn snapshots_svg(result: &RunResult, planar: bool, path: &Path) -> Result<()> {
-    let pl = planes(planar);
-    let root = SVGBackend::new(path, (560 * pl.len() as u32, 560)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let areas = root.split_evenly((1, pl.len()));
-    let title = format!(
-        "snapshots every {:.2} s, blue → red",
-        result.snapshots.get(1).map_or(0.0, |s| s.t)
-    );
-    for (plane, area) in pl.iter().zip(areas.iter()) {
-        draw_snapshots(area, result, *plane, &title)?;
-    }
-    root.present()?;
-    Ok(())
-}
-
-/// Figs. 7 and 9 style for a sweep: the snapshots of every run, one row per controller, one
-/// panel per ω0, in the first plane of the structure (`x–z` planar, `x–y` spatial; each run's
-/// `runs/<controller>-w<ω0>-snapshots.svg` has every plane).
-pub fn sweep_snapshots_svg(
-    runs: &[crate::control::SweepRun],
-    planar: bool,
-    path: &Path,
-) -> Result<()> {
-    let kinds = plot::sweep_kinds(runs);
-    let cols = runs.len().div_ceil(kinds.len().max(1)).max(1);
-    let root = SVGBackend::new(path, (300 * cols as u32, 320 * kinds.len().max(1) as u32))
-        .into_drawing_area();
-    root.fill(&WHITE)?;
-    let areas = root.split_evenly((kinds.len().max(1), cols));
-    let plane = planes(planar)[0];
-    for (row, k) in kinds.iter().enumerate() {
-        for (col, r) in runs.iter().filter(|r| r.controller == *k).enumerate() {
-            let Some(area) = areas.get(row * cols + col) else { continue };
-            let title = format!("{} ω0 = {}", k.name().to_uppercase(), r.omega0);
-            match &r.result {
-                Ok(res) => draw_snapshots(area, res, plane, &title)?,
-                Err(_) => {
-                    area.draw(&Text::new(
-                        format!("{title}: failed"),
-                        (10, 20),
-                        ("sans-serif", 14).into_font(),
-                    ))?;
-                }
-            }
-        }
-    }
-    root.present()?;
-    Ok(())
 }
 
 /// An animated SVG (SMIL, discrete frames at the snapshot times, real time, looping) of the
@@ -227,6 +108,34 @@ fn animation_svg(result: &RunResult, planar: bool, path: &Path) -> Result<()> {
     Ok(())
 }
 
+/// The controller's mode set in words: `the lowest 8`, `rigid 2, axial 1, bending 4`,
+/// `modes 1, 2, 5 of the table below (scene indices 0, 1, 4, 0-based)`.
+pub fn selection_text(sel: &modal_rom::ModeSelection) -> String {
+    match sel {
+        modal_rom::ModeSelection::Lowest(n) => format!("the lowest {n} (rigid included)"),
+        modal_rom::ModeSelection::ByKind(k) => {
+            let parts: Vec<String> = [
+                ("rigid", k.rigid),
+                ("axial", k.axial),
+                ("torsion", k.torsion),
+                ("bending about e2", k.bending_e2),
+                ("bending about e3", k.bending_e3),
+                ("mixed", k.mixed),
+            ]
+            .iter()
+            .filter(|(_, n)| *n > 0)
+            .map(|(name, n)| format!("{name} {n}"))
+            .collect();
+            format!("the lowest of each kind: {}", parts.join(", "))
+        }
+        modal_rom::ModeSelection::Indices(i) => format!(
+            "modes {} of the table below (scene indices {}, 0-based)",
+            i.iter().map(|m| (m + 1).to_string()).collect::<Vec<_>>().join(", "),
+            i.iter().map(|m| m.to_string()).collect::<Vec<_>>().join(", ")
+        ),
+    }
+}
+
 /// The page head and its style sheet (no external resources).
 fn head(h: &mut String, title: &str) {
     let _ = writeln!(
@@ -269,6 +178,7 @@ pub fn write(
     scene: &Scene,
     control: &Control,
     result: &RunResult,
+    rom: Option<&modal_rom::ModalRom>,
     out: &Path,
     timings: bool,
 ) -> Result<PathBuf> {
@@ -288,38 +198,54 @@ pub fn write(
     let cost: Vec<(f64, f64)> = result.records.iter().map(|r| (r.t, r.v_state / v0)).collect();
     plot::lines(
         &out.join("cost.svg"),
-        (900, 420),
+        (1000, 420),
         &Axes {
             title: format!("scaled cost V(t)/V(0), ω0 = {}", control.omega0),
             x: "t (s)".into(),
-            y: "V/V(0)".into(),
+            y: "V/V(0) (dimensionless)".into(),
             log_y: true,
             references: vec![(0.1, "0.1 (criterion)".into())],
             points: false,
         },
         &[(control.controller.kind.name().to_uppercase(), cost)],
     )?;
-    // inputs (Fig. 10)
-    let inputs: Vec<Series> = result
-        .input_names
-        .iter()
-        .enumerate()
-        .map(|(i, n)| {
-            let pts: Vec<(f64, f64)> = result.records.iter().map(|r| (r.t, r.u[i])).collect();
-            (n.clone(), plot::steps(&pts))
+    // inputs (Fig. 10), one panel per unit
+    let mut by_unit: Vec<(&str, Vec<Series>)> = Vec::new();
+    for (i, n) in result.input_names.iter().enumerate() {
+        let unit = sc.inputs.get(i).map_or("N or N·m", crate::figures::input_unit);
+        let pts: Vec<(f64, f64)> = result.records.iter().map(|r| (r.t, r.u[i])).collect();
+        match by_unit.iter_mut().find(|(u, _)| *u == unit) {
+            Some((_, v)) => v.push((n.clone(), plot::steps(&pts))),
+            None => by_unit.push((unit, vec![(n.clone(), plot::steps(&pts))])),
+        }
+    }
+    let charts: Vec<(Axes, Vec<Series>)> = by_unit
+        .into_iter()
+        .map(|(unit, series)| {
+            (
+                Axes {
+                    title: format!("inputs in {unit} (each held for τs)"),
+                    x: "t (s)".into(),
+                    y: format!("u ({unit})"),
+                    ..Default::default()
+                },
+                series,
+            )
         })
         .collect();
-    plot::lines(
-        &out.join("inputs.svg"),
-        (900, 420),
-        &Axes {
-            title: "inputs u (held for τs)".into(),
-            x: "t (s)".into(),
-            y: "u (N, N·m)".into(),
-            ..Default::default()
-        },
-        &inputs,
-    )?;
+    plot::grid(&out.join("inputs.svg"), (1000, 380 * charts.len().max(1) as u32), 1, &charts)?;
+    // which path produced each sample, energy and the model against the plant
+    crate::figures::strategy_timeline(&out.join("strategies.svg"), result, sc.mpc.sampling)?;
+    let prediction_error = match rom {
+        Some(rom) => crate::figures::energy_and_prediction(
+            &out.join("energy.svg"),
+            &out.join("prediction.svg"),
+            result,
+            rom,
+            sc.mpc.sampling,
+        )?,
+        None => None,
+    };
     // joint angles
     let angles: Vec<Series> = result
         .joint_names
@@ -334,7 +260,7 @@ pub fn write(
         .collect();
     plot::lines(
         &out.join("angles.svg"),
-        (900, 420),
+        (1000, 420),
         &Axes {
             title: "joint angles".into(),
             x: "t (s)".into(),
@@ -354,7 +280,7 @@ pub fn write(
     let _ = writeln!(h, "<h1>{}</h1>\n<p>{}</p>", esc(&title), esc(scene.description.trim()));
     let _ = writeln!(
         h,
-        r#"<p id="figure-status">figures: script did not run</p>
+        r#"<p id="figure-status" hidden>figures: script did not run</p>
 <p>Files: <a href="timeseries.csv">timeseries.csv</a>, <a href="samples.json">samples.json</a> (per-sample solver log), <a href="summary.json">summary.json</a>, <a href="snapshots.json">snapshots.json</a>{}.</p>"#,
         if timings {
             r#"; measured timings: <a href="timings.json">timings.json</a>, <a href="timings.csv">timings.csv</a>"#
@@ -372,12 +298,19 @@ pub fn write(
     };
     let _ = writeln!(
         h,
-        "<tr><th>criterion (issue 6, at the end: rigid rate &lt; 5% of ω0, orientation within \
-         20% of its largest excursion, V/V(0) &lt; 0.1)</th><td>{verdict}</td></tr>"
+        "<tr><th>criterion (at the end: rigid rate &lt; 5% of ω0, orientation within 20% of \
+         its largest excursion, V/V(0) &lt; 0.1)</th><td>{verdict}</td></tr>"
     );
     for (k, v) in [
         ("controller / plant", format!("{} / {}", s.controller, s.plant)),
-        ("ω0 (rad/s) × axis", format!("{} × {:?}", s.omega0, sc.omega_direction)),
+        (
+            "ω0 (rad/s) × axis",
+            format!(
+                "{} × ({})",
+                s.omega0,
+                sc.omega_direction.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(", ")
+            ),
+        ),
         ("V(T)/V(0)", format!("{:.4e}", s.v_ratio_final)),
         ("largest joint angle between links (deg)", format!("{:.2}", s.max_joint_angle_deg)),
         (
@@ -405,18 +338,40 @@ pub fn write(
     let _ = writeln!(h, "</table>");
 
     // figures of the run
+    let (fig_cost, fig_snap) = if planar { ("Fig. 6", "Fig. 7") } else { ("Fig. 8", "Fig. 9") };
     let _ = writeln!(h, "<h2>Cost</h2>");
     figure(
         &mut h,
         "cost.svg",
-        "State part of the cost (34), V(t)/V(0), from the projected plant state (paper Fig. 6).",
+        &format!("State part of the cost (34), V(t)/V(0), from the projected plant state (paper {fig_cost})."),
     );
     let _ = writeln!(h, "<h2>Snapshots</h2>");
-    figure(&mut h, "snapshots.svg", "Deformed structure every snapshot interval, coloured from blue (t = 0) to red (end) (paper Fig. 7).");
+    figure(&mut h, "snapshots.svg", &format!("Deformed structure every snapshot interval in three time windows, shade darkening as t increases (paper {fig_snap})."));
     figure(&mut h, "animation.svg", "Animation of the snapshots (real time, looping).");
     let _ = writeln!(h, "<h2>Inputs and joint angles</h2>");
-    figure(&mut h, "inputs.svg", "Control inputs, each held for τs (paper Fig. 10).");
+    figure(
+        &mut h,
+        "inputs.svg",
+        if planar {
+            "Control inputs, each held for τs (the paper's Fig. 10 shows them for the 3D case)."
+        } else {
+            "Control inputs, each held for τs (paper Fig. 10)."
+        },
+    );
     figure(&mut h, "angles.svg", "Joint angles (supports: the root link's orientation).");
+    let _ = writeln!(h, "<h2>Controller</h2>");
+    figure(&mut h, "strategies.svg", "Which path produced each sample's control: linear MPC, NMPC, NMPC after a relaxed retry, linear MPC plan after an NMPC failure (fallback) or held on it afterwards.");
+    if rom.is_some() {
+        figure(&mut h, "energy.svg", "Energy ½(q1ᵀq1 + q2ᵀq2) (21) of the plant's state projected on the controller's modes.");
+        figure(
+            &mut h,
+            "prediction.svg",
+            &match prediction_error {
+                Some(e) => format!("The controller's reduced model (29) against the plant: from the plant's state at each sample, the model's prediction of the energy over the sample interval with the applied inputs. Largest relative error at the end of an interval: {e:.2e}."),
+                None => "The controller's reduced model (29) against the plant: no prediction could be made from the recorded states.".to_string(),
+            },
+        );
+    }
     let _ = writeln!(h, "<h2>Solve time per sample</h2>");
     if timings {
         let _ = writeln!(
@@ -487,7 +442,19 @@ pub fn write(
                 c.fallback_to_lmpc
             ),
         ),
-        ("integrator", format!("{:?}, {} substeps per interval", c.integrator.kind, c.integrator.substeps)),
+        (
+            "integrator",
+            format!(
+                "{}, {} substeps per interval",
+                match c.integrator.kind {
+                    ocp_transcription::IntegratorKind::Rk4 => "explicit RK4",
+                    ocp_transcription::IntegratorKind::ImplicitMidpoint => "implicit midpoint",
+                    ocp_transcription::IntegratorKind::LawsonRk4 => "Lawson exponential RK4",
+                    _ => "another integrator",
+                },
+                c.integrator.substeps
+            ),
+        ),
         (
             "weights (34)–(36)",
             format!(
@@ -503,7 +470,7 @@ pub fn write(
             ),
         ),
         ("timing", format!("τp = {} s, τs = {} s, Nc = {}, duration {} s, plant dt = {} s", m.horizon, m.sampling, m.intervals, sc.duration, sc.plant.dt)),
-        ("controller modes", format!("{:?}", sc.selection)),
+        ("controller modes", selection_text(&sc.selection)),
     ] {
         row(&mut h, k, &v);
     }
@@ -529,11 +496,12 @@ pub fn write(
                 );
             }
             let _ = writeln!(h, "</table>");
-            figure(&mut h, "modes/shapes.svg", "Elastic mode shapes: translational velocity on the reference configuration (paper Fig. 5).");
+            let (f4, f5) = if planar { (" (paper Fig. 4)", " (paper Fig. 5)") } else { ("", "") };
+            figure(&mut h, "modes/shapes.svg", &format!("Elastic mode shapes: translational velocity on the reference configuration{f5}."));
             figure(
                 &mut h,
                 "modes/components.svg",
-                "Velocity components of the elastic modes along the beams (paper Fig. 4).",
+                &format!("Velocity components of the elastic modes along the beams{f4}."),
             );
         }
         Err(e) => {
@@ -583,7 +551,7 @@ window.addEventListener('load', function () {{
 pub fn write_sweep(
     scene: &Scene,
     control: &Control,
-    runs: &[crate::control::SweepRun],
+    runs: &[crate::results::SweepRun],
     out: &Path,
     timings: bool,
 ) -> Result<PathBuf> {
@@ -608,7 +576,7 @@ pub fn write_sweep(
         h,
         "<h2>Runs</h2><table><tr><th>controller</th><th>ω0 (rad/s)</th><th>stabilised</th>\
          <th>V(T)/V(0)</th><th>largest joint angle (deg)</th><th>orientation error / largest \
-         (deg)</th><th>rigid rate ratio</th><th>relaxed / fallback samples</th><th>stopped \
+         (deg)</th><th>rigid rate ratio</th><th>relaxed / fallback / held samples</th><th>stopped \
          early</th><th>time series</th></tr>"
     );
     for r in runs {
@@ -618,7 +586,7 @@ pub fn write_sweep(
                 let stem = format!("{}-w{}", s.controller, s.omega0);
                 let _ = writeln!(
                     h,
-                    r#"<tr><td>{}</td><td>{}</td><td class="{}">{}</td><td>{:.3e}</td><td>{:.1}</td><td>{:.2} / {:.1}</td><td>{:.2e}</td><td>{} / {}</td><td>{}</td><td><a href="runs/{stem}.csv">csv</a>, <a href="runs/{stem}-snapshots.svg">snapshots</a></td></tr>"#,
+                    r#"<tr><td>{}</td><td>{}</td><td class="{}">{}</td><td>{:.3e}</td><td>{:.1}</td><td>{:.2} / {:.1}</td><td>{:.2e}</td><td>{} / {} / {}</td><td>{}</td><td><a href="runs/{stem}.csv">csv</a>, <a href="runs/{stem}-snapshots.svg">snapshots</a></td></tr>"#,
                     esc(&s.controller),
                     s.omega0,
                     if s.stabilised { "ok" } else { "fail" },
@@ -630,6 +598,7 @@ pub fn write_sweep(
                     s.rigid_rate_ratio,
                     s.relaxed_samples,
                     s.fallback_samples,
+                    s.held_samples,
                     esc(&s
                         .error
                         .as_ref()
@@ -649,11 +618,26 @@ pub fn write_sweep(
     }
     let _ = writeln!(h, "</table>");
     let _ = writeln!(h, "<h2>Cost</h2>");
-    figure(&mut h, "cost.svg", "State part of the cost, V(t)/V(0), per ω0 (paper Figs. 6, 8).");
+    let planar =
+        matches!(control.scenario.structure.components(), intrinsic_beam::Components::Planar);
+    let (fig_cost, fig_snap) = if planar { ("Fig. 6", "Fig. 7") } else { ("Fig. 8", "Fig. 9") };
+    figure(
+        &mut h,
+        "cost.svg",
+        &format!("State part of the cost, V(t)/V(0), per ω0 (paper {fig_cost})."),
+    );
     let _ = writeln!(h, "<h2>Snapshots</h2>");
-    figure(&mut h, "snapshots.svg", "Deformed structure every snapshot interval, blue (t = 0) to red (end), per run (paper Figs. 7, 9).");
+    figure(&mut h, "snapshots.svg", &format!("Deformed structure every snapshot interval in three time windows, shade darkening as t increases, one row per run (paper {fig_snap})."));
     let _ = writeln!(h, "<h2>Inputs</h2>");
-    figure(&mut h, "inputs.svg", "Control inputs per ω0, each held for τs (paper Fig. 10).");
+    figure(
+        &mut h,
+        "inputs.svg",
+        if planar {
+            "Control inputs per ω0, each held for τs (the paper's Fig. 10 shows them for the 3D case)."
+        } else {
+            "Control inputs per ω0, each held for τs (paper Fig. 10)."
+        },
+    );
     let _ = writeln!(h, "<h2>Solve time per sample</h2>");
     if timings {
         figure(

@@ -1,10 +1,13 @@
-//! Running a scene: stepping the plant, writing the CSV time series, progress bar.
+//! Running a scene: stepping the plant, writing the CSV time series (through the `csv`
+//! crate: a name with a comma or a quote is quoted, never splits a column), progress bar,
+//! and with `--vtk` the deformed structure at every output step ([`crate::vtk`]).
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
+
+use multibody_constraints::Plant;
 
 use crate::scene::{InputKind, Scene};
 
@@ -14,6 +17,8 @@ pub struct RunSummary {
     pub csv: PathBuf,
     /// Plot written (if the scene asked for one).
     pub plot: Option<PathBuf>,
+    /// VTK collection written (`--vtk`).
+    pub vtk: Option<PathBuf>,
     /// Steps taken.
     pub steps: usize,
     /// Wall time (s).
@@ -27,7 +32,7 @@ pub struct RunSummary {
 
 /// Column names of the time series.
 pub fn columns(scene: &Scene) -> Vec<String> {
-    let s = scene.plant.structure();
+    let s = &scene.structure;
     let mut c = vec![
         "t".to_string(),
         "energy".into(),
@@ -56,8 +61,7 @@ pub fn columns(scene: &Scene) -> Vec<String> {
     c
 }
 
-fn row(scene: &Scene, iterations: usize) -> Vec<f64> {
-    let p = &scene.plant;
+fn row(scene: &Scene, p: &Plant, iterations: usize) -> Vec<f64> {
     let s = p.structure();
     let (e, v) = (p.energy(), p.potential_energy());
     let mut r = vec![p.time(), e, v, e + v, iterations as f64];
@@ -84,20 +88,30 @@ fn row(scene: &Scene, iterations: usize) -> Vec<f64> {
 }
 
 /// Runs a scene and writes `<out>/timeseries.csv` (and `plot.svg` if asked).
-pub fn simulate(mut scene: Scene, out: &Path, quiet: bool) -> Result<RunSummary> {
+pub fn simulate(scene: Scene, out: &Path, quiet: bool) -> Result<RunSummary> {
+    simulate_with(scene, out, quiet, false)
+}
+
+/// [`simulate`], and with `vtk` also `vtk/simulate-<k>.vtu` per output step and the
+/// collection `vtk/simulate.pvd` ([`crate::vtk`]).
+pub fn simulate_with(scene: Scene, out: &Path, quiet: bool, vtk: bool) -> Result<RunSummary> {
+    let mut plant = scene.plant()?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let csv_path = out.join("timeseries.csv");
-    let mut csv = std::io::BufWriter::new(
-        std::fs::File::create(&csv_path)
-            .with_context(|| format!("creating {}", csv_path.display()))?,
-    );
+    let mut csv = csv::Writer::from_path(&csv_path)
+        .with_context(|| format!("creating {}", csv_path.display()))?;
     let cols = columns(&scene);
-    writeln!(csv, "{}", cols.join(","))?;
+    csv.write_record(&cols)?;
     let mut table: Vec<Vec<f64>> = Vec::new();
-    let first = row(&scene, 0);
+    let mut frames =
+        if vtk { Some(crate::vtk::Collection::new(&out.join("vtk"), "simulate")?) } else { None };
+    let first = row(&scene, &plant, 0);
     let total0 = first[3];
-    writeln!(csv, "{}", fmt_row(&first))?;
+    csv.write_record(fmt_row(&first))?;
     table.push(first);
+    if let Some(c) = &mut frames {
+        c.push(&crate::vtk::frame_of_plant(&plant))?;
+    }
     let bar = if quiet { ProgressBar::hidden() } else { ProgressBar::new(scene.steps as u64) };
     bar.set_style(
         ProgressStyle::with_template(
@@ -110,29 +124,29 @@ pub fn simulate(mut scene: Scene, out: &Path, quiet: bool) -> Result<RunSummary>
     let mut vv = 0.0f64;
     let mut iterations = 0;
     for step in 1..=scene.steps {
-        let t_mid = scene.plant.time() + 0.5 * scene.plant.settings().dt;
+        let t_mid = plant.time() + 0.5 * plant.settings().dt;
         for i in &scene.inputs {
             if let InputKind::Torque { joint, axis, value, amplitude } = &i.kind {
-                scene.plant.set_joint_torque(joint, *axis, value * amplitude.at(t_mid))?;
+                plant.set_joint_torque(joint, *axis, value * amplitude.at(t_mid))?;
             }
         }
-        let r = scene
-            .plant
-            .step()
-            .with_context(|| format!("step {step} of {}", scene.file.display()))?;
+        let r = plant.step().with_context(|| format!("step {step} of {}", scene.file.display()))?;
         iterations += r.iterations;
         vv = vv.max(r.velocity_violation);
         if step % scene.output_every == 0 || step == scene.steps {
-            let rw = row(&scene, iterations);
+            let rw = row(&scene, &plant, iterations);
             iterations = 0;
             total_end = rw[3];
-            writeln!(csv, "{}", fmt_row(&rw))?;
+            csv.write_record(fmt_row(&rw))?;
             table.push(rw);
+            if let Some(c) = &mut frames {
+                c.push(&crate::vtk::frame_of_plant(&plant))?;
+            }
             bar.set_position(step as u64);
         }
     }
     bar.finish_and_clear();
-    csv.flush()?;
+    csv.flush().with_context(|| format!("writing {}", csv_path.display()))?;
     let seconds = start.elapsed().as_secs_f64();
     let plot = if scene.plot.is_empty() {
         None
@@ -141,9 +155,11 @@ pub fn simulate(mut scene: Scene, out: &Path, quiet: bool) -> Result<RunSummary>
         crate::plot::time_series(&path, &scene.title, &cols, &table, &scene.plot)?;
         Some(path)
     };
+    let vtk = frames.map(crate::vtk::Collection::finish).transpose()?;
     Ok(RunSummary {
         csv: csv_path,
         plot,
+        vtk,
         steps: scene.steps,
         seconds,
         total_energy: (total0, total_end),
@@ -151,6 +167,6 @@ pub fn simulate(mut scene: Scene, out: &Path, quiet: bool) -> Result<RunSummary>
     })
 }
 
-fn fmt_row(r: &[f64]) -> String {
-    r.iter().map(|v| format!("{v:.10e}")).collect::<Vec<_>>().join(",")
+fn fmt_row(r: &[f64]) -> Vec<String> {
+    r.iter().map(|v| format!("{v:.10e}")).collect()
 }

@@ -14,8 +14,8 @@ use anyhow::{Context, Result};
 use mpc::RunResult;
 use serde_json::{json, Map, Value};
 
-use crate::control::SweepRun;
 use crate::plot::{self, Axes, Series};
+use crate::results::SweepRun;
 
 /// The real-time goal for the worst sample's solve time (s): 4× under τs = 0.2 s.
 pub const SOLVE_TIME_GOAL_S: f64 = 0.05;
@@ -149,7 +149,7 @@ pub fn write_run(r: &RunResult, sampling: f64, out: &Path) -> Result<Vec<PathBuf
     let svg = out.join(FILES[2]);
     plot::lines(
         &svg,
-        (900, 420),
+        (1000, 420),
         &solve_axes(
             format!("solve time per sample, {}", r.summary.controller.to_uppercase()),
             sampling,
@@ -196,7 +196,7 @@ pub fn write_sweep(runs: &[SweepRun], sampling: f64, out: &Path) -> Result<Vec<P
     }
     f.flush()?;
     let svg = out.join(FILES[2]);
-    let charts: Vec<(Axes, Vec<Series>)> = plot::sweep_kinds(runs)
+    let charts: Vec<(Axes, Vec<Series>)> = crate::results::sweep_kinds(runs)
         .into_iter()
         .map(|k| {
             let series = runs

@@ -8,9 +8,9 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use intrinsic_beam::modes::closed_form::{bending, Supports};
-use intrinsic_beam::modes::{family, linear_modes, Family};
+use intrinsic_beam::closed_form::{bending, Supports};
 use intrinsic_beam::samples::{self, Sample};
+use intrinsic_beam::{family, linear_modes, Family};
 use intrinsic_beam::{
     Beam, BeamProblem, Components, EndCondition, ImplicitMidpoint, LinearSolver, Loads, Mesh,
     NewtonSettings, StepRefresh,

@@ -73,13 +73,9 @@ where
     }
 
     /// Number of block rows.
+    #[cfg(test)]
     pub fn n_blocks(&self) -> usize {
         self.n
-    }
-
-    /// Number of scalar unknowns, `K n`.
-    pub fn dim(&self) -> usize {
-        K * self.n
     }
 
     /// Flat storage slot of entry `(a, b)` of block `(row, col)`, or `None` if that block is
@@ -117,6 +113,7 @@ where
     }
 
     /// Block `(row, col)` for reading (`None` outside the band).
+    #[cfg(test)]
     pub fn block(&self, row: usize, col: usize) -> Option<&Block<K>> {
         self.slot(row, col, 0, 0).map(|s| &self.blocks[s / (K * K)])
     }
@@ -175,13 +172,9 @@ where
         Ok(())
     }
 
-    /// Whether a valid factorisation is available.
-    pub fn is_factorized(&self) -> bool {
-        self.factorized
-    }
-
     /// Solves `A x = b` in place (`b` in block order, length `K n`); `false` if not factorised
     /// or `b` has the wrong length.
+    #[cfg(test)]
     pub fn solve_in_place(&self, b: &mut [f64]) -> bool {
         if b.len() != K * self.n {
             return false;

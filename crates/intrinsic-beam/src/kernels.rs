@@ -1,11 +1,10 @@
 //! The pointwise operators of eqs. (3)–(4) on `k`-component vectors, behind one trait so the
-//! step Jacobian of [`crate::step_system`] is written once for planar (`k = 3`, the in-plane
-//! restrictions of [`crate::beam::planar_ops`]) and spatial (`k = 6`) beams.
+//! step Jacobian of the step system is written once for planar (`k = 3`, the in-plane
+//! restrictions of [`crate::operators::planar_ops`]) and spatial (`k = 6`) beams.
 
 use nalgebra::{SVector, Vector3};
 
-use crate::beam::{e_times, et_times, l1t_times, planar_ops};
-use crate::operators::{l1_times, l2_times};
+use crate::operators::{e_times, et_times, l1_times, l1t_times, l2_times, planar_ops};
 
 /// `L1(x1) p`, `L2(x2) e`, `L1ᵀ(x1) y`, `E x2`, `Eᵀ x1` on `K`-vectors (all bilinear/linear, so
 /// their Jacobians are obtained by applying them to unit vectors).

@@ -10,7 +10,8 @@ use nalgebra::{UnitQuaternion, Vector3, Vector4, Vector6};
 
 use crate::beam::Beam;
 use crate::error::{check_len, BeamError, Result};
-use crate::operators::{halves, quaternion_half_and_full_step, quaternion_step, rotation};
+use crate::operators::halves;
+use crate::rotation::{quaternion_half_and_full_step, quaternion_step, rotation};
 
 /// Quaternion `ξ_n = [ξ0, ξv]` and position `r_n` (global frame) of every node.
 #[derive(Clone, Debug, PartialEq)]

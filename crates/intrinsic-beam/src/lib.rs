@@ -12,36 +12,36 @@
 //! ∂s ξ = U(κ + κ0) ξ,  ∂t ξ = U(ω) ξ;   ∂s r = T(e1 + γ),  ∂t r = T v                       (7), (10)
 //! ```
 //!
-//! `E` (3), `L1`, `L2` (4), `U` (8) and `T(ξ)` (9) are in [`operators`]. Space is discretised
+//! `E` (3), `L1`, `L2` (4) are in [`operators`], `U` (8) and `T(ξ)` (9) in [`rotation`]. Space is discretised
 //! on a staggered grid (theory.md §2): velocities at nodes, forces at elements, boundary
 //! values `x2_L`, `x2_R` at the ends, node weights `w_n`; the discrete energy
 //! `ε_h = ½ Σ w_n x1ᵀ M x1 + ½ Σ h_e x2ᵀ C x2` changes only by boundary, load and damping power.
 //! The implicit midpoint rule keeps that balance exactly per step.
 //!
 //! # Modules and API
-//! * [`section::Section`] — `M`, `C` (full 6×6, explicit rigid/massless directions), `κ0`,
-//!   `D0, D1, D2`; `validate()`; presets [`section::Section::paper_2d`], [`section::Section::paper_3d`].
-//! * [`components::Components`] — `Planar` (`k = 3`) or `Spatial` (`k = 6`).
-//! * [`mesh::Mesh`] — node coordinates, element lengths `h_e`, node weights `w_n`.
-//! * [`beam::Beam`] — the per-beam discretisation a multi-beam assembler calls: local layout
+//! * [`Section`] — `M`, `C` (full 6×6, explicit rigid/massless directions), `κ0`,
+//!   `D0, D1, D2`; `validate()`; presets [`Section::paper_2d`], [`Section::paper_3d`].
+//! * [`Components`] — `Planar` (`k = 3`) or `Spatial` (`k = 6`).
+//! * [`Mesh`] — node coordinates, element lengths `h_e`, node weights `w_n`.
+//! * [`Beam`] — the per-beam discretisation a multi-beam assembler calls: local layout
 //!   `[x1_0..x1_N, x2_0..x2_{N−1}, x2_L, x2_R]` (`k(2N+3)` unknowns), `k(2N+1)` rows
-//!   ([`beam::Beam::step_residual`]), a fixed sparse Jacobian pattern
-//!   ([`beam::Beam::jacobian_pattern`], shifted by caller offsets) with values in the same order
-//!   ([`beam::Beam::jacobian_values`]), the midpoint convention for algebraic unknowns
-//!   ([`beam::Beam::midpoint_weight`]), energy, powers, and the linear operators `B`, `A`,
-//!   damping ([`beam::Beam::linear_operators`]) for modes.
-//! * [`loads::Loads`] — point/distributed, follower/dead loads with time amplitudes.
-//! * [`kinematics::Kinematics`] — node quaternions/positions, advanced in time or rebuilt from
+//!   ([`Beam::step_residual`]), a fixed sparse Jacobian pattern
+//!   ([`Beam::jacobian_pattern`], shifted by caller offsets) with values in the same order
+//!   ([`Beam::jacobian_values`]), the midpoint convention for algebraic unknowns
+//!   ([`Beam::midpoint_weight`]), energy, powers, and the linear operators `B`, `A`,
+//!   damping ([`Beam::linear_operators`]) for modes.
+//! * [`Loads`] — point/distributed, follower/dead loads with time amplitudes.
+//! * [`Kinematics`] — node quaternions/positions, advanced in time or rebuilt from
 //!   strains.
-//! * [`problem`] — single-beam problems: [`problem::EndCondition`] (free, applied end load,
-//!   clamped, pinned, prescribed motion, mixed) and [`problem::ImplicitMidpoint`] (Newton on the
+//! * [`BeamProblem`] — single-beam problems: [`EndCondition`] (free, applied end load,
+//!   clamped, pinned, prescribed motion, mixed); [`ImplicitMidpoint`] (Newton on the
 //!   step system with the factorisation reused and refreshed once per step, counters).
-//! * [`step_system`] — the step system's linear solver: unknowns interleaved along the beam,
+//! * the step system's linear solver ([`LinearSolver`]): unknowns interleaved along the beam,
 //!   block-tridiagonal with `k×k` blocks, solved by the block LU of
-//!   [`block_tridiagonal::BlockTridiagonal`] (blocks written directly on `k`-vectors); faer's
-//!   sparse LU ([`sparse::SparseLuSystem`]) for flux damping or singular blocks.
-//! * [`rk4::ExplicitRk4`] — explicit RK4 for cross-checks when the problem is an ODE.
-//! * [`modes`] — linear modes of a single beam (second-order reduction, faer dense eigen) and
+//!   a block-tridiagonal LU (blocks written directly on `k`-vectors); faer's
+//!   sparse LU ([`SparseLuSystem`], also the constrained plant's solver) for flux damping or singular blocks.
+//! * [`ExplicitRk4`] — explicit RK4 for cross-checks when the problem is an ODE.
+//! * [`linear_modes`] — linear modes of a single beam (second-order reduction, faer dense eigen) and
 //!   closed-form beam frequencies.
 //! * [`samples`] — canonical problems with provenance and known answers; [`studies`] — the
 //!   experiments behind the tests, verification cases and benches.
@@ -49,7 +49,7 @@
 //! A multi-beam assembler places each beam's vector at a column offset and its rows at a row
 //! offset, appends its own end/joint rows (on the `x2_L`, `x2_R` and end-node `x1` unknowns,
 //! at the step midpoint), and solves `Σ residuals = 0` with Newton; after convergence it
-//! advances each beam's [`kinematics::Kinematics`] with [`kinematics::Kinematics::advance`].
+//! advances each beam's [`Kinematics`] with [`Kinematics::advance`].
 //!
 //! # Example
 //!
@@ -80,35 +80,41 @@
 //! # Ok::<(), intrinsic_beam::BeamError>(())
 //! ```
 
-pub mod beam;
-pub mod block_tridiagonal;
-pub mod components;
-pub mod error;
-pub(crate) mod kernels;
-pub mod kinematics;
-pub mod loads;
-pub mod mesh;
-pub mod modes;
+mod beam;
+mod block_tridiagonal;
+mod components;
+mod error;
+mod kernels;
+mod kinematics;
+mod loads;
+mod mesh;
+mod midpoint;
+mod modes;
+mod null_space;
 pub mod operators;
-pub mod problem;
+mod problem;
 #[cfg(test)]
 mod proptests;
-pub(crate) mod random;
-pub mod rk4;
+mod random;
+mod rk4;
+pub mod rotation;
 pub mod samples;
-pub mod section;
-pub mod sparse;
-pub mod step_system;
+mod section;
+mod sparse;
+mod step_system;
 pub mod studies;
 
 pub use beam::{Beam, LinearOperators, StepInput, StepPower};
-pub use components::Components;
+pub use components::{Components, OUT_OF_PLANE_INDICES, PLANAR_INDICES, SPATIAL_INDICES};
 pub use error::{BeamError, Result};
 pub use kinematics::Kinematics;
 pub use loads::{Amplitude, DistributedLoad, LoadFrame, Loads, PointLoad};
 pub use mesh::Mesh;
-pub use problem::{
-    BeamProblem, Counters, End, EndCondition, ImplicitMidpoint, NewtonSettings, StepRefresh,
-};
+pub use midpoint::{Counters, ImplicitMidpoint, NewtonSettings, StepRefresh};
+pub use modes::{closed_form, family, linear_modes, Family, LinearMode};
+pub use null_space::{null_space, NullSpace};
+pub use problem::{BeamProblem, End, EndCondition};
+pub use rk4::ExplicitRk4;
 pub use section::Section;
+pub use sparse::SparseLuSystem;
 pub use step_system::LinearSolver;

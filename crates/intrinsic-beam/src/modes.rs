@@ -106,7 +106,7 @@ pub fn linear_modes(problem: &BeamProblem) -> Result<Vec<LinearMode>> {
     let z = if x2r.is_empty() {
         Mat::<f64>::identity(x1.len(), x1.len())
     } else {
-        null_space(&d_r.transpose().to_owned())?
+        crate::null_space::null_space(d_r.transpose(), RANK_TOLERANCE)?.basis
     };
     // Massless node coordinates (a massless section direction: zero rows of B1). Without
     // them the route below is the original one (bit-identical results for sections with
@@ -355,17 +355,6 @@ fn massless_route(
 
 fn symmetrize(m: &Mat<f64>) -> Mat<f64> {
     Mat::from_fn(m.nrows(), m.ncols(), |i, j| 0.5 * (m[(i, j)] + m[(j, i)]))
-}
-
-/// Orthonormal basis of the null space of `a` (columns), by faer's SVD.
-pub fn null_space(a: &Mat<f64>) -> Result<Mat<f64>> {
-    let svd = a.svd().map_err(|e| BeamError::LinearSolve { reason: format!("SVD: {e:?}") })?;
-    let s = svd.S();
-    let nsv = a.nrows().min(a.ncols());
-    let smax = if nsv > 0 { s[0] } else { 0.0 };
-    let rank = (0..nsv).filter(|&i| s[i] > RANK_TOLERANCE * smax).count();
-    let v = svd.V();
-    Ok(Mat::from_fn(a.ncols(), a.ncols() - rank, |i, j| v[(i, rank + j)]))
 }
 
 /// The family of a mode of a straight beam: the component group with most kinetic energy.

@@ -68,7 +68,7 @@ proptest! {
         let old = random_vec(&mut rng, beam.dim());
         let new = random_vec(&mut rng, beam.dim());
         let dt = 10f64.powf(rng.uniform(-4.0, 0.0));
-        let input = StepInput { time: 0.0, dt, loads: &loads, kinematics: &kin };
+        let input = StepInput { time: 0.0, dt, loads: &loads, node_quaternions: &kin.xi };
         let mut res = vec![0.0; beam.n_rows()];
         beam.step_residual(&input, &old, &new, &mut res).unwrap();
         let mut mid = vec![0.0; beam.dim()];

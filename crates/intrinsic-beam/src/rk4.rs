@@ -12,8 +12,9 @@ use nalgebra::{DMatrix, DVector, Matrix3, Vector3, Vector4};
 use crate::beam::Beam;
 use crate::error::{check_len, BeamError, Result};
 use crate::kinematics::Kinematics;
-use crate::operators::{halves, rotation, u_matrix};
+use crate::operators::halves;
 use crate::problem::{BeamProblem, End};
+use crate::rotation::{rotation, u_matrix};
 
 /// RK4 integrator of a [`BeamProblem`].
 #[derive(Clone, Debug)]

@@ -494,9 +494,9 @@ mod tests {
     use crate::kinematics::Kinematics;
     use crate::loads::{Amplitude, LoadFrame, Loads, PointLoad};
     use crate::mesh::Mesh;
-    use crate::operators::quaternion_step;
     use crate::problem::EndCondition;
     use crate::random::{random_section, random_vec, Lcg};
+    use crate::rotation::quaternion_step;
     use crate::samples;
     use nalgebra::{DMatrix, DVector, Vector3, Vector6};
 
@@ -587,8 +587,12 @@ mod tests {
             for components in [Components::Planar, Components::Spatial] {
                 let (problem, kin, old, new) =
                     setup(40 + i as u64, components, left.clone(), right.clone());
-                let input =
-                    StepInput { time: 0.2, dt: 0.05, loads: &problem.loads, kinematics: &kin };
+                let input = StepInput {
+                    time: 0.2,
+                    dt: 0.05,
+                    loads: &problem.loads,
+                    node_quaternions: &kin.xi,
+                };
                 let mut solver = StepSolver::new(&problem, LinearSolver::Auto).unwrap();
                 let values = values(&problem, &kin, &old, &new);
                 assert_eq!(values.len(), solver.nnz());
@@ -625,7 +629,8 @@ mod tests {
     }
 
     fn values(problem: &BeamProblem, kin: &Kinematics, old: &[f64], new: &[f64]) -> Vec<f64> {
-        let input = StepInput { time: 0.2, dt: 0.05, loads: &problem.loads, kinematics: kin };
+        let input =
+            StepInput { time: 0.2, dt: 0.05, loads: &problem.loads, node_quaternions: &kin.xi };
         let nnz = problem.beam.jacobian_nnz();
         let mut values = vec![1.0; nnz + 2 * problem.beam.k()];
         problem.beam.jacobian_values(&input, old, new, &mut values[..nnz]).unwrap();

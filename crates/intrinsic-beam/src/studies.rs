@@ -11,9 +11,10 @@ use crate::components::Components;
 use crate::error::{BeamError, Result};
 use crate::kinematics::Kinematics;
 use crate::mesh::Mesh;
+use crate::midpoint::{Counters, ImplicitMidpoint, NewtonSettings};
 use crate::modes::closed_form::{self, Supports};
 use crate::modes::{family, linear_modes, Family};
-use crate::problem::{BeamProblem, Counters, EndCondition, ImplicitMidpoint, NewtonSettings};
+use crate::problem::{BeamProblem, EndCondition};
 use crate::rk4::ExplicitRk4;
 use crate::samples::{self, euler_bernoulli_section, Sample};
 
@@ -107,8 +108,12 @@ pub fn damped_decay(
         let e_old = sim.energy();
         sim.step(dt)?;
         let e_new = sim.energy();
-        let input =
-            StepInput { time: sim.time() - dt, dt, loads: &sim.problem().loads, kinematics: &kin };
+        let input = StepInput {
+            time: sim.time() - dt,
+            dt,
+            loads: &sim.problem().loads,
+            node_quaternions: &kin.xi,
+        };
         let p = sim.problem().beam.step_power(&input, &old, sim.state())?;
         inc = inc.max((e_new - e_old) / e0);
         bal = bal.max((e_new - e_old - dt * (p.damping + p.boundary + p.loads)).abs() / e0);
@@ -405,7 +410,7 @@ pub fn identity_residuals(cases: usize, seed: u64) -> Result<[f64; 3]> {
         let old = random_vec(&mut rng, beam.dim());
         let new = random_vec(&mut rng, beam.dim());
         let dt = 10f64.powf(rng.uniform(-4.0, 0.0));
-        let input = StepInput { time: 0.0, dt, loads: &loads, kinematics: &kin };
+        let input = StepInput { time: 0.0, dt, loads: &loads, node_quaternions: &kin.xi };
         let mut res = vec![0.0; beam.n_rows()];
         beam.step_residual(&input, &old, &new, &mut res)?;
         let mut mid = vec![0.0; beam.dim()];

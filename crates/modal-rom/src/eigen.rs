@@ -307,41 +307,6 @@ fn symmetrize(m: &mut Mat<f64>) {
     }
 }
 
-/// Null-space basis of `c` (rows × n): identity on untouched columns, and the right singular
-/// vectors of the touched columns with singular value `≤ tol · σ_max`.
-pub(crate) fn null_space(c: MatRef<'_, f64>, tol: f64) -> Result<Mat<f64>> {
-    let n = c.ncols();
-    let touched: Vec<usize> =
-        (0..n).filter(|&j| (0..c.nrows()).any(|i| c[(i, j)] != 0.0)).collect();
-    let untouched: Vec<usize> = (0..n).filter(|j| touched.binary_search(j).is_err()).collect();
-    let mut null_cols: Vec<Vec<f64>> = Vec::new();
-    if !touched.is_empty() {
-        let rows: Vec<usize> = (0..c.nrows()).collect();
-        let sub = gather(c, &rows, &touched);
-        let svd = sub.svd().map_err(|e| ModalError::Numerical {
-            stage: "SVD of the constraint rows".into(),
-            reason: format!("{e:?}"),
-        })?;
-        let s = svd.S().column_vector();
-        let smax = (0..s.nrows()).map(|i| s[i]).fold(0.0f64, f64::max);
-        let rank = (0..s.nrows()).filter(|&i| s[i] > tol * smax).count();
-        let v = svd.V();
-        for col in rank..touched.len() {
-            null_cols.push((0..touched.len()).map(|i| v[(i, col)]).collect());
-        }
-    }
-    let mut z = Mat::<f64>::zeros(n, untouched.len() + null_cols.len());
-    for (col, &j) in untouched.iter().enumerate() {
-        z[(j, col)] = 1.0;
-    }
-    for (extra, vals) in null_cols.iter().enumerate() {
-        for (i, &t) in touched.iter().enumerate() {
-            z[(t, untouched.len() + extra)] = vals[i];
-        }
-    }
-    Ok(z)
-}
-
 struct UnionFind(Vec<usize>);
 
 impl UnionFind {
@@ -522,7 +487,7 @@ fn solve_block(
     let mut z = if cons.nrows() == 0 {
         Mat::<f64>::identity(s1.len(), s1.len())
     } else {
-        null_space(cons.as_ref(), tol)?
+        intrinsic_beam::null_space(cons.as_ref(), tol)?.basis
     };
     let b2e = gather(b2.as_ref(), &elastic, &elastic);
     let all1: Vec<usize> = (0..s1.len()).collect();

@@ -68,7 +68,7 @@ impl BeamLayout {
         xi: [f64; 4],
     ) -> Self {
         let h = length / n_elements as f64;
-        let t = intrinsic_beam::operators::rotation(&Vector4::from_column_slice(&xi));
+        let t = intrinsic_beam::rotation::rotation(&Vector4::from_column_slice(&xi));
         let e1 = t * Vector3::x();
         let reference_positions = (0..=n_elements)
             .map(|n| {

@@ -10,7 +10,7 @@
 //!   φ2 = +B2⁻¹ Dᵀ φ1 / ω,      ⟨φ1i, B1 φ1j⟩ = δij,   ⟨φ1i, D φ2j⟩ = ω_j δij,
 //! ```
 //!
-//! ([`eigen`], [`basis::ModalBasis`]): rigid modes first (exact rotations about the root, then
+//! ([`solve_second_order`], [`ModalBasis`]): rigid modes first (exact rotations about the root, then
 //! joint by joint), then elastic modes by frequency, labelled from their energy split.
 //!
 //! **Modal model (14)–(21).** `x1 = φ1j q1j`, `x2 = φ2j q2j`:
@@ -25,11 +25,11 @@
 //!
 //! **Quaternion modes (22)–(29).** `ξ = φξj qξj`, `φξ0 = ξ̄`, `φξj = Uω(ξ̄) φωj`,
 //! `Aξ q̇ξ = qξl Γξ^l q1`, `Aξ = ⟨φξi, φξj⟩`, `Γξ^l_ij = ⟨φξi, U(φωj) φξl⟩`; zero or dependent
-//! quaternion modes are dropped so `Aξ` is invertible ([`rom::ModalRom`]).
+//! quaternion modes are dropped so `Aξ` is invertible ([`ModalRom`]).
 //!
 //! Also: projection of FE states and reconstruction of fields and positions
-//! ([`projection`]), export to JSON + `.npy` and a reader ([`export`]), a mode report for
-//! the CLI ([`report`]) and the paper's canonical models ([`samples`]).
+//! ([`Fields`]), export to JSON + `.npy` and a reader ([`Metadata`]), a mode report for
+//! the CLI ([`mode_report`]) and the paper's canonical models ([`samples`]).
 //!
 //! # Example
 //!
@@ -51,28 +51,35 @@
 //! # Ok::<(), modal_rom::ModalError>(())
 //! ```
 
-pub mod basis;
-pub mod blocks;
-pub mod eigen;
-pub mod error;
-pub mod export;
-pub mod layout;
+mod basis;
+mod blocks;
+mod eigen;
+mod error;
+pub mod exact_joints;
+mod export;
+mod layout;
 pub mod npy;
-pub mod projection;
-pub mod report;
-pub mod rigid;
-pub mod rom;
+mod projection;
+mod report;
+mod rigid;
+mod rom;
 pub mod samples;
-pub mod structure;
-pub mod tensor;
+mod structure;
+mod tensor;
 
 pub use basis::{BasisSettings, KindCounts, ModalBasis, ModeKind, ModeSelection};
-pub use eigen::{EigenSettings, SecondOrderProblem};
+pub use blocks::BlockDiag;
+pub use eigen::{solve as solve_second_order, EigenSettings, RawModes, SecondOrderProblem};
 pub use error::{ModalError, Result};
-pub use layout::{BeamLayout, Components, Layout};
-pub use report::{mode_report, ModeReport};
-pub use rom::{Input, ModalRom, RomOptions};
+pub use exact_joints::{ExactJointsRom, LinkBasis, LinkBasisSettings};
+pub use export::{ArrayInfo, Metadata, FORMAT, VERSION};
+pub use layout::{BeamLayout, Components, FullIndex, Layout};
+pub use projection::Fields;
+pub use report::{mode_report, report_of, BeamShape, ModeReport, ModeShape};
+pub use rigid::{chain_rotations, rigid_rotation_fields, RigidRotation};
+pub use rom::{Input, ModalRom, QuaternionModel, RomOptions};
 pub use structure::StructureModel;
+pub use tensor::SparseTensor3;
 
 #[cfg(test)]
 mod basis_tests;

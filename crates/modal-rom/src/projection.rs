@@ -9,7 +9,7 @@
 use crate::error::{shape, Result};
 use crate::layout::FullIndex;
 use crate::rom::ModalRom;
-use intrinsic_beam::operators::rotation;
+use intrinsic_beam::rotation::rotation;
 use nalgebra::{Vector3, Vector4};
 
 /// Fields rebuilt from modal coordinates.

@@ -4,8 +4,8 @@
 use crate::basis::{BasisSettings, ModalBasis};
 use crate::error::{invalid, Result};
 use crate::structure::StructureModel;
-use intrinsic_beam::operators::rotation;
-use multibody_constraints::structure::Structure;
+use intrinsic_beam::rotation::rotation;
+use multibody_constraints::Structure;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 

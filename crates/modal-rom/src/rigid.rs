@@ -7,7 +7,7 @@
 use crate::error::{invalid, Result};
 use crate::layout::Layout;
 use faer::Mat;
-use intrinsic_beam::operators::rotation;
+use intrinsic_beam::rotation::rotation;
 use nalgebra::Vector3;
 
 /// A rigid rotation of a set of beams about an axis through a pivot (global frame).

@@ -25,7 +25,8 @@ use crate::layout::Layout;
 use crate::tensor::SparseTensor3;
 use faer::linalg::solvers::{DenseSolveCore, Solve};
 use faer::{Mat, Side};
-use intrinsic_beam::operators::{l1_times, l2_times, u_matrix, u_omega};
+use intrinsic_beam::operators::{l1_times, l2_times};
+use intrinsic_beam::rotation::{u_matrix, u_omega};
 use nalgebra::{Vector3, Vector4, Vector6};
 use serde::{Deserialize, Serialize};
 

@@ -7,7 +7,7 @@ use crate::rom::{Input, ModalRom, RomOptions};
 use crate::structure::StructureModel;
 use intrinsic_beam::Section;
 use multibody_constraints::samples;
-use multibody_constraints::structure::Structure;
+use multibody_constraints::Structure;
 
 /// A structure with its modes and reduced model.
 #[derive(Clone, Debug)]

@@ -8,9 +8,8 @@ use crate::layout::{BeamLayout, Components, FullIndex, Layout};
 use crate::rigid::{rigid_rotation_fields, RigidRotation};
 use crate::rom::Input;
 use faer::Mat;
-use intrinsic_beam::operators::rotation;
-use multibody_constraints::joint::{Freedom, Part};
-use multibody_constraints::structure::{Placement, Structure};
+use intrinsic_beam::rotation::rotation;
+use multibody_constraints::{Placement, Structure};
 use nalgebra::{Matrix3, Vector3};
 
 /// Everything the modal route needs from a structure at its reference configuration.
@@ -138,9 +137,7 @@ impl StructureModel {
             } else {
                 reachable(structure, &j.ends[1..].iter().map(|e| e.0).collect::<Vec<_>>(), Some(ji))
             };
-            for axis in
-                j.axes.iter().filter(|a| a.part == Part::Angular && a.freedom == Freedom::Free)
-            {
+            for axis in j.free_rotation_axes().into_iter().map(|i| &j.axes[i]) {
                 let global: Vector3<f64> = rots[0] * axis.local_at(0, &rots);
                 rotations.push(RigidRotation {
                     pivot: [pivot.x, pivot.y, pivot.z],
@@ -178,24 +175,7 @@ impl StructureModel {
             invalid(format!("input `{name}`: joint"), joint, "unknown joint or support")
         })?;
         let j = &structure.joints()[ji];
-        let free: Vec<usize> = j
-            .axes
-            .iter()
-            .enumerate()
-            .filter(|(_, a)| a.part == Part::Angular && a.freedom == Freedom::Free)
-            .map(|(i, _)| i)
-            .collect();
-        let a = match axis {
-            Some(a) if free.contains(&a) => a,
-            None if free.len() == 1 => free[0],
-            other => {
-                return Err(invalid(
-                    format!("input `{name}`: axis"),
-                    format!("{other:?}"),
-                    format!("free rotation axes are {free:?}"),
-                ))
-            }
-        };
+        let a = j.free_rotation_axis(axis)?;
         if !j.ground && j.ends.len() != 2 {
             return Err(invalid(
                 format!("input `{name}`: joint"),

@@ -6,7 +6,8 @@
 use crate::eigen::SecondOrderProblem;
 use crate::layout::{BeamLayout, Components, Layout};
 use faer::Mat;
-use intrinsic_beam::operators::{e_matrix, rotation};
+use intrinsic_beam::operators::e_matrix;
+use intrinsic_beam::rotation::rotation;
 use nalgebra::{Vector3, Vector4};
 
 /// Section data (spatial diagonals).

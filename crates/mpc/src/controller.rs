@@ -163,7 +163,12 @@ impl ControllerSettings {
 
     /// Checks the ranges (the solver settings are checked again by `ocp-transcription`).
     pub fn validate(&self) -> Result<()> {
-        self.integrator.validate()?;
+        self.integrator.validate().map_err(|e| match e {
+            ocp_transcription::OcpError::InvalidSetting { field, value, reason } => {
+                invalid(field, value, reason)
+            }
+            e => e.into(),
+        })?;
         if self.max_iterations == 0 {
             return Err(invalid("max_iterations", 0, "must be at least 1"));
         }

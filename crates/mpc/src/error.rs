@@ -35,6 +35,55 @@ pub enum MpcError {
     },
 }
 
+impl MpcError {
+    /// The same error with the value of an [`MpcError::Invalid`] replaced by `value`.
+    pub(crate) fn with_value(self, value: impl std::fmt::Display) -> MpcError {
+        match self {
+            MpcError::Invalid { field, reason, .. } => {
+                MpcError::Invalid { field, value: value.to_string(), reason }
+            }
+            other => other,
+        }
+    }
+
+    /// The same error with the reason of an [`MpcError::Invalid`] rewritten by `f`.
+    pub(crate) fn with_reason(self, f: impl FnOnce(String) -> String) -> MpcError {
+        match self {
+            MpcError::Invalid { field, value, reason } => {
+                MpcError::Invalid { field, value, reason: f(reason) }
+            }
+            other => other,
+        }
+    }
+
+    /// The same error with its field named inside `owner` (`horizon` → `mpc.horizon`), for
+    /// the checks a settings struct runs on the structs it holds. Other variants pass through.
+    pub(crate) fn within(self, owner: &str) -> MpcError {
+        match self {
+            MpcError::Invalid { field, value, reason } => {
+                MpcError::Invalid { field: format!("{owner}.{field}"), value, reason }
+            }
+            MpcError::Ocp(ocp_transcription::OcpError::InvalidSetting { field, value, reason }) => {
+                MpcError::Invalid {
+                    field: format!("{owner}.{field}"),
+                    value,
+                    reason: reason.to_string(),
+                }
+            }
+            MpcError::Plant(multibody_constraints::MultibodyError::BadSetting {
+                field,
+                value,
+                reason,
+            }) => MpcError::Invalid {
+                field: format!("{owner}.{field}"),
+                value: value.to_string(),
+                reason: reason.to_string(),
+            },
+            other => other,
+        }
+    }
+}
+
 /// Result alias of the crate.
 pub type Result<T> = std::result::Result<T, MpcError>;
 

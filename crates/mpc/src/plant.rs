@@ -3,9 +3,10 @@
 
 use crate::dynamics::RomDynamics;
 use crate::error::{invalid, MpcError, Result};
+use intrinsic_beam::rotation::{quat_conj, quat_mul};
 use intrinsic_beam::{Amplitude, LoadFrame, PointLoad};
 use modal_rom::{Input, ModalRom, StructureModel};
-use multibody_constraints::structure::{quat_conj, quat_mul, Structure};
+use multibody_constraints::Structure;
 use multibody_constraints::{Plant, PlantSettings};
 use nalgebra::{Vector4, Vector6};
 use ocp_transcription::{Integrator, IntegratorKind, IntegratorSettings};

@@ -2,12 +2,12 @@
 //! the run's timing; the paper's 2D (§5.2) and 3D (§5.3) two-links. [`Setup`] holds what a
 //! scenario's runs share (modes, reduced model, weights), built once per sweep.
 
-use crate::error::{invalid, Result};
+use crate::error::{invalid, MpcError, Result};
 use crate::plant::ControlInput;
 use crate::weights::{MpcSettings, Weights};
 use intrinsic_beam::Section;
 use modal_rom::{BasisSettings, ModalRom, ModeSelection, RomOptions, StructureModel};
-use multibody_constraints::structure::Structure;
+use multibody_constraints::Structure;
 use multibody_constraints::{samples, PlantSettings};
 use nalgebra::Vector4;
 
@@ -115,17 +115,27 @@ impl Scenario {
         Ok(s)
     }
 
-    /// Checks timing (divisibility of `τs`, output, snapshot and plant steps) and the MPC
-    /// settings.
+    /// Checks every field: the MPC settings (errors name `mpc.<field>`), the plant settings
+    /// (`plant.<field>`), the reduced-model options (`rom_options.<field>`); times finite and
+    /// positive, each a whole multiple of the one it is sampled on (`τs`, `τp/Nc`, the
+    /// duration and the snapshot interval of `output_interval`, which is one of `plant.dt`),
+    /// at most [`MAX_PLANT_STEPS`] plant steps; the disturbance axis finite and non-zero, the
+    /// centre finite, `root` a support of the structure, at least one input.
     pub fn validate(&self) -> Result<()> {
-        self.mpc.validate()?;
-        self.plant.validate()?;
-        self.rom_options.validate()?;
+        self.mpc.validate().map_err(|e| e.within("mpc"))?;
+        self.plant.validate().map_err(|e| MpcError::from(e).within("plant"))?;
+        self.rom_options.validate().map_err(|e| MpcError::from(e).within("rom_options"))?;
         if !self.rom_options.quaternions {
             return Err(invalid("rom_options.quaternions", false, "the cost (35) needs them"));
         }
-        if !(self.duration.is_finite() && self.duration > 0.0) {
-            return Err(invalid("duration", self.duration, "must be finite and > 0"));
+        for (field, v) in [
+            ("duration", self.duration),
+            ("output_interval", self.output_interval),
+            ("snapshot_interval", self.snapshot_interval),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(invalid(field, v, "must be finite and > 0"));
+            }
         }
         if self.inputs.is_empty() {
             return Err(invalid("inputs", 0, "a controlled scenario needs at least one input"));
@@ -133,33 +143,74 @@ impl Scenario {
         if self.rom_plant_substeps == 0 {
             return Err(invalid("rom_plant_substeps", 0, "must be at least 1"));
         }
-        ratio("output_interval per sampling", self.mpc.sampling, self.output_interval)?;
+        let out = ("output_interval", self.output_interval);
+        multiple("mpc.sampling", self.mpc.sampling, out)?;
         let dt_plan = self.mpc.horizon / self.mpc.intervals as f64;
         if self.mpc.control_grid == crate::weights::ControlGrid::Absolute
             || self.mpc.sampling > dt_plan + 1e-12
         {
             // the plan's switching times must fall on output-interval boundaries
-            ratio("output_interval per control interval τp/Nc", dt_plan, self.output_interval)?;
+            multiple("mpc.intervals", dt_plan, out).map_err(|e| {
+                let e = e.with_reason(|r| format!("gives τp/Nc = {dt_plan} s, which {r}"));
+                e.with_value(self.mpc.intervals)
+            })?;
         }
-        ratio("output_interval per duration", self.duration, self.output_interval)?;
-        ratio("plant.dt per output_interval", self.output_interval, self.plant.dt)?;
-        ratio(
-            "output_interval per snapshot_interval",
-            self.snapshot_interval,
-            self.output_interval,
-        )?;
-        if self.omega_direction.iter().any(|v| !v.is_finite()) {
+        multiple("duration", self.duration, out)?;
+        multiple("output_interval", self.output_interval, ("plant.dt", self.plant.dt))?;
+        multiple("snapshot_interval", self.snapshot_interval, out)?;
+        let steps = self.duration / self.plant.dt;
+        if steps > MAX_PLANT_STEPS as f64 {
+            return Err(invalid(
+                "duration",
+                self.duration,
+                format!(
+                    "must be at most {MAX_PLANT_STEPS} plant steps of plant.dt = {} s \
+                     ({steps:.3e})",
+                    self.plant.dt
+                ),
+            ));
+        }
+        if self.omega_direction.iter().any(|v| !v.is_finite())
+            || self.omega_direction.iter().all(|v| *v == 0.0)
+        {
             return Err(invalid(
                 "omega_direction",
                 format!("{:?}", self.omega_direction),
-                "must be finite",
+                "must be finite and non-zero",
             ));
         }
-        if self.structure.joint_index(&self.root).is_none() {
-            return Err(invalid("root", &self.root, "no such support"));
+        if self.center.iter().any(|v| !v.is_finite()) {
+            return Err(invalid("center", format!("{:?}", self.center), "must be finite"));
+        }
+        let supports: Vec<&str> =
+            self.structure.joints().iter().filter(|j| j.ground).map(|j| j.name.as_str()).collect();
+        if !supports.contains(&self.root.as_str()) {
+            return Err(invalid(
+                "root",
+                &self.root,
+                if supports.is_empty() {
+                    "the structure has no support".to_string()
+                } else {
+                    format!("must name a support (supports: {})", supports.join(", "))
+                },
+            ));
         }
         Ok(())
     }
+}
+
+/// Most plant steps (`duration / plant.dt`) a closed loop may take: beyond it a run would take
+/// days, and no scenario of the paper needs more than 10⁴.
+pub const MAX_PLANT_STEPS: usize = 10_000_000;
+
+/// `a` (the value of `field`) as a whole multiple (≥ 1, to 1e-9 relative) of `b = (name, value)`.
+fn multiple(field: &str, a: f64, (name, b): (&str, f64)) -> Result<()> {
+    let r = a / b;
+    let n = r.round();
+    if !(n >= 1.0 && (r - n).abs() <= 1e-9 * n) {
+        return Err(invalid(field, a, format!("must be a whole multiple (≥ 1) of {name} = {b} s")));
+    }
+    Ok(())
 }
 
 /// `a / b` as a whole number ≥ 1 (to 1e-9 relative).
@@ -249,5 +300,48 @@ impl Setup {
             planar_axis,
             reference_xi,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    type Edit = fn(&mut Scenario);
+
+    /// Each rule of [`Scenario::validate`] fails on its own field, so that a front end can
+    /// map the error to the key of its input.
+    #[test]
+    fn validate_names_the_field_of_each_rule() {
+        let base = Scenario::paper_2d(4).unwrap();
+        base.validate().unwrap();
+        let cases: [(&str, Edit); 16] = [
+            ("mpc.horizon", |s| s.mpc.horizon = -1.0),
+            ("mpc.sampling", |s| s.mpc.sampling = 0.33),
+            ("mpc.sampling", |s| s.mpc.sampling = 7.0),
+            ("mpc.intervals", |s| s.mpc.intervals = 7),
+            ("mpc.ku", |s| s.mpc.ku = 0.0),
+            ("duration", |s| s.duration = 1.01),
+            ("duration", |s| s.duration = 1e5),
+            ("output_interval", |s| s.output_interval = 0.0),
+            ("output_interval", |s| s.plant.dt = 0.03),
+            ("snapshot_interval", |s| s.snapshot_interval = 0.26),
+            ("plant.dt", |s| s.plant.dt = -1.0),
+            ("omega_direction", |s| s.omega_direction = [0.0; 3]),
+            ("center", |s| s.center = [f64::NAN, 0.0, 0.0]),
+            ("root", |s| {
+                s.root = s.structure.joints().iter().find(|j| !j.ground).unwrap().name.clone()
+            }),
+            ("inputs", |s| s.inputs.clear()),
+            ("rom_plant_substeps", |s| s.rom_plant_substeps = 0),
+        ];
+        for (field, edit) in cases {
+            let mut s = base.clone();
+            edit(&mut s);
+            match s.validate() {
+                Err(MpcError::Invalid { field: f, .. }) => assert_eq!(f, field),
+                other => panic!("{field}: {other:?}"),
+            }
+        }
     }
 }

@@ -124,6 +124,17 @@ pub enum MultibodyError {
         /// The value.
         value: f64,
     },
+    /// A joint torque about an axis that is not a free rotation axis of the joint, or no axis
+    /// given for a joint with several (or no) free rotation axes.
+    #[error("`{joint}`: axis {axis:?} is not a free rotation axis (free rotation axes: {free:?}; give one when there are several)")]
+    NotFreeRotationAxis {
+        /// Joint or support name.
+        joint: String,
+        /// The requested axis (index among the joint's active axes), if any.
+        axis: Option<usize>,
+        /// Indices of the joint's free rotation axes.
+        free: Vec<usize>,
+    },
     /// A linear solve failed (singular system).
     #[error("linear solve failed: {0}")]
     LinearSolve(String),

@@ -29,13 +29,13 @@
 //! sparse LU on a fixed pattern; the factorisation is reused while it contracts.
 //!
 //! # Modules and API
-//! * [`joint`] — [`joint::JointKind`] (weld, ball, hinge, universal, custom per-direction),
-//!   [`joint::Joint`], [`joint::Support`], the rows (11)–(12).
-//! * [`structure`] — [`structure::Structure`]: beams placed in space (explicitly or by joint
-//!   angles), topology validation, layout, [`structure::Structure::constraint_matrix`] (`G`),
-//!   [`structure::Structure::linear_operators`] (`B`, `A`), rigid-rotation states.
-//! * [`nullspace`] — [`nullspace::null_space`]: orthonormal `Z` with `G Z = 0` (faer SVD).
-//! * [`plant`] — [`Plant`]: steps, inputs (point loads follower/dead, gravity, joint torques,
+//! * [`JointKind`] (weld, ball, hinge, universal, custom per-direction), [`Joint`],
+//!   [`Support`]: the rows (11)–(12).
+//! * [`Structure`]: beams placed in space (explicitly or by joint
+//!   angles), topology validation, layout, [`Structure::constraint_matrix`] (`G`),
+//!   [`Structure::linear_operators`] (`B`, `A`), rigid-rotation states.
+//! * [`null_space`]: orthonormal `Z` with `G Z = 0` (faer SVD), redundant rows named.
+//! * [`Plant`]: steps, inputs (point loads follower/dead, gravity, joint torques,
 //!   changeable every step), outputs (joint angles, reactions, positions, energy).
 //! * [`samples`] — the paper's two-links, Fig. 2's ball joint, an L-frame, the rigid double
 //!   pendulum; [`studies`] — the experiments behind the verification cases.
@@ -56,14 +56,20 @@
 //! assert!(plant.joint_angles()[1] > 0.0); // the root support turns about e2
 //! ```
 
-pub mod error;
-pub mod joint;
-pub mod nullspace;
-pub mod plant;
+mod error;
+mod joint;
+mod nullspace;
+mod plant;
 pub mod samples;
-pub mod structure;
+mod structure;
 pub mod studies;
 
 pub use error::{MultibodyError, Result};
+pub use joint::{
+    rows, Axis, End, EndRef, Frame, Freedom, Joint, JointKind, Part, Row, RowKind, Support,
+};
+pub use nullspace::{null_space, RANK_TOLERANCE};
 pub use plant::{Plant, PlantSettings, StepReport};
-pub use structure::Structure;
+pub use structure::{
+    ConstraintMatrix, JointInfo, Placement, RowLabel, Structure, StructureBeam, StructureSettings,
+};

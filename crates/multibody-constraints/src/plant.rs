@@ -10,18 +10,17 @@
 //! gap drift). Newton with faer's sparse LU (fixed symbolic factorisation); the `T`-dependence
 //! of the joint rows enters the Jacobian by central differences in `ω_mid`.
 
-use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::{Lu, SymbolicLu};
-use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
 use faer::Mat;
-use intrinsic_beam::operators::{halves, quaternion_step, rotation};
+use intrinsic_beam::operators::halves;
+use intrinsic_beam::rotation::{quat_conj, quat_mul, quaternion_step, rotation, rotation_angle};
+use intrinsic_beam::SparseLuSystem;
 use intrinsic_beam::{Kinematics, LoadFrame, Loads, StepInput};
 use nalgebra::{Matrix3, Vector3, Vector4, Vector6};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{MultibodyError, Result};
-use crate::joint::{rows, Freedom, Part, RowKind};
-use crate::structure::{end_load_global, quat_conj, quat_mul, JointInfo, Structure};
+use crate::joint::{rows, RowKind};
+use crate::structure::{end_load_global, JointInfo, Structure};
 
 /// Settings of the plant's time stepping.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -122,12 +121,12 @@ pub struct Plant {
     beam_nnz: Vec<(usize, usize)>,
     joint_nnz: Vec<usize>,
     free_nnz: usize,
-    symbolic: SymbolicSparseColMat<usize>,
-    argsort: Argsort<usize>,
-    symbolic_lu: SymbolicLu<usize>,
     values: Vec<f64>,
-    lu: Option<Lu<usize, f64>>,
-    rhs: Mat<f64>,
+    /// Step matrix with its fixed pattern; `factorized` says whether its last numeric LU is
+    /// that of the current step's Jacobian (reusable).
+    lu: SparseLuSystem,
+    factorized: bool,
+    rhs: Vec<f64>,
     mid: Vec<f64>,
     weight: Vec<f64>,
     residual: Vec<f64>,
@@ -178,12 +177,7 @@ impl Plant {
                 pattern.push((row_of_constraint[r0 + a], structure.x2_end_column(b, e, a)));
             }
         }
-        let pairs: Vec<Pair<usize, usize>> =
-            pattern.iter().map(|&(r, c)| Pair::new(r, c)).collect();
-        let (symbolic, argsort) = SymbolicSparseColMat::try_new_from_indices(dim, dim, &pairs)
-            .map_err(|e| MultibodyError::LinearSolve(format!("sparse pattern: {e:?}")))?;
-        let symbolic_lu = SymbolicLu::try_new(symbolic.as_ref())
-            .map_err(|e| MultibodyError::LinearSolve(format!("symbolic LU: {e:?}")))?;
+        let lu = SparseLuSystem::new(dim, &pattern)?;
         let mut weight = vec![1.0; dim];
         for b in 0..n_beams {
             let beam = &structure.beams()[b].beam;
@@ -218,11 +212,9 @@ impl Plant {
             joint_nnz,
             free_nnz,
             values: vec![0.0; pattern.len()],
-            symbolic,
-            argsort,
-            symbolic_lu,
-            lu: None,
-            rhs: Mat::zeros(dim, 1),
+            lu,
+            factorized: false,
+            rhs: vec![0.0; dim],
             mid: vec![0.0; dim],
             weight,
             residual: vec![0.0; dim],
@@ -357,23 +349,7 @@ impl Plant {
                 j.ends.len()
             )));
         }
-        let free: Vec<usize> = j
-            .axes
-            .iter()
-            .enumerate()
-            .filter(|(_, a)| a.part == Part::Angular && a.freedom == Freedom::Free)
-            .map(|(i, _)| i)
-            .collect();
-        let axis = match axis {
-            Some(a) if free.contains(&a) => a,
-            Some(a) => {
-                return Err(bad(format!("axis {a} is not a free rotation axis (free: {free:?})")))
-            }
-            None if free.len() == 1 => free[0],
-            None => {
-                return Err(bad(format!("{} free rotation axes; say which ({free:?})", free.len())))
-            }
-        };
+        let axis = j.free_rotation_axis(axis)?;
         if let Some(t) = self.torques.iter_mut().find(|t| t.joint == ji && t.axis == axis) {
             t.value = value;
         } else {
@@ -477,7 +453,7 @@ impl Plant {
                 time: self.time,
                 dt,
                 loads: &self.step_loads[b],
-                kinematics: &self.kinematics[b],
+                node_quaternions: &self.kinematics[b].xi,
             };
             sb.beam.step_residual(
                 &input,
@@ -527,7 +503,7 @@ impl Plant {
                 time: self.time,
                 dt,
                 loads: &self.step_loads[b],
-                kinematics: &self.kinematics[b],
+                node_quaternions: &self.kinematics[b].xi,
             };
             let (start, len) = self.beam_nnz[b];
             sb.beam.jacobian_values(
@@ -588,12 +564,14 @@ impl Plant {
         Ok(())
     }
 
-    fn factor(&self) -> Result<Lu<usize, f64>> {
-        let mat =
-            SparseColMat::new_from_argsort(self.symbolic.clone(), &self.argsort, &self.values)
-                .map_err(|e| MultibodyError::LinearSolve(format!("assembly: {e:?}")))?;
-        Lu::try_new_with_symbolic(self.symbolic_lu.clone(), mat.as_ref())
-            .map_err(|e| MultibodyError::LinearSolve(format!("sparse LU: {e:?}")))
+    /// Numeric LU of the assembled step matrix (`values`), reusing the symbolic analysis.
+    fn factor(&mut self) -> Result<()> {
+        self.factorized = false;
+        self.lu
+            .factorize(&self.values)
+            .map_err(|e| MultibodyError::LinearSolve(format!("sparse LU: {e}")))?;
+        self.factorized = true;
+        Ok(())
     }
 
     /// Advances one step of `dt`. Inputs (loads, gravity, torques) are those set now, held
@@ -611,34 +589,32 @@ impl Plant {
         let mut report = StepReport::default();
         let mut converged = false;
         let mut last_update = f64::INFINITY;
-        let mut refresh = self.lu.is_none() || !self.settings.reuse_jacobian;
+        let mut refresh = !self.factorized || !self.settings.reuse_jacobian;
         let mut fresh = false;
         for it in 0..self.settings.max_newton_iterations {
             self.compute_mid(&old, &new)?;
             self.assemble_residual(&old, &new)?;
             if refresh || it >= self.settings.max_newton_iterations / 2 {
                 self.assemble_jacobian(&old, &new)?;
-                self.lu = Some(self.factor()?);
+                self.factor()?;
                 report.factorizations += 1;
                 refresh = !self.settings.reuse_jacobian;
                 fresh = true;
             }
-            let lu = self.lu.as_ref().expect("factorised above");
             for i in 0..self.residual.len() {
-                self.rhs[(i, 0)] = -self.residual[i];
+                self.rhs[i] = -self.residual[i];
             }
-            lu.solve_in_place(self.rhs.as_mut());
+            if self.lu.solve(&mut self.rhs).is_err() {
+                self.factorized = false;
+                return Err(MultibodyError::LinearSolve(format!(
+                    "non-finite Newton update at t = {} (singular step matrix)",
+                    self.time
+                )));
+            }
             let mut du = 0.0f64;
             let mut xmax = 0.0f64;
             for i in 0..new.len() {
-                let d = self.rhs[(i, 0)];
-                if !d.is_finite() {
-                    self.lu = None;
-                    return Err(MultibodyError::LinearSolve(format!(
-                        "non-finite Newton update at t = {} (singular step matrix)",
-                        self.time
-                    )));
-                }
+                let d = self.rhs[i];
                 new[i] += d;
                 du = du.max(d.abs());
                 xmax = xmax.max(new[i].abs());
@@ -757,17 +733,13 @@ impl Plant {
                     quat_mul(&quat_conj(&q(0)), &q(1))
                 };
                 // signed angle about the (single) free rotation axis, else the magnitude
-                let free: Vec<_> = j
-                    .axes
-                    .iter()
-                    .filter(|a| a.part == Part::Angular && a.freedom == Freedom::Free)
-                    .collect();
+                let free = j.free_rotation_axes();
                 let raw = if planar || free.len() == 1 {
-                    let axis = if planar { Vector3::y() } else { free[0].direction };
+                    let axis = if planar { Vector3::y() } else { j.axes[free[0]].direction };
                     let s = Vector3::new(rel[1], rel[2], rel[3]).dot(&axis);
                     2.0 * s.atan2(rel[0])
                 } else {
-                    crate::structure::rotation_angle(&rel)
+                    rotation_angle(&rel)
                 };
                 match previous {
                     Some(p) if planar || free.len() == 1 => {
@@ -847,22 +819,19 @@ impl Plant {
         res?;
         let singular = match self.factor() {
             Err(_) => true,
-            Ok(lu) => {
-                // Solve with a fixed right-hand side and check the residual.
-                let b = Mat::<f64>::from_fn(dim, 1, |i, _| 1.0 + ((i * 7919) % 13) as f64 / 13.0);
-                let mut x = b.clone();
-                lu.solve_in_place(x.as_mut());
-                let mut xmax = 0.0f64;
-                let mut ok = true;
-                for i in 0..dim {
-                    if !x[(i, 0)].is_finite() {
-                        ok = false;
-                    }
-                    xmax = xmax.max(x[(i, 0)].abs());
+            Ok(()) => {
+                // Solve with a fixed right-hand side and check the size of the solution (a
+                // non-finite solution is an error of the solve).
+                let mut x: Vec<f64> =
+                    (0..dim).map(|i| 1.0 + ((i * 7919) % 13) as f64 / 13.0).collect();
+                match self.lu.solve(&mut x) {
+                    Err(_) => true,
+                    Ok(()) => x.iter().fold(0.0f64, |m, v| m.max(v.abs())) > 1e13,
                 }
-                !ok || xmax > 1e13
             }
         };
+        // The check's factorisation is not a step Jacobian: the first step factorises afresh.
+        self.factorized = false;
         if !singular {
             return Ok(());
         }

@@ -7,13 +7,14 @@
 
 use std::collections::HashMap;
 
-use intrinsic_beam::operators::{halves, join, rotation};
+use intrinsic_beam::operators::{halves, join};
+use intrinsic_beam::rotation::{axis_angle, quat_conj, quat_mul, rotation};
 use intrinsic_beam::{Beam, Components, Kinematics};
-use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3, Vector4, Vector6};
+use nalgebra::{Matrix3, Vector3, Vector4, Vector6};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{MultibodyError, Result};
-use crate::joint::{rows, Axis, End, EndRef, Joint, JointKind, Part, RowKind, Support};
+use crate::joint::{rows, Axis, End, EndRef, Freedom, Joint, JointKind, Part, RowKind, Support};
 
 /// Where a beam's `s = 0` end sits in the reference configuration.
 #[derive(Clone, Debug, PartialEq)]
@@ -51,31 +52,6 @@ impl Placement {
     pub fn origin() -> Self {
         Placement::at([0.0; 3], [0.0, 1.0, 0.0], 0.0)
     }
-}
-
-/// Unit quaternion (scalar first) of a rotation by `angle` about `axis` (any length; zero axis
-/// with zero angle gives the identity).
-pub fn axis_angle(axis: &Vector3<f64>, angle: f64) -> Vector4<f64> {
-    let n = axis.norm();
-    if n == 0.0 || angle == 0.0 {
-        return Vector4::new(1.0, 0.0, 0.0, 0.0);
-    }
-    let a = axis / n * (0.5 * angle).sin();
-    Vector4::new((0.5 * angle).cos(), a.x, a.y, a.z)
-}
-
-/// Hamilton product `p ⊗ q` of scalar-first quaternions: `T(p ⊗ q) = T(p) T(q)`.
-pub fn quat_mul(p: &Vector4<f64>, q: &Vector4<f64>) -> Vector4<f64> {
-    let (pw, pv) = (p[0], Vector3::new(p[1], p[2], p[3]));
-    let (qw, qv) = (q[0], Vector3::new(q[1], q[2], q[3]));
-    let w = pw * qw - pv.dot(&qv);
-    let v = qv * pw + pv * qw + pv.cross(&qv);
-    Vector4::new(w, v.x, v.y, v.z)
-}
-
-/// Conjugate (inverse of a unit quaternion).
-pub fn quat_conj(q: &Vector4<f64>) -> Vector4<f64> {
-    Vector4::new(q[0], -q[1], -q[2], -q[3])
 }
 
 /// A beam of a structure: its name, discretisation and placement.
@@ -133,6 +109,29 @@ pub struct JointInfo {
     /// Reference relative rotation (end 0 → end 1) for joints, reference orientation of the
     /// end for supports; joint angles are measured from the identity, i.e. they include it.
     pub reference_relative: Vector4<f64>,
+}
+
+impl JointInfo {
+    /// Indices (into [`JointInfo::axes`]) of the free rotation axes.
+    pub fn free_rotation_axes(&self) -> Vec<usize> {
+        self.axes
+            .iter()
+            .enumerate()
+            .filter(|(_, a)| a.part == Part::Angular && a.freedom == Freedom::Free)
+            .map(|(i, _)| i)
+            .collect()
+    }
+
+    /// The free rotation axis a joint torque acts about: `axis` if it is one of the free
+    /// rotation axes, else (`None`) the joint's only free rotation axis.
+    pub fn free_rotation_axis(&self, axis: Option<usize>) -> Result<usize> {
+        let free = self.free_rotation_axes();
+        match axis {
+            Some(a) if free.contains(&a) => Ok(a),
+            None if free.len() == 1 => Ok(free[0]),
+            _ => Err(MultibodyError::NotFreeRotationAxis { joint: self.name.clone(), axis, free }),
+        }
+    }
 }
 
 /// Label of a constraint row.
@@ -830,12 +829,6 @@ impl Structure {
 pub fn end_load_global(t: &Matrix3<f64>, sign: f64, y: &Vector6<f64>) -> Vector6<f64> {
     let (f, m) = halves(y);
     join(&(t * f * -sign), &(t * m * -sign))
-}
-
-/// Relative rotation angle (rad, in `[0, π]`) of a unit quaternion: `2 acos|ξ0|`.
-pub fn rotation_angle(q: &Vector4<f64>) -> f64 {
-    let uq = UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]));
-    uq.angle()
 }
 
 /// The linearised constraint rows `G` (see [`Structure::constraint_matrix`]).

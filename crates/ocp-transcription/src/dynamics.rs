@@ -55,6 +55,15 @@ pub trait Dynamics: Sync {
         let _ = (x, u, g, gx, fu);
         false
     }
+    /// The stage evaluation of a Lawson trial without sensitivities (a line-search trial needs
+    /// only the states): `g = f(x, u) − Lx` with `L` = [`Dynamics::linear_part`]. Returns
+    /// `false` when not implemented (the default, which writes nothing; the integrator then
+    /// calls [`Dynamics::rhs`] and subtracts `Lx` itself, two products with the linear part
+    /// that a model storing it apart skips). Must agree with `rhs` minus `Lx` up to round-off.
+    fn remainder(&self, x: &[f64], u: &[f64], g: &mut [f64]) -> bool {
+        let _ = (x, u, g);
+        false
+    }
     /// Whether [`Dynamics::weighted_hessian`] is implemented (needed by the exact-Hessian SQP).
     fn has_second_order(&self) -> bool {
         false
@@ -105,6 +114,9 @@ impl<D: Dynamics + ?Sized> Dynamics for &D {
         fu: &mut DMatrix<f64>,
     ) -> bool {
         (**self).remainder_and_jacobians(x, u, g, gx, fu)
+    }
+    fn remainder(&self, x: &[f64], u: &[f64], g: &mut [f64]) -> bool {
+        (**self).remainder(x, u, g)
     }
     fn has_second_order(&self) -> bool {
         (**self).has_second_order()

@@ -142,6 +142,28 @@ impl Ocp {
         Ok(())
     }
 
+    /// The discretised cost `J` (see the type's documentation) of the nodes `s_0 … s_Nc` and
+    /// controls `u_0 … u_{Nc−1}`.
+    pub fn cost(&self, s: &[DVector<f64>], u: &[DVector<f64>]) -> Result<f64> {
+        check_dim("nodes", self.intervals + 1, s.len())?;
+        check_dim("controls", self.intervals, u.len())?;
+        let mut j = 0.0;
+        for (k, sk) in s.iter().enumerate() {
+            check_dim("node", self.nx(), sk.len())?;
+            let e = sk - &self.x_ref;
+            j += 0.5 * self.node_weight(k) * e.dot(&(&self.q * &e));
+            if k == self.intervals {
+                j += 0.5 * e.dot(&(&self.terminal * &e));
+            }
+        }
+        for uk in u {
+            check_dim("control", self.nu(), uk.len())?;
+            let e = uk - &self.u_ref;
+            j += 0.5 * self.interval() * e.dot(&(&self.r * &e));
+        }
+        Ok(j)
+    }
+
     /// Weight `c_k Δt` of node `k` in the trapezoidal state cost.
     pub(crate) fn node_weight(&self, k: usize) -> f64 {
         let dt = self.interval();

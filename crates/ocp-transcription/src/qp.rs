@@ -91,6 +91,18 @@ impl Step {
             mu: vec![DVector::zeros(nx); n + 1],
         }
     }
+
+    /// Copies `other` into `self` (same dimensions; no allocation).
+    pub(crate) fn copy_from(&mut self, other: &Step) {
+        for (a, b) in [(&mut self.ds, &other.ds), (&mut self.du, &other.du)]
+            .into_iter()
+            .chain([(&mut self.lam, &other.lam), (&mut self.mu, &other.mu)])
+        {
+            for (x, y) in a.iter_mut().zip(b) {
+                x.copy_from(y);
+            }
+        }
+    }
 }
 
 /// Why a QP did not give a step.

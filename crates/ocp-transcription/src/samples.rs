@@ -3,6 +3,7 @@
 
 use crate::dynamics::Dynamics;
 use crate::error::{check_dim, invalid, Result};
+use crate::integrator::Integrator;
 use crate::quadratic::QuadraticTerms;
 use nalgebra::DMatrix;
 use std::ops::{Add, Div, Mul, Neg, Sub};
@@ -280,6 +281,66 @@ impl Dynamics for CartPole {
                 out[(j, i)] = v;
             }
         }
+    }
+}
+
+/// Largest relative deviation `|FD − exact| / (1 + |exact|)` of an integrator pass's
+/// sensitivities `A = ∂Φ/∂x`, `B = ∂Φ/∂u` at `(x, u)` from central differences with step
+/// `1e-6` (truncation `~ε²‖Φ'''‖ ≈ 1e-12`, round-off `~1e-16/ε ≈ 1e-10`; a missing term of
+/// order `h` shows as `~1e-2`).
+pub fn fd_sensitivity_error<D: Dynamics + ?Sized>(
+    int: &mut Integrator,
+    model: &D,
+    x: &[f64],
+    u: &[f64],
+) -> Result<f64> {
+    let (nx, nu) = (model.nx(), model.nu());
+    let (mut xe, mut xp, mut xm) = (vec![0.0; nx], vec![0.0; nx], vec![0.0; nx]);
+    let mut a = DMatrix::zeros(nx, nx);
+    let mut b = DMatrix::zeros(nx, nu);
+    int.integrate_with_sensitivities(model, x, u, &mut xe, &mut a, &mut b)?;
+    let eps = 1e-6;
+    let mut err = 0.0_f64;
+    for j in 0..nx + nu {
+        let (mut x1, mut u1, mut x2, mut u2) = (x.to_vec(), u.to_vec(), x.to_vec(), u.to_vec());
+        if j < nx {
+            x1[j] += eps;
+            x2[j] -= eps;
+        } else {
+            u1[j - nx] += eps;
+            u2[j - nx] -= eps;
+        }
+        int.integrate(model, &x1, &u1, &mut xp)?;
+        int.integrate(model, &x2, &u2, &mut xm)?;
+        for i in 0..nx {
+            let an = if j < nx { a[(i, j)] } else { b[(i, j - nx)] };
+            err = err.max(((xp[i] - xm[i]) / (2.0 * eps) - an).abs() / (1.0 + an.abs()));
+        }
+    }
+    Ok(err)
+}
+
+/// The cart-pole whose dynamics return NaN (in `ṗ̇`) once the cart leaves `|p| ≤ 0.5`: a model
+/// with a bounded domain, for checking that non-finite dynamics end a solve in a status, not a
+/// panic. Jacobians are the cart-pole's.
+#[derive(Clone, Debug, Default)]
+pub struct Fragile(pub CartPole);
+
+impl Dynamics for Fragile {
+    fn nx(&self) -> usize {
+        4
+    }
+    fn nu(&self) -> usize {
+        1
+    }
+    fn rhs(&self, x: &[f64], u: &[f64], xdot: &mut [f64]) {
+        self.0.rhs(x, u, xdot);
+        if x[0].abs() > 0.5 {
+            xdot[2] = f64::NAN;
+        }
+    }
+    fn jacobians(&self, x: &[f64], u: &[f64], fx: &mut DMatrix<f64>, fu: &mut DMatrix<f64>) {
+        self.0.jacobians(x, u, fx, fu)
     }
 }
 
@@ -609,6 +670,15 @@ impl Dynamics for ModalLike {
         crate::la::gemv(g, gx, x, 0.5, false);
         crate::la::gemv(g, &self.b, u, 1.0, true);
         fu.copy_from(&self.b);
+        true
+    }
+    fn remainder(&self, x: &[f64], u: &[f64], g: &mut [f64]) -> bool {
+        // g = f − Wx = N(x)x + Bu
+        g.fill(0.0);
+        for &(i, l, j, v) in &self.gamma {
+            g[i] += v * x[l] * x[j];
+        }
+        crate::la::gemv(g, &self.b, u, 1.0, true);
         true
     }
     fn rhs_and_jacobians(

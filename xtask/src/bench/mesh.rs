@@ -8,16 +8,16 @@ use super::plot::{Chart, Series};
 use super::report::{Fmt, Study, Table};
 use super::{orders, timed, Ctx};
 use anyhow::{anyhow, Result};
-use intrinsic_beam::modes::closed_form::{bending, Supports};
-use intrinsic_beam::modes::{family, linear_modes, Family};
+use intrinsic_beam::closed_form::{bending, Supports};
 use intrinsic_beam::samples;
+use intrinsic_beam::{family, linear_modes, Family};
 use intrinsic_beam::{
     Beam, BeamProblem, Components, EndCondition, ImplicitMidpoint, Loads, Mesh, NewtonSettings,
     Section,
 };
 use modal_rom::{BasisSettings, StructureModel};
-use multibody_constraints::joint::{End, EndRef, JointKind, Support};
-use multibody_constraints::structure::{Placement, Structure, StructureBeam, StructureSettings};
+use multibody_constraints::{End, EndRef, JointKind, Support};
+use multibody_constraints::{Placement, Structure, StructureBeam, StructureSettings};
 
 fn cantilever_structure(n: usize) -> Result<Structure> {
     let beam =

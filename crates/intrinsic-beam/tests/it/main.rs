@@ -1,10 +1,10 @@
 //! Integration tests of `intrinsic-beam`: the "must show" items 1–7 on cheap settings
 //! (the `cargo xtask verify` cases run the same studies, some with finer settings).
 
-use intrinsic_beam::modes::closed_form::Supports;
-use intrinsic_beam::modes::Family;
+use intrinsic_beam::closed_form::Supports;
 use intrinsic_beam::samples::{self, ELASTICA_TIP_LOAD_1};
 use intrinsic_beam::studies::*;
+use intrinsic_beam::Family;
 use intrinsic_beam::*;
 use nalgebra::Vector6;
 
@@ -140,7 +140,7 @@ fn bad_input_is_rejected_with_errors() {
     for dt in [0.0, -1e-3, f64::NAN] {
         assert!(matches!(sim.step(dt), Err(BeamError::NonPositiveTime { .. })));
     }
-    let mut rk = intrinsic_beam::rk4::ExplicitRk4::new(
+    let mut rk = intrinsic_beam::ExplicitRk4::new(
         sample.problem.clone(),
         sample.state.clone(),
         sample.kinematics.clone(),
@@ -154,7 +154,7 @@ fn bad_input_is_rejected_with_errors() {
             .unwrap_err();
     assert!(matches!(err, BeamError::NodeOutOfRange { node: 7, last: 4, .. }), "{err}");
     let kin = Kinematics::straight(&beam);
-    let input = StepInput { time: 0.0, dt: 1e-3, loads: &loads, kinematics: &kin };
+    let input = StepInput { time: 0.0, dt: 1e-3, loads: &loads, node_quaternions: &kin.xi };
     let mut res = vec![0.0; beam.n_rows()];
     let x = vec![0.0; beam.dim()];
     assert!(beam.step_residual(&input, &x, &x, &mut res).is_err());
@@ -182,7 +182,7 @@ fn bad_input_is_rejected_with_errors() {
     let kin = Kinematics::straight(&problem.beam);
     let x = vec![0.0; problem.dim()];
     assert!(matches!(
-        intrinsic_beam::rk4::ExplicitRk4::new(problem, x, kin),
+        intrinsic_beam::ExplicitRk4::new(problem, x, kin),
         Err(BeamError::NotAnOde { .. })
     ));
     // planar beams reject out-of-plane section coupling
@@ -251,7 +251,7 @@ fn dead_loads_balance_per_step() {
             time: sim.time() - 2e-3,
             dt: 2e-3,
             loads: &sim.problem().loads,
-            kinematics: &kin,
+            node_quaternions: &kin.xi,
         };
         let p = sim.problem().beam.step_power(&input, &old, sim.state()).unwrap();
         let lhs = sim.energy() - e;
@@ -322,8 +322,12 @@ fn prescribed_end_motion_does_boundary_work() {
         let old = sim.state().to_vec();
         let kin = sim.kinematics().clone();
         sim.step(dt).unwrap();
-        let input =
-            StepInput { time: sim.time() - dt, dt, loads: &sim.problem().loads, kinematics: &kin };
+        let input = StepInput {
+            time: sim.time() - dt,
+            dt,
+            loads: &sim.problem().loads,
+            node_quaternions: &kin.xi,
+        };
         work += dt * sim.problem().beam.step_power(&input, &old, sim.state()).unwrap().boundary;
     }
     assert!(work > 1e-3, "the root did work: {work}");
@@ -386,8 +390,7 @@ fn graded_meshes_conserve_energy_and_converge() {
         sim.step(1e-3).unwrap();
     }
     assert!(((sim.energy() - e0) / e0).abs() < 1e-11);
-    let exact =
-        intrinsic_beam::modes::closed_form::bending(Supports::ClampedFree, 1.0, 1.0, 1.0, 1)[0];
+    let exact = intrinsic_beam::closed_form::bending(Supports::ClampedFree, 1.0, 1.0, 1.0, 1)[0];
     let mut errors = Vec::new();
     for n in [16, 32, 64] {
         let beam = Beam::new(
@@ -399,7 +402,7 @@ fn graded_meshes_conserve_energy_and_converge() {
         let problem =
             BeamProblem::new(beam, EndCondition::Clamped, EndCondition::Free, Loads::none())
                 .unwrap();
-        let modes = intrinsic_beam::modes::linear_modes(&problem).unwrap();
+        let modes = intrinsic_beam::linear_modes(&problem).unwrap();
         let omega = modes.iter().find(|m| m.omega > 1.0).unwrap().omega;
         errors.push((omega - exact).abs() / exact);
     }

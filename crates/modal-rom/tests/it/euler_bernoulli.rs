@@ -7,12 +7,12 @@
 //! spurious `ω² ≈ 1e20`. These tests hold the route to the closed form, to its order, to the
 //! beam crate's independent dense route, and to the exact scaling of the discrete model.
 
-use intrinsic_beam::modes::closed_form::{bending, Supports};
-use intrinsic_beam::modes::{family, linear_modes, Family};
+use intrinsic_beam::closed_form::{bending, Supports};
+use intrinsic_beam::{family, linear_modes, Family};
 use intrinsic_beam::{samples, Beam, BeamProblem, Components, EndCondition, Loads, Mesh, Section};
 use modal_rom::{BasisSettings, ModalBasis, ModeKind, StructureModel};
-use multibody_constraints::joint::{End, EndRef, JointKind, Support};
-use multibody_constraints::structure::{Placement, Structure, StructureBeam, StructureSettings};
+use multibody_constraints::{End, EndRef, JointKind, Support};
+use multibody_constraints::{Placement, Structure, StructureBeam, StructureSettings};
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed};
 
@@ -237,7 +237,7 @@ proptest! {
 #[test]
 fn rotated_coordinates_give_the_same_modes() {
     use faer::Mat;
-    use modal_rom::eigen::{solve, EigenSettings, SecondOrderProblem};
+    use modal_rom::{solve_second_order as solve, EigenSettings, SecondOrderProblem};
     for (support, n) in [(Some(JointKind::Weld), 40usize), (None, 33), (Some(JointKind::Ball), 57)]
     {
         let s = structure(samples::euler_bernoulli_section(), 1.0, n, Components::Planar, support);
@@ -280,7 +280,7 @@ fn rotated_coordinates_give_the_same_modes() {
 #[test]
 fn massless_mechanism_is_an_error() {
     use faer::Mat;
-    use modal_rom::eigen::{solve, EigenSettings, SecondOrderProblem};
+    use modal_rom::{solve_second_order as solve, EigenSettings, SecondOrderProblem};
     // coordinate 0: mass 1 on a spring (D = 1, B2 = 1); coordinate 1: massless, no strain;
     // once alone (its own block), once tied to coordinate 0 by a velocity row x0 − x1 = 0 …
     let b1 = Mat::from_fn(2, 2, |i, j| if i == 0 && j == 0 { 1.0 } else { 0.0 });

@@ -3,11 +3,11 @@
 
 use intrinsic_beam::Section;
 use intrinsic_beam::{Beam, Components, LoadFrame, Mesh};
-use multibody_constraints::joint::{End, EndRef, Joint, JointKind, Support};
-use multibody_constraints::nullspace::null_space;
+use multibody_constraints::null_space;
 use multibody_constraints::samples;
-use multibody_constraints::structure::{Placement, Structure, StructureBeam, StructureSettings};
+use multibody_constraints::{End, EndRef, Joint, JointKind, Support};
 use multibody_constraints::{MultibodyError, Plant, PlantSettings};
+use multibody_constraints::{Placement, Structure, StructureBeam, StructureSettings};
 use nalgebra::{Vector3, Vector6};
 
 /// Link 1 at rest, link 2 spinning about the elbow at `rate`: consistent with both hinges.

@@ -1,7 +1,7 @@
 //! Integrator sensitivities and second derivatives against central finite differences.
 
 use nalgebra::DMatrix;
-use ocp_transcription::samples::{CartPole, LinearModel, ModalLike};
+use ocp_transcription::samples::{self, CartPole, LinearModel, ModalLike};
 use ocp_transcription::{Dynamics, Integrator, IntegratorKind, IntegratorSettings};
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed};
@@ -30,32 +30,7 @@ pub(crate) fn fd_sensitivity_error_of<D: Dynamics>(
     x: &[f64],
     u: &[f64],
 ) -> f64 {
-    let (nx, nu) = (model.nx(), model.nu());
-    let mut xe = vec![0.0; nx];
-    let mut a = DMatrix::zeros(nx, nx);
-    let mut b = DMatrix::zeros(nx, nu);
-    int.integrate_with_sensitivities(model, x, u, &mut xe, &mut a, &mut b).unwrap();
-    let eps = 1e-6;
-    let mut err = 0.0_f64;
-    let (mut xp, mut xm) = (vec![0.0; nx], vec![0.0; nx]);
-    for j in 0..nx + nu {
-        let (mut x1, mut u1, mut x2, mut u2) = (x.to_vec(), u.to_vec(), x.to_vec(), u.to_vec());
-        if j < nx {
-            x1[j] += eps;
-            x2[j] -= eps;
-        } else {
-            u1[j - nx] += eps;
-            u2[j - nx] -= eps;
-        }
-        int.integrate(model, &x1, &u1, &mut xp).unwrap();
-        int.integrate(model, &x2, &u2, &mut xm).unwrap();
-        for i in 0..nx {
-            let fd = (xp[i] - xm[i]) / (2.0 * eps);
-            let an = if j < nx { a[(i, j)] } else { b[(i, j - nx)] };
-            err = err.max((fd - an).abs() / (1.0 + an.abs()));
-        }
-    }
-    err
+    samples::fd_sensitivity_error(int, model, x, u).unwrap()
 }
 
 /// Exact Hessian of λᵀΦ against central differences of the exact gradient Φ_zᵀλ.
@@ -310,4 +285,38 @@ fn rhs_and_jacobians_agree_with_separate_calls() {
     };
     check(&m, &x, &u);
     check(&c, &[0.1, 0.5, -0.3, 0.2], &[2.0]);
+}
+
+/// A Lawson trial without sensitivities uses the model's `remainder` (`f − Lx` without the
+/// products with `L`): it agrees with `rhs − Lx` and with the state of the pass with
+/// sensitivities to round-off (‖x‖ ≈ 1, tolerance 1e-12 relative; a missing term is O(1)).
+#[test]
+fn lawson_trial_with_the_model_remainder_matches_the_sensitivity_pass() {
+    use ocp_transcription::samples::{ModalLike, SplitMix64};
+    let m = ModalLike::rom_like(61, 5, 175.0, 0.1, 7).unwrap();
+    let (nx, nu) = (m.nx(), m.nu());
+    let w = m.linear_part().unwrap();
+    let mut rng = SplitMix64::new(5);
+    let mut int =
+        Integrator::new(&m, &IntegratorSettings::new(IntegratorKind::LawsonRk4, 16), 0.25).unwrap();
+    for _ in 0..4 {
+        let x: Vec<f64> = (0..nx).map(|_| rng.uniform(-1.0, 1.0)).collect();
+        let u: Vec<f64> = (0..nu).map(|_| rng.uniform(-1.0, 1.0)).collect();
+        let (mut g, mut f) = (vec![f64::NAN; nx], vec![0.0; nx]);
+        assert!(m.remainder(&x, &u, &mut g));
+        m.rhs(&x, &u, &mut f);
+        let wx = &w * nalgebra::DVector::from_column_slice(&x);
+        let scale = f.iter().fold(1.0_f64, |a, v| a.max(v.abs()));
+        for i in 0..nx {
+            assert!((g[i] - (f[i] - wx[i])).abs() <= 1e-12 * scale, "{i}");
+        }
+        let (mut x1, mut x2) = (vec![0.0; nx], vec![0.0; nx]);
+        int.integrate(&m, &x, &u, &mut x1).unwrap();
+        let (mut a, mut b) = (DMatrix::zeros(nx, nx), DMatrix::zeros(nx, nu));
+        int.integrate_with_sensitivities(&m, &x, &u, &mut x2, &mut a, &mut b).unwrap();
+        let n = x2.iter().fold(1.0_f64, |a, v| a.max(v.abs()));
+        for i in 0..nx {
+            assert!((x1[i] - x2[i]).abs() <= 1e-12 * n, "{i}: {} vs {}", x1[i], x2[i]);
+        }
+    }
 }

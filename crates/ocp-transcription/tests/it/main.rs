@@ -1,5 +1,6 @@
 //! Integration tests of `ocp-transcription` (one binary).
 
 mod adaptive;
+mod globalisation;
 mod integrators;
 mod sqp;

@@ -2,7 +2,7 @@
 //! and the failure statuses.
 
 use nalgebra::{DMatrix, DVector};
-use ocp_transcription::samples::{CartPole, LinearModel};
+use ocp_transcription::samples::{CartPole, Fragile, LinearModel};
 use ocp_transcription::{
     Dynamics, Globalisation, HessianApproximation, Integrator, IntegratorKind, IntegratorSettings,
     Ocp, QpForm, SqpMode, SqpSettings, SqpSolver, SqpStatus,
@@ -139,26 +139,6 @@ fn cartpole_swing_up_converges_with_active_bounds() {
             }
             assert!(stats.iterations < 45, "exact Hessian took {} iterations", stats.iterations);
         }
-    }
-}
-
-/// A model that returns NaN once the cart leaves |p| < 0.5.
-struct Fragile(CartPole);
-impl Dynamics for Fragile {
-    fn nx(&self) -> usize {
-        4
-    }
-    fn nu(&self) -> usize {
-        1
-    }
-    fn rhs(&self, x: &[f64], u: &[f64], xdot: &mut [f64]) {
-        self.0.rhs(x, u, xdot);
-        if x[0].abs() > 0.5 {
-            xdot[2] = f64::NAN;
-        }
-    }
-    fn jacobians(&self, x: &[f64], u: &[f64], fx: &mut DMatrix<f64>, fu: &mut DMatrix<f64>) {
-        self.0.jacobians(x, u, fx, fu)
     }
 }
 

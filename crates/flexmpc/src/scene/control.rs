@@ -1,0 +1,318 @@
+//! `[modes]`, `[controller]`, `[scenario]` and `[sweep]` → the closed-loop setup.
+
+use multibody_constraints::PlantSettings;
+use multibody_constraints::Structure;
+use serde::de::{value, IntoDeserializer};
+use serde::Deserialize;
+
+use super::error::{Ctx, Owner, SceneError};
+use super::spec::SceneSpec;
+use super::Control;
+
+/// `[modes] count` and `angles`, checked.
+pub(super) fn modes_of(ctx: &Ctx<'_>, spec: &SceneSpec) -> Result<(usize, Vec<f64>), SceneError> {
+    let Some(m) = &spec.modes else { return Ok((8, Vec::new())) };
+    let span = Some(m.span());
+    let ms = m.get_ref();
+    let count = ms.count.unwrap_or(8);
+    if count == 0 {
+        return ctx.err(span, "modes.count", "must be at least 1");
+    }
+    let angles = ms.angles.clone().unwrap_or_default();
+    if let Some(a) = angles.iter().find(|a| !a.is_finite()) {
+        return ctx.err(span, "modes.angles", format!("angles (deg) must be finite, got {a}"));
+    }
+    if ms.angles.as_ref().is_some_and(|a| a.is_empty()) {
+        return ctx.err(span, "modes.angles", "give at least one angle (deg), e.g. [0, 45, 90]");
+    }
+    if !angles.is_empty() && !spec.beams.iter().any(|b| b.get_ref().attach.is_some()) {
+        return ctx.err(
+            span,
+            "modes.angles",
+            "reference angles need a beam placed by a joint (`attach = { joint = .. }`)",
+        );
+    }
+    Ok((count, angles))
+}
+
+/// The controller model's mode set of `[modes]` (exactly one of its four forms).
+fn selection_of(ctx: &Ctx<'_>, spec: &SceneSpec) -> Result<modal_rom::ModeSelection, SceneError> {
+    use modal_rom::{KindCounts, ModeSelection};
+    const NEED: &str = "the controller model needs a mode set in [modes]: one of \
+                        `selection = \"paper-2d\"|\"paper-3d\"`, `kinds = { rigid = 2, axial = 4, \
+                        bending_e2 = 4 }`, `lowest = n` or `indices = [..]`";
+    let Some(m) = &spec.modes else {
+        let span = spec.scenario.as_ref().map(|s| s.span());
+        return ctx.err(span, "modes", NEED);
+    };
+    let span = Some(m.span());
+    let ms = m.get_ref();
+    let given =
+        [ms.selection.is_some(), ms.kinds.is_some(), ms.lowest.is_some(), ms.indices.is_some()];
+    match given.iter().filter(|g| **g).count() {
+        0 => return ctx.err(span, "modes.selection", NEED),
+        1 => {}
+        _ => {
+            return ctx.err(
+                span,
+                "modes.selection",
+                "give only one of `selection`, `kinds`, `lowest`, `indices`",
+            )
+        }
+    }
+    if let Some(p) = ms.selection {
+        return Ok(p.selection());
+    }
+    if let Some(k) = ms.kinds {
+        let total = k.rigid + k.axial + k.torsion + k.bending_e2 + k.bending_e3 + k.mixed;
+        if total == 0 {
+            return ctx.err(span, "modes.kinds", "select at least one mode");
+        }
+        return Ok(ModeSelection::ByKind(KindCounts {
+            rigid: k.rigid,
+            axial: k.axial,
+            torsion: k.torsion,
+            bending_e2: k.bending_e2,
+            bending_e3: k.bending_e3,
+            mixed: k.mixed,
+        }));
+    }
+    if let Some(n) = ms.lowest {
+        if n == 0 {
+            return ctx.err(span, "modes.lowest", "must be at least 1");
+        }
+        return Ok(ModeSelection::Lowest(n));
+    }
+    match &ms.indices {
+        Some(v) if !v.is_empty() => Ok(ModeSelection::Indices(v.clone())),
+        _ => ctx.err(span, "modes.indices", "give at least one mode index"),
+    }
+}
+
+/// A `[controller]` value behind an on/off switch (`retry` / `retry_relaxation`,
+/// `joint_limit` / `plan_joint_limit_deg`): `None` when neither is given (keep the default),
+/// `Some(None)` when switched off, `Some(Some(v))` for a value (its range is the library's
+/// rule); a value given with the switch off is an error naming both.
+fn switched(
+    ctx: &Ctx<'_>,
+    span: Option<std::ops::Range<usize>>,
+    (switch, on): (&str, Option<bool>),
+    field: &str,
+    value: Option<f64>,
+) -> Result<Option<Option<f64>>, SceneError> {
+    match (on, value) {
+        (Some(false), Some(_)) => ctx.err(
+            span,
+            format!("controller.{field}"),
+            format!("is unused with `{switch} = false`; remove one of them"),
+        ),
+        (Some(false), None) => Ok(Some(None)),
+        (_, Some(v)) => Ok(Some(Some(v))),
+        (_, None) => Ok(None),
+    }
+}
+
+/// `nmpc` / `lmpc` (the names of `[controller] kind`).
+pub fn controller_kind(name: &str) -> Option<mpc::ControllerKind> {
+    mpc::ControllerKind::deserialize(IntoDeserializer::<value::Error>::into_deserializer(name)).ok()
+}
+
+/// `fe` / `rom` (the names of `[scenario] plant`).
+pub fn plant_kind(name: &str) -> Option<mpc::PlantKind> {
+    mpc::PlantKind::deserialize(IntoDeserializer::<value::Error>::into_deserializer(name)).ok()
+}
+
+/// `[controller]` → `mpc::ControllerSettings` and the weights part of `mpc::MpcSettings`
+/// (unset keys keep the library's defaults; the library's `validate` checks the values).
+fn controller_of(
+    ctx: &Ctx<'_>,
+    spec: &SceneSpec,
+    m: &mut mpc::MpcSettings,
+) -> Result<mpc::ControllerSettings, SceneError> {
+    let mut c = mpc::ControllerSettings::default();
+    let Some(cs) = &spec.controller else { return Ok(c) };
+    let span = Some(cs.span());
+    let cs = cs.get_ref();
+    fn set<T>(slot: &mut T, v: Option<T>) {
+        if let Some(v) = v {
+            *slot = v;
+        }
+    }
+    set(&mut c.kind, cs.kind);
+    set(&mut c.real_time_iteration, cs.real_time_iteration);
+    set(
+        &mut c.globalisation,
+        cs.line_search.map(|on| {
+            if on {
+                ocp_transcription::Globalisation::merit()
+            } else {
+                ocp_transcription::Globalisation::FullStep
+            }
+        }),
+    );
+    set(&mut c.max_iterations, cs.max_iterations);
+    set(&mut c.kkt_tolerance, cs.kkt_tolerance);
+    set(&mut c.accept_violation, cs.accept_violation);
+    set(&mut c.levenberg_marquardt, cs.levenberg_marquardt);
+    set(&mut c.retry_levenberg_marquardt, cs.retry_levenberg_marquardt);
+    set(&mut c.fallback_to_lmpc, cs.fallback_to_lmpc);
+    set(
+        &mut c.retry_relaxation,
+        switched(ctx, span.clone(), ("retry", cs.retry), "retry_relaxation", cs.retry_relaxation)?,
+    );
+    set(
+        &mut c.plan_joint_limit_deg,
+        switched(
+            ctx,
+            span.clone(),
+            ("joint_limit", cs.joint_limit),
+            "plan_joint_limit_deg",
+            cs.plan_joint_limit_deg,
+        )?,
+    );
+    set(&mut c.integrator.kind, cs.integrator.map(|i| i.kind()));
+    set(&mut c.integrator.substeps, cs.substeps);
+    if let Some(w) = &cs.weights {
+        let w = w.get_ref();
+        set(&mut m.kx1, w.kx1);
+        set(&mut m.kx2, w.kx2);
+        set(&mut m.k_dxi, w.k_dxi);
+        set(&mut m.ku, w.ku);
+        set(&mut m.k_xi_rigid, w.k_xi_rigid);
+        set(&mut m.k_xi_elastic, w.k_xi_elastic);
+        set(&mut m.u_max, w.u_max);
+    }
+    c.validate().or_else(|e| ctx.library(spec, Owner::Controller, e))?;
+    Ok(c)
+}
+
+/// `[scenario]`, `[controller]`, `[sweep]` and the mode set → the closed-loop setup on
+/// `structure` with the plant settings of `[run]`; every value is checked by the library's
+/// `validate` ([`mpc::Scenario::validate`], [`mpc::ControllerSettings::validate`]).
+pub(super) fn control_of(
+    ctx: &Ctx<'_>,
+    spec: &SceneSpec,
+    structure: &Structure,
+    plant: PlantSettings,
+    controls: Vec<mpc::ControlInput>,
+    name: &str,
+) -> Result<Option<Control>, SceneError> {
+    let Some(sc) = &spec.scenario else {
+        for (what, present, span) in [
+            ("controller", spec.controller.is_some(), spec.controller.as_ref().map(|c| c.span())),
+            ("sweep", spec.sweep.is_some(), spec.sweep.as_ref().map(|c| c.span())),
+        ] {
+            if present {
+                return ctx.err(
+                    span,
+                    what,
+                    format!("[{what}] needs a [scenario] section (axis, omega0, …)"),
+                );
+            }
+        }
+        return Ok(None);
+    };
+    let span = Some(sc.span());
+    let ss = sc.get_ref();
+    if spec.gravity.is_some() {
+        return ctx.err(
+            None,
+            "gravity",
+            "a scene with [scenario] has no gravity (the closed loop's plant has none)",
+        );
+    }
+    let selection = selection_of(ctx, spec)?;
+    let mut m = mpc::MpcSettings::default();
+    if let Some(v) = ss.horizon {
+        m.horizon = v;
+    }
+    if let Some(v) = ss.sampling {
+        m.sampling = v;
+    }
+    if let Some(v) = ss.intervals {
+        m.intervals = v;
+    }
+    let controller = controller_of(ctx, spec, &mut m)?;
+    let omega0 = ss.omega0.unwrap_or(1.0);
+    if !omega0.is_finite() {
+        return ctx.err(span, "scenario.omega0", format!("must be finite, got {omega0}"));
+    }
+    // the first support by default; an unknown name is the library's error
+    let root = ss
+        .root
+        .clone()
+        .or_else(|| structure.joints().iter().find(|j| j.ground).map(|j| j.name.clone()));
+    let scenario = mpc::Scenario {
+        name: name.to_string(),
+        structure: structure.clone(),
+        inputs: controls,
+        selection,
+        rom_options: modal_rom::RomOptions::default(),
+        omega_direction: ss.axis,
+        center: ss.center.unwrap_or([0.0; 3]),
+        root: root.unwrap_or_default(),
+        duration: ss.duration.unwrap_or(7.5),
+        output_interval: ss.output_interval.unwrap_or(0.05),
+        snapshot_interval: ss.snapshot_interval.unwrap_or(0.25),
+        plant,
+        rom_plant_substeps: ss.rom_plant_substeps.unwrap_or(16),
+        mpc: m,
+    };
+    scenario.validate().or_else(|e| ctx.library(spec, Owner::Scenario, e))?;
+    let (sweep_omegas, sweep_controllers) = match &spec.sweep {
+        None => (Vec::new(), vec![controller.kind]),
+        Some(sw) => {
+            let span = Some(sw.span());
+            let s = sw.get_ref();
+            if s.omega0.is_empty() {
+                return ctx.err(span, "sweep.omega0", "give at least one ω0 (rad/s)");
+            }
+            if let Some(w) = s.omega0.iter().find(|w| !w.is_finite()) {
+                return ctx.err(span, "sweep.omega0", format!("must be finite, got {w}"));
+            }
+            let kinds = match &s.controllers {
+                None => vec![controller.kind],
+                Some(v) if v.is_empty() => {
+                    return ctx.err(span, "sweep.controllers", "give at least one of nmpc, lmpc")
+                }
+                Some(v) => v.clone(),
+            };
+            (s.omega0.clone(), kinds)
+        }
+    };
+    Ok(Some(Control {
+        scenario,
+        controller,
+        plant: ss.plant.unwrap_or(mpc::PlantKind::Fe),
+        omega0,
+        sweep_omegas,
+        sweep_controllers,
+    }))
+}
+
+/// The setup that `mpc`, `sweep` and `ocp` build first ([`mpc::Setup::new`]: the modes, the
+/// mode set, the reduced model with the control inputs, the weights); a mode set that the
+/// structure's modes cannot fill is an error at the `[modes]` key that asked for it.
+pub(super) fn setup_of(
+    ctx: &Ctx<'_>,
+    spec: &SceneSpec,
+    control: &Control,
+) -> Result<mpc::Setup, SceneError> {
+    use modal_rom::ModalError;
+    mpc::Setup::new(&control.scenario).or_else(|e| match &e {
+        mpc::MpcError::Modal(ModalError::NotEnoughModes { .. } | ModalError::Invalid { .. }) => {
+            let m = spec.modes.as_ref();
+            let key = m.map_or("modes", |m| {
+                let m = m.get_ref();
+                match (&m.selection, &m.kinds, &m.lowest) {
+                    (Some(_), _, _) => "modes.selection",
+                    (_, Some(_), _) => "modes.kinds",
+                    (_, _, Some(_)) => "modes.lowest",
+                    _ => "modes.indices",
+                }
+            });
+            ctx.err(m.map(|m| m.span()), key, e.to_string())
+        }
+        _ => ctx.library(spec, Owner::Scenario, e),
+    })
+}

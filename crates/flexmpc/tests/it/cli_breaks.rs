@@ -1,0 +1,141 @@
+//! The `flexmpc` binary under conditions a researcher meets: a closed pipe, `RUST_BACKTRACE`,
+//! names that need quoting in CSV, a mesh too large for the dense modal basis. None of them
+//! may panic.
+
+use std::path::PathBuf;
+use std::process::{Command, Stdio};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn flexmpc() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_flexmpc"));
+    c.current_dir(root());
+    c.env_remove("RUST_BACKTRACE");
+    c
+}
+
+fn scratch(tag: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("breaks-{tag}"));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// `flexmpc modes … | head -1`: the reader closes the pipe before flexmpc writes; the run ends
+/// quietly (exit 0, nothing on stderr), with and without `--json`.
+#[test]
+fn closed_stdout_ends_quietly() {
+    let dir = scratch("pipe");
+    for json in [false, true] {
+        let mut c = flexmpc();
+        c.args(["modes", "scenes/paper-2d-modes.toml", "--out"]).arg(dir.join("modes"));
+        if json {
+            c.arg("--json");
+        }
+        let mut child =
+            c.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("the binary runs");
+        // close the read end at once: every write to stdout meets a broken pipe
+        drop(child.stdout.take());
+        let o = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!err.contains("panicked"), "json = {json}: {err}");
+        assert_eq!(o.status.code(), Some(0), "json = {json}: {err}");
+        assert!(err.is_empty(), "json = {json}: stderr `{err}`");
+    }
+}
+
+/// With `RUST_BACKTRACE=1` a user error is still its message chain, one line each: no stack
+/// trace.
+#[test]
+fn user_errors_have_no_backtrace() {
+    let dir = scratch("user-error");
+    let bad = dir.join("bad.toml");
+    std::fs::write(&bad, "components = \"planar\"\n[[beams]]\nname = \"b\"\nlength = -1.0\n")
+        .unwrap();
+    for args in [
+        vec!["check".to_string(), "scenes/no-such-scene.toml".to_string()],
+        vec!["check".to_string(), bad.display().to_string()],
+        vec!["mpc".to_string(), "scenes/cantilever.toml".to_string()],
+    ] {
+        for bt in ["1", "full"] {
+            let o = flexmpc().env("RUST_BACKTRACE", bt).args(&args).output().unwrap();
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert_eq!(o.status.code(), Some(1), "{args:?}: {err}");
+            assert!(err.starts_with("error: "), "{args:?}: {err}");
+            assert!(!err.to_lowercase().contains("backtrace"), "{args:?}: {err}");
+            let lines = err.lines().count();
+            assert!(lines <= 4, "{args:?}: {lines} lines: {err}");
+        }
+    }
+}
+
+/// A beam named `my,beam` keeps the CSV rectangular: the header field is quoted, every row
+/// has as many fields as the header, and the column is found by its name.
+#[test]
+fn names_with_commas_keep_the_csv_rectangular() {
+    let dir = scratch("comma");
+    let text =
+        std::fs::read_to_string(root().join("crates/flexmpc/tests/fixtures/cantilever-10.toml"))
+            .unwrap()
+            .replace("name = \"beam\"", "name = \"my,beam\"")
+            .replace("end = \"beam:start\"", "end = \"my,beam:start\"")
+            .replace("beam = \"beam\"", "beam = \"my,beam\"");
+    let scene = dir.join("comma.toml");
+    std::fs::write(&scene, text).unwrap();
+    let out = dir.join("out");
+    let o = flexmpc()
+        .args(["--quiet", "simulate"])
+        .arg(&scene)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let mut r = csv::Reader::from_path(out.join("timeseries.csv")).unwrap();
+    let header = r.headers().unwrap().clone();
+    let col = header.iter().position(|h| h == "my,beam.end.z").expect("the column by its name");
+    let mut rows = 0;
+    for rec in r.records() {
+        let rec = rec.expect("a well-formed row");
+        assert_eq!(rec.len(), header.len());
+        let z: f64 = rec[col].parse().unwrap();
+        assert!(z.is_finite() && z <= 0.0, "the tip moves down under its load: {z}");
+        rows += 1;
+    }
+    assert_eq!(rows, 11, "t = 0 and every 5 ms to 0.05 s");
+}
+
+/// `modes` on a mesh that `check` accepts but whose dense modal basis would need hundreds of
+/// gigabytes is refused before anything is allocated: exit 1, the estimate and the cap in
+/// one message, no panic.
+#[test]
+fn huge_mesh_modes_is_refused_with_the_cap() {
+    let dir = scratch("huge");
+    let text = std::fs::read_to_string(root().join("scenes/paper-2d-modes.toml"))
+        .unwrap()
+        .replace("elements = 50", "elements = 50000");
+    let scene = dir.join("huge.toml");
+    std::fs::write(&scene, text).unwrap();
+    let o = flexmpc().args(["check", "--json"]).arg(&scene).output().unwrap();
+    assert!(o.status.success(), "check accepts it: {}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["modal_basis_fits"], false, "check warns: {v}");
+    let o =
+        flexmpc().arg("modes").arg(&scene).arg("--out").arg(dir.join("modes")).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(!err.contains("panicked") && !err.contains("memory allocation"), "{err}");
+    assert!(err.contains("100000 elements"), "{err}");
+    assert!(err.contains("the cap is 4.3 GB"), "{err}");
+    assert!(err.contains("huge.toml"), "names the scene: {err}");
+    // the estimate: 6 dense matrices of ~300k² doubles, about 4 TB
+    let gb: f64 = err
+        .split("about ")
+        .nth(1)
+        .and_then(|r| r.split(" GB").next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no estimate in GB: {err}"));
+    assert!(gb > 1000.0, "{gb} GB");
+}

@@ -1,0 +1,10 @@
+//! flexmpc's integration tests, one binary: the CLI end to end, its failure modes, every
+//! shipped and malformed scene, reproducible outputs, the report in headless Chromium and the
+//! ParaView export.
+
+mod cli;
+mod cli_breaks;
+mod report_chromium;
+mod reproducible;
+mod scenes;
+mod vtk_export;

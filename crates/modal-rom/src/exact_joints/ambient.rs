@@ -1,0 +1,434 @@
+//! Per-link fields and their Galerkin operators (theory §10.2).
+//!
+//! A [`LinkBasis`] holds velocity fields `Φ1` and force fields `Φ2`, each supported on one link
+//! only, in that link's local components (the FE unknowns `X1`, `X2` of theory.md §2), with
+//! `Φ1ᵀB1Φ1 = I` and `Φ2ᵀB2Φ2 = I`. The link fields are the per-link pieces of given
+//! structure fields (constrained modes at one or several reference angles), optionally
+//! with the link's six rigid motions, orthonormalised link by link with rank truncation; the
+//! force fields span the strain images `B2⁻¹Dᵀφ1` of the velocity fields (the paper's
+//! `φ2 ∝ B2⁻¹Dᵀφ1`, split per link). The Galerkin operators on them are those of (14)–(20):
+//!
+//! ```text
+//!   f1 = Σ q1 + W q2 − q1_l Γ1^l q1 − q2_l Γ2^l q2 + B_u u,   f2 = −Wᵀ q1 + q2_l (Γ2^l)ᵀ q1,
+//!   W = Φ1ᵀ D Φ2,  Σ = Φ1ᵀ D_damp Φ1,  Γ1^l_ij = ⟨φ1i, L1(φ1j) M φ1l⟩,  Γ2^l_ij = ⟨φ1i, L2(φ2j) C φ2l⟩,
+//! ```
+//!
+//! without the joints' reactions: those enter the reduced model as workless constraint
+//! forces (theory §10.3). `q1ᵀf1 + q2ᵀf2 = q1ᵀΣq1 + q1ᵀB_u u` for every `(q1, q2)`.
+
+use crate::error::{invalid, shape, ModalError, Result};
+use crate::layout::Layout;
+use crate::rom::Input;
+use crate::structure::StructureModel;
+use crate::tensor::SparseTensor3;
+use faer::linalg::solvers::Solve;
+use faer::{Mat, MatRef, Side};
+use intrinsic_beam::operators::{l1_times, l2_times};
+use intrinsic_beam::rotation::rotation;
+use nalgebra::{Vector3, Vector6};
+
+/// Settings of [`LinkBasis::from_fields`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct LinkBasisSettings {
+    /// Add each link's rigid motions (translations and rotations about its start node) to
+    /// its fields. Default `true`.
+    pub rigid_links: bool,
+    /// A per-link field direction is kept when its Gram eigenvalue exceeds this fraction of
+    /// the largest. Default `1e-10`; range `(0, 1e-4]`.
+    pub rank_tolerance: f64,
+}
+
+impl Default for LinkBasisSettings {
+    fn default() -> Self {
+        LinkBasisSettings { rigid_links: true, rank_tolerance: 1e-10 }
+    }
+}
+
+impl LinkBasisSettings {
+    /// Checks the documented ranges.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.rank_tolerance > 0.0 && self.rank_tolerance <= 1e-4) {
+            return Err(invalid("rank_tolerance", self.rank_tolerance, "must lie in (0, 1e-4]"));
+        }
+        Ok(())
+    }
+}
+
+/// Per-link orthonormal velocity and force fields (theory §10.2).
+#[derive(Clone, Debug)]
+pub struct LinkBasis {
+    pub(crate) layout: Layout,
+    /// `n1 × na`, `B1`-orthonormal, columns grouped by link.
+    pub(crate) phi1: Mat<f64>,
+    /// `n2 × nb`, `B2`-orthonormal, columns grouped by link.
+    pub(crate) phi2: Mat<f64>,
+    /// Column range of each link in `phi1`.
+    pub(crate) cols1: Vec<(usize, usize)>,
+    /// Column range of each link in `phi2`.
+    pub(crate) cols2: Vec<(usize, usize)>,
+    pub(crate) b1: Mat<f64>,
+    pub(crate) b2: Mat<f64>,
+    pub(crate) d: Mat<f64>,
+}
+
+/// `B`-orthonormal basis of the columns of `f` (rows `r0..r1` of the block `b`), by the
+/// eigenvectors of the Gram matrix, largest first, eigenvalues below `tol · max` dropped;
+/// sign fixed so that the largest |entry| of each column is positive.
+fn orthonormalise(f: &Mat<f64>, b: MatRef<'_, f64>, tol: f64, what: &str) -> Result<Mat<f64>> {
+    if f.ncols() == 0 {
+        return Ok(Mat::zeros(f.nrows(), 0));
+    }
+    let bf = b * f;
+    let gram = f.transpose() * &bf;
+    let gram = Mat::from_fn(gram.nrows(), gram.ncols(), |i, j| 0.5 * (gram[(i, j)] + gram[(j, i)]));
+    let eig = gram.self_adjoint_eigen(Side::Lower).map_err(|e| ModalError::Numerical {
+        stage: format!("Gram matrix of the {what} fields"),
+        reason: format!("{e:?}"),
+    })?;
+    let s = eig.S().column_vector();
+    let u = eig.U();
+    let n = s.nrows();
+    let smax = (0..n).map(|i| s[i]).fold(0.0f64, f64::max);
+    let mut keep: Vec<usize> = (0..n).filter(|&i| smax > 0.0 && s[i] > tol * smax).collect();
+    keep.sort_by(|&a, &b| s[b].total_cmp(&s[a]).then(a.cmp(&b)));
+    let mut out = Mat::<f64>::zeros(f.nrows(), keep.len());
+    for (c, &e) in keep.iter().enumerate() {
+        let scale = 1.0 / s[e].sqrt();
+        for j in 0..f.ncols() {
+            let w = u[(j, e)] * scale;
+            if w == 0.0 {
+                continue;
+            }
+            for i in 0..f.nrows() {
+                out[(i, c)] += f[(i, j)] * w;
+            }
+        }
+        let (mut big, mut at) = (0.0f64, 0);
+        for i in 0..f.nrows() {
+            if out[(i, c)].abs() > big + 1e-12 * big {
+                big = out[(i, c)].abs();
+                at = i;
+            }
+        }
+        if out[(at, c)] < 0.0 {
+            for i in 0..f.nrows() {
+                out[(i, c)] = -out[(i, c)];
+            }
+        }
+    }
+    Ok(out)
+}
+
+fn sub(m: &Mat<f64>, r: (usize, usize), c: (usize, usize)) -> Mat<f64> {
+    Mat::from_fn(r.1 - r.0, c.1 - c.0, |i, j| m[(r.0 + i, c.0 + j)])
+}
+
+impl LinkBasis {
+    /// Per-link fields from structure fields `fields` (each `n1 × s`, node velocities in local
+    /// components, e.g. constrained modes of the structure at several reference angles; all
+    /// must share the layout of `model`), plus the links' rigid motions when asked.
+    pub fn from_fields(
+        model: &StructureModel,
+        fields: &[MatRef<'_, f64>],
+        settings: &LinkBasisSettings,
+    ) -> Result<Self> {
+        settings.validate()?;
+        let layout = model.layout.clone();
+        let (n1, n2, k) = (layout.n1(), layout.n2(), layout.k());
+        for (i, f) in fields.iter().enumerate() {
+            if f.nrows() != n1 {
+                return Err(shape(format!("fields[{i}]"), (n1, f.ncols()), (f.nrows(), f.ncols())));
+            }
+        }
+        let prob = &model.problem;
+        let mut blocks1 = Vec::new();
+        let mut cols1 = Vec::new();
+        let mut total = 0;
+        for (b, beam) in layout.beams.iter().enumerate() {
+            let r = (layout.x1_offset(b), layout.x1_offset(b) + k * beam.n_nodes());
+            let mut cols: Vec<Vec<f64>> = Vec::new();
+            if settings.rigid_links {
+                let r0 = beam.position(0);
+                for m in 0..6 {
+                    let mut col = vec![0.0; r.1 - r.0];
+                    for n in 0..beam.n_nodes() {
+                        let t = rotation(&beam.xi(n));
+                        let (v, w) = if m < 3 {
+                            (Vector3::ith(m, 1.0), Vector3::zeros())
+                        } else {
+                            let w = Vector3::ith(m - 3, 1.0);
+                            (w.cross(&(beam.position(n) - r0)), w)
+                        };
+                        let (vl, wl) = (t.transpose() * v, t.transpose() * w);
+                        let full = Vector6::new(vl.x, vl.y, vl.z, wl.x, wl.y, wl.z);
+                        for c in 0..k {
+                            col[n * k + c] = full[layout.components.spatial_index(c)];
+                        }
+                    }
+                    cols.push(col);
+                }
+            }
+            for f in fields {
+                for j in 0..f.ncols() {
+                    cols.push((r.0..r.1).map(|i| f[(i, j)]).collect());
+                }
+            }
+            let fb = Mat::from_fn(r.1 - r.0, cols.len(), |i, j| cols[j][i]);
+            let bb = sub(&prob.b1, r, r);
+            let ob = orthonormalise(&fb, bb.as_ref(), settings.rank_tolerance, "velocity")?;
+            cols1.push((total, total + ob.ncols()));
+            total += ob.ncols();
+            blocks1.push((r, ob));
+        }
+        let mut phi1 = Mat::<f64>::zeros(n1, total);
+        for ((r, ob), c) in blocks1.iter().zip(&cols1) {
+            for j in 0..ob.ncols() {
+                for i in 0..ob.nrows() {
+                    phi1[(r.0 + i, c.0 + j)] = ob[(i, j)];
+                }
+            }
+        }
+        // Force fields: strain images B2⁻¹Dᵀφ1 per link.
+        let dt_phi = prob.d.transpose() * &phi1;
+        let lu = prob.b2.partial_piv_lu();
+        let y = lu.solve(dt_phi);
+        let mut phi2_blocks = Vec::new();
+        let mut cols2 = Vec::new();
+        let mut total2 = 0;
+        for (b, beam) in layout.beams.iter().enumerate() {
+            let r = (layout.x2_offset(b), layout.x2_offset(b) + k * beam.n_elements());
+            let yb = sub(&y, r, cols1[b]);
+            let bb = sub(&prob.b2, r, r);
+            let ob = orthonormalise(&yb, bb.as_ref(), settings.rank_tolerance.max(1e-12), "force")?;
+            cols2.push((total2, total2 + ob.ncols()));
+            total2 += ob.ncols();
+            phi2_blocks.push((r, ob));
+        }
+        let mut phi2 = Mat::<f64>::zeros(n2, total2);
+        for ((r, ob), c) in phi2_blocks.iter().zip(&cols2) {
+            for j in 0..ob.ncols() {
+                for i in 0..ob.nrows() {
+                    phi2[(r.0 + i, c.0 + j)] = ob[(i, j)];
+                }
+            }
+        }
+        Ok(LinkBasis {
+            layout,
+            phi1,
+            phi2,
+            cols1,
+            cols2,
+            b1: prob.b1.clone(),
+            b2: prob.b2.clone(),
+            d: prob.d.clone(),
+        })
+    }
+
+    /// Number of velocity fields `na`.
+    pub fn n1(&self) -> usize {
+        self.phi1.ncols()
+    }
+
+    /// Number of force fields `nb`.
+    pub fn n2(&self) -> usize {
+        self.phi2.ncols()
+    }
+
+    /// Velocity fields (`n1 × na`).
+    pub fn phi1(&self) -> MatRef<'_, f64> {
+        self.phi1.as_ref()
+    }
+
+    /// Force fields (`n2 × nb`).
+    pub fn phi2(&self) -> MatRef<'_, f64> {
+        self.phi2.as_ref()
+    }
+
+    /// Coordinates `Φ1ᵀB1 X1` of velocity fields `x1` (`n1 × c`).
+    pub fn coordinates1(&self, x1: MatRef<'_, f64>) -> Mat<f64> {
+        self.phi1.transpose() * (&self.b1 * x1)
+    }
+
+    /// Coordinates `Φ2ᵀB2 X2` of force fields `x2` (`n2 × c`).
+    pub fn coordinates2(&self, x2: MatRef<'_, f64>) -> Mat<f64> {
+        self.phi2.transpose() * (&self.b2 * x2)
+    }
+}
+
+/// The Galerkin operators on a [`LinkBasis`] (module docs).
+#[derive(Clone, Debug)]
+pub(crate) struct AmbientOps {
+    pub w: Mat<f64>,
+    pub sigma: Mat<f64>,
+    pub gamma1: SparseTensor3,
+    pub gamma2: SparseTensor3,
+    pub b_u: Mat<f64>,
+}
+
+impl AmbientOps {
+    pub fn new(basis: &LinkBasis, damping: Option<&Mat<f64>>, inputs: &[Input]) -> Result<Self> {
+        let layout = &basis.layout;
+        let comps = layout.components;
+        let k = comps.k();
+        let (na, nb, n1) = (basis.n1(), basis.n2(), layout.n1());
+        let phi1 = &basis.phi1;
+        let phi2 = &basis.phi2;
+        let w = phi1.transpose() * &basis.d * phi2;
+        let sigma = match damping {
+            Some(d) => {
+                if d.nrows() != n1 || d.ncols() != n1 {
+                    return Err(shape("damping operator", (n1, n1), (d.nrows(), d.ncols())));
+                }
+                let s = phi1.transpose() * d * phi1;
+                Mat::from_fn(na, na, |i, j| 0.5 * (s[(i, j)] + s[(j, i)]))
+            }
+            None => Mat::zeros(na, na),
+        };
+        let b1phi = &basis.b1 * phi1;
+        let b2phi = &basis.b2 * phi2;
+        let emb = |mat: &Mat<f64>, i0: usize, j: usize| -> Vector6<f64> {
+            let vals: Vec<f64> = (0..k).map(|c| mat[(i0 + c, j)]).collect();
+            comps.embed(&vals)
+        };
+        let mut e1 = Vec::new();
+        let mut e2 = Vec::new();
+        for (b, beam) in layout.beams.iter().enumerate() {
+            let c1 = basis.cols1[b];
+            let c2 = basis.cols2[b];
+            let m = c1.1 - c1.0;
+            let m2 = c2.1 - c2.0;
+            let mut g1 = vec![0.0; m * m * m];
+            let mut g2 = vec![0.0; m * m2 * m2];
+            for n in 0..beam.n_nodes() {
+                let i0 = layout.x1_index(b, n, 0);
+                let p: Vec<Vector6<f64>> = (c1.0..c1.1).map(|j| emb(phi1, i0, j)).collect();
+                let mp: Vec<Vector6<f64>> = (c1.0..c1.1).map(|j| emb(&b1phi, i0, j)).collect();
+                for l in 0..m {
+                    for j in 0..m {
+                        let t = l1_times(&p[j], &mp[l]);
+                        for i in 0..m {
+                            g1[(l * m + i) * m + j] += p[i].dot(&t);
+                        }
+                    }
+                }
+            }
+            for e in 0..beam.n_elements() {
+                let i0 = layout.x2_index(b, e, 0);
+                let (na_, nb_) = (layout.x1_index(b, e, 0), layout.x1_index(b, e + 1, 0));
+                let bar: Vec<Vector6<f64>> =
+                    (c1.0..c1.1).map(|j| (emb(phi1, na_, j) + emb(phi1, nb_, j)) * 0.5).collect();
+                let p2: Vec<Vector6<f64>> = (c2.0..c2.1).map(|j| emb(phi2, i0, j)).collect();
+                let cp2: Vec<Vector6<f64>> = (c2.0..c2.1).map(|j| emb(&b2phi, i0, j)).collect();
+                for l in 0..m2 {
+                    for j in 0..m2 {
+                        let t = l2_times(&p2[j], &cp2[l]);
+                        for i in 0..m {
+                            g2[(l * m + i) * m2 + j] += bar[i].dot(&t);
+                        }
+                    }
+                }
+            }
+            for l in 0..m {
+                for i in 0..m {
+                    for j in 0..m {
+                        let v = g1[(l * m + i) * m + j];
+                        if v != 0.0 {
+                            e1.push(((c1.0 + i) as u32, (c1.0 + j) as u32, (c1.0 + l) as u32, v));
+                        }
+                    }
+                }
+            }
+            for l in 0..m2 {
+                for i in 0..m {
+                    for j in 0..m2 {
+                        let v = g2[(l * m + i) * m2 + j];
+                        if v != 0.0 {
+                            e2.push(((c1.0 + i) as u32, (c2.0 + j) as u32, (c2.0 + l) as u32, v));
+                        }
+                    }
+                }
+            }
+        }
+        let gamma1 = SparseTensor3 { dims: (na, na, na), entries: e1 };
+        let gamma2 = SparseTensor3 { dims: (na, nb, nb), entries: e2 };
+        let mut b_u = Mat::<f64>::zeros(na, inputs.len());
+        for (c, input) in inputs.iter().enumerate() {
+            for &(idx, wgt) in &input.entries {
+                if idx >= n1 {
+                    return Err(invalid(
+                        format!("input `{}` index", input.name),
+                        idx,
+                        format!("X1 has {n1} entries"),
+                    ));
+                }
+                for i in 0..na {
+                    b_u[(i, c)] += phi1[(idx, i)] * wgt;
+                }
+            }
+        }
+        Ok(AmbientOps { w, sigma, gamma1, gamma2, b_u })
+    }
+
+    /// `(f1, f2)` at ambient coordinates `(q1, q2)` and input `u`.
+    pub fn rhs(&self, q1: &[f64], q2: &[f64], u: &[f64], f1: &mut [f64], f2: &mut [f64]) {
+        let (na, nb) = (q1.len(), q2.len());
+        for i in 0..na {
+            let mut acc = 0.0;
+            for j in 0..na {
+                acc += self.sigma[(i, j)] * q1[j];
+            }
+            for j in 0..nb {
+                acc += self.w[(i, j)] * q2[j];
+            }
+            for (c, uc) in u.iter().enumerate() {
+                acc += self.b_u[(i, c)] * uc;
+            }
+            f1[i] = acc;
+        }
+        for j in 0..nb {
+            let mut acc = 0.0;
+            for i in 0..na {
+                acc -= self.w[(i, j)] * q1[i];
+            }
+            f2[j] = acc;
+        }
+        for &(i, j, l, v) in &self.gamma1.entries {
+            f1[i as usize] -= v * q1[j as usize] * q1[l as usize];
+        }
+        for &(i, j, l, v) in &self.gamma2.entries {
+            let (i, j, l) = (i as usize, j as usize, l as usize);
+            f1[i] -= v * q2[j] * q2[l];
+            f2[j] += v * q1[i] * q2[l];
+        }
+    }
+
+    /// Dense Jacobian of `(f1, f2)` with respect to `(q1, q2)` (`(na + nb)²`).
+    pub fn jacobian(&self, q1: &[f64], q2: &[f64]) -> Mat<f64> {
+        let (na, nb) = (q1.len(), q2.len());
+        let mut j = Mat::<f64>::zeros(na + nb, na + nb);
+        for c in 0..na {
+            for r in 0..na {
+                j[(r, c)] = self.sigma[(r, c)];
+            }
+        }
+        for c in 0..nb {
+            for r in 0..na {
+                j[(r, na + c)] = self.w[(r, c)];
+                j[(na + c, r)] = -self.w[(r, c)];
+            }
+        }
+        for &(i, jj, l, v) in &self.gamma1.entries {
+            let (i, jj, l) = (i as usize, jj as usize, l as usize);
+            j[(i, jj)] -= v * q1[l];
+            j[(i, l)] -= v * q1[jj];
+        }
+        for &(i, jj, l, v) in &self.gamma2.entries {
+            let (i, jj, l) = (i as usize, jj as usize, l as usize);
+            j[(i, na + jj)] -= v * q2[l];
+            j[(i, na + l)] -= v * q2[jj];
+            j[(na + jj, i)] += v * q2[l];
+            j[(na + jj, na + l)] += v * q1[i];
+        }
+        j
+    }
+}

@@ -1,0 +1,286 @@
+//! Identities of the exact-joints model (theory §10): reduction to the paper's model at the
+//! reference rotation, energy neutrality, compatibility, exact Jacobian against finite
+//! differences, energy conservation of the implicit midpoint rule.
+
+use super::*;
+use crate::basis::ModeSelection;
+use crate::samples::{self, paper_2d_selection, paper_3d_selection};
+use crate::{BasisSettings, RomOptions};
+use intrinsic_beam::Section;
+use nalgebra::Vector4;
+use proptest::prelude::*;
+use std::sync::OnceLock;
+
+fn paper_options() -> RomOptions {
+    RomOptions { quaternions: false, ..RomOptions::default() }
+}
+
+/// Link fields from the constrained modes (rigid + `elastic` lowest) at `angles`, plus rigid
+/// link motions: the multi-angle basis of theory §10.6.
+fn multi_angle(
+    spatial: bool,
+    n: usize,
+    damped: bool,
+    angles: &[f64],
+    elastic: usize,
+) -> ExactJointsRom {
+    let section = match (spatial, damped) {
+        (false, true) => Section::paper_2d(),
+        (false, false) => Section::paper_2d().undamped(),
+        (true, true) => Section::paper_3d(),
+        (true, false) => Section::paper_3d().undamped(),
+    };
+    let build = |a: f64| {
+        if spatial {
+            multibody_constraints::samples::paper_3d(section.clone(), n, a)
+        } else {
+            multibody_constraints::samples::paper_2d(section.clone(), n, a)
+        }
+        .unwrap()
+    };
+    let structure = build(0.0);
+    let model = StructureModel::new(&structure).unwrap();
+    let mut fields = Vec::new();
+    for &a in angles {
+        let s = build(a);
+        let m = StructureModel::new(&s).unwrap();
+        let b = m.modes(&BasisSettings::default()).unwrap();
+        let sel = b.select(&ModeSelection::Lowest(b.n_rigid() + elastic)).unwrap();
+        fields.push(sel.phi1().to_owned());
+    }
+    let refs: Vec<_> = fields.iter().map(|f| f.as_ref()).collect();
+    let inputs = if spatial {
+        samples::inputs_3d(&structure, &model).unwrap()
+    } else {
+        samples::inputs_2d(&structure, &model).unwrap()
+    };
+    let damping = damped.then_some(&model.damping);
+    from_fields(&structure, &model, &refs, &LinkBasisSettings::default(), damping, &inputs).unwrap()
+}
+
+fn undamped_2d() -> &'static ExactJointsRom {
+    static ROM: OnceLock<ExactJointsRom> = OnceLock::new();
+    ROM.get_or_init(|| multi_angle(false, 6, false, &[0.0, 0.8, 1.6], 3))
+}
+
+fn damped_3d() -> &'static ExactJointsRom {
+    static ROM: OnceLock<ExactJointsRom> = OnceLock::new();
+    ROM.get_or_init(|| multi_angle(true, 4, true, &[0.0, 0.8], 2))
+}
+
+/// A state with velocities `p`, forces `p2` from `seed`, the elbow turned by `angle` about
+/// `axis` from its reference.
+fn state(rom: &ExactJointsRom, seed: f64, angle: f64, axis: [f64; 3], scale: f64) -> Vec<f64> {
+    let mut x = rom.reference_state();
+    for (i, v) in x[..rom.n_p() + rom.n_p2()].iter_mut().enumerate() {
+        *v = scale * (seed * (i as f64 + 1.3)).sin();
+    }
+    let a = nalgebra::Vector3::from(axis).normalize() * (0.5 * angle).sin();
+    let turn = Vector4::new((0.5 * angle).cos(), a.x, a.y, a.z);
+    let o = rom.joint_offset(0);
+    let r = rom.joint_quaternion(&x, 0);
+    let q = super::rows::quat_mul(&r, &turn);
+    x[o..o + 4].copy_from_slice(q.as_slice());
+    x
+}
+
+fn max_abs(v: &[f64]) -> f64 {
+    v.iter().fold(0.0f64, |m, x| m.max(x.abs()))
+}
+
+/// Must-show 3: at the reference rotation, with the paper's basis, right-hand side and
+/// `(q1, q2, u)` Jacobian equal the paper model's (2D and 3D, damped).
+#[test]
+fn reduces_to_the_paper_model_at_the_reference_rotation() {
+    for spatial in [false, true] {
+        let sample = if spatial {
+            samples::paper_3d(6, 0.0, true, &paper_3d_selection(), &paper_options()).unwrap()
+        } else {
+            samples::paper_2d(8, 0.0, true, &paper_2d_selection(), &paper_options()).unwrap()
+        };
+        let selection = if spatial { paper_3d_selection() } else { paper_2d_selection() };
+        let modes = sample.basis.select(&selection).unwrap();
+        let inputs = if spatial {
+            samples::inputs_3d(&sample.structure, &sample.model).unwrap()
+        } else {
+            samples::inputs_2d(&sample.structure, &sample.model).unwrap()
+        };
+        let ej = paper_reduction(
+            &sample.structure,
+            &sample.model,
+            &modes,
+            Some(&sample.model.damping),
+            &inputs,
+        )
+        .unwrap();
+        let paper = &sample.rom;
+        let np = paper.n_state();
+        assert_eq!(ej.n_p() + ej.n_p2(), np);
+        let nu = paper.n_inputs();
+        for seed in [0.37, 1.1, 2.9] {
+            let mut x = ej.reference_state();
+            for (i, v) in x[..np].iter_mut().enumerate() {
+                *v = 0.4 * (seed * (i as f64 + 0.7)).sin();
+            }
+            let u: Vec<f64> = (0..nu).map(|i| (seed + i as f64).cos()).collect();
+            let q = x[..np].to_vec();
+            let (mut f0, mut j0, mut ju0) = (vec![0.0; np], vec![0.0; np * np], vec![0.0; np * nu]);
+            paper.rhs_and_jacobian(&q, &u, &mut f0, &mut j0, &mut ju0).unwrap();
+            let n = ej.n_state();
+            let (mut f1, mut j1, mut ju1) = (vec![0.0; n], vec![0.0; n * n], vec![0.0; n * nu]);
+            ej.rhs_and_jacobian(&x, &u, &mut f1, &mut j1, &mut ju1).unwrap();
+            let fs = max_abs(&f0);
+            let df = (0..np).fold(0.0f64, |m, i| m.max((f0[i] - f1[i]).abs()));
+            let js = max_abs(&j0);
+            let mut dj = 0.0f64;
+            for c in 0..np {
+                for r in 0..np {
+                    dj = dj.max((j0[c * np + r] - j1[c * n + r]).abs());
+                }
+            }
+            let mut du = 0.0f64;
+            for c in 0..nu {
+                for r in 0..np {
+                    du = du.max((ju0[c * np + r] - ju1[c * n + r]).abs());
+                }
+            }
+            eprintln!(
+                "spatial {spatial}: |Δf|/|f| {:.1e}, |ΔJ|/|J| {:.1e}, |ΔB| {du:.1e}",
+                df / fs,
+                dj / js
+            );
+            // round-off of the per-link re-expansion and of `Φ1ᵀDΦ2` against the exact `Ω`
+            // the paper's model uses (measured ≈ 3e-12 relative)
+            assert!(df <= 1e-11 * fs, "rhs differs: {df:e} of {fs:e}");
+            assert!(dj <= 1e-11 * js, "Jacobian differs: {dj:e} of {js:e}");
+            assert!(du <= 1e-11 * max_abs(&ju0));
+        }
+    }
+}
+
+/// The exact Jacobian against central differences, away from the reference rotation.
+#[test]
+fn jacobian_matches_finite_differences() {
+    for (rom, axis) in [(undamped_2d(), [0.0, 1.0, 0.0]), (damped_3d(), [0.2, 1.0, -0.6])] {
+        let x = state(rom, 0.71, 1.3, axis, 0.3);
+        let n = rom.n_state();
+        let nu = rom.n_inputs();
+        let u: Vec<f64> = (0..nu).map(|i| 0.3 * (i as f64 + 1.0)).collect();
+        let (mut f, mut jx, mut ju) = (vec![0.0; n], vec![0.0; n * n], vec![0.0; n * nu]);
+        rom.rhs_and_jacobian(&x, &u, &mut f, &mut jx, &mut ju).unwrap();
+        let h = 1e-6;
+        let mut worst = 0.0f64;
+        let scale = max_abs(&jx).max(1.0);
+        let (mut fp, mut fm) = (vec![0.0; n], vec![0.0; n]);
+        for c in 0..n {
+            let (mut xp, mut xm) = (x.clone(), x.clone());
+            xp[c] += h;
+            xm[c] -= h;
+            rom.rhs(&xp, &u, &mut fp).unwrap();
+            rom.rhs(&xm, &u, &mut fm).unwrap();
+            for r in 0..n {
+                let fd = (fp[r] - fm[r]) / (2.0 * h);
+                worst = worst.max((fd - jx[c * n + r]).abs() / scale);
+            }
+        }
+        for c in 0..nu {
+            let (mut up, mut um) = (u.clone(), u.clone());
+            up[c] += h;
+            um[c] -= h;
+            rom.rhs(&x, &up, &mut fp).unwrap();
+            rom.rhs(&x, &um, &mut fm).unwrap();
+            for r in 0..n {
+                let fd = (fp[r] - fm[r]) / (2.0 * h);
+                worst = worst.max((fd - ju[c * n + r]).abs() / scale);
+            }
+        }
+        eprintln!("n = {n}: max |J − FD| / max|J| = {worst:.2e}");
+        assert!(worst < 1e-7, "Jacobian vs FD: {worst:e}");
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+    /// Energy neutrality (`pᵀṗ + p2ᵀṗ2 = 0` without damping and input) and compatibility
+    /// (`A(ξ) Z(ξ) p = 0`) at any state and joint rotation.
+    #[test]
+    fn energy_neutral_and_compatible(seed in 0.1f64..10.0, angle in -2.5f64..2.5, scale in 0.01f64..3.0) {
+        let rom = undamped_2d();
+        let x = state(rom, seed, angle, [0.0, 1.0, 0.0], scale);
+        let mut f = vec![0.0; rom.n_state()];
+        rom.rhs(&x, &vec![0.0; rom.n_inputs()], &mut f).unwrap();
+        let k = rom.n_p() + rom.n_p2();
+        let power: f64 = (0..k).map(|i| x[i] * f[i]).sum();
+        let size: f64 = (0..k).map(|i| (x[i] * f[i]).abs()).sum::<f64>().max(1e-300);
+        prop_assert!(power.abs() <= 1e-12 * size, "power {power:e} of {size:e}");
+        let res = rom.compatibility_residual(&x).unwrap();
+        let v = max_abs(&rom.link_velocities(&x).unwrap());
+        prop_assert!(res <= 1e-12 * v.max(1e-300), "compatibility {res:e}");
+    }
+}
+
+/// The 3D model is energy neutral too (universal joints, elbow turned about a skew axis).
+#[test]
+fn energy_neutral_3d() {
+    let rom = multi_angle(true, 4, false, &[0.0, 0.8], 2);
+    for (seed, angle) in [(0.3, 0.4), (1.7, 1.4), (2.2, -2.0)] {
+        let x = state(&rom, seed, angle, [0.3, 1.0, 0.5], 1.0);
+        let mut f = vec![0.0; rom.n_state()];
+        rom.rhs(&x, &vec![0.0; rom.n_inputs()], &mut f).unwrap();
+        let k = rom.n_p() + rom.n_p2();
+        let power: f64 = (0..k).map(|i| x[i] * f[i]).sum();
+        let size: f64 = (0..k).map(|i| (x[i] * f[i]).abs()).sum();
+        assert!(power.abs() <= 1e-12 * size, "power {power:e} of {size:e}");
+        assert!(rom.compatibility_residual(&x).unwrap() < 1e-12);
+    }
+}
+
+/// Implicit midpoint conserves the energy and `|ξ|` to solver tolerance while the elbow
+/// swings through a large angle (short run; the long one is a verification case).
+#[test]
+fn midpoint_conserves_energy() {
+    let rom = undamped_2d();
+    let mut x = state(rom, 0.9, 0.0, [0.0, 1.0, 0.0], 0.0);
+    // spin link 2 about the elbow: the rigid relative rotation of the reference null space
+    let q1 = rom.link_velocities(&x).unwrap();
+    assert!(max_abs(&q1) == 0.0);
+    x[0] = 1.0;
+    x[1] = -0.5;
+    let e0 = rom.energy(&x);
+    let u = vec![0.0; rom.n_inputs()];
+    let mut turned = 0.0f64;
+    for _ in 0..200 {
+        rom.midpoint_step(&mut x, &u, 0.01, 1e-14, 30).unwrap();
+        let q = rom.joint_quaternion(&x, 0);
+        turned = turned.max(2.0 * q[2].atan2(q[0]).abs());
+    }
+    let drift = (rom.energy(&x) - e0).abs() / e0;
+    let norm = rom.joint_quaternion(&x, 0).norm();
+    eprintln!(
+        "energy drift {drift:.2e}, |ξ| − 1 = {:.1e}, max elbow angle {turned:.2}",
+        norm - 1.0
+    );
+    assert!(drift < 1e-12, "energy drift {drift:e}");
+    assert!((norm - 1.0).abs() < 1e-12);
+    assert!(turned > 0.3, "the elbow should move: {turned}");
+}
+
+#[test]
+fn bad_coordinates_are_errors() {
+    let sample = samples::paper_2d(4, 0.0, false, &paper_2d_selection(), &paper_options()).unwrap();
+    let modes = sample.basis.select(&paper_2d_selection()).unwrap();
+    let basis = LinkBasis::from_fields(
+        &sample.model,
+        &[modes.phi1()],
+        &LinkBasisSettings { rigid_links: false, ..Default::default() },
+    )
+    .unwrap();
+    let na = basis.n1();
+    let z0 = Mat::from_fn(na, 1, |i, _| if i == 0 { 2.0 } else { 0.0 });
+    let z2 = Mat::identity(basis.n2(), basis.n2());
+    let err =
+        ExactJointsRom::with_coordinates(&sample.structure, basis, None, &[], z0, z2).unwrap_err();
+    assert!(err.to_string().contains("z0"), "{err}");
+    let bad = LinkBasisSettings { rank_tolerance: 0.5, ..Default::default() };
+    assert!(bad.validate().unwrap_err().to_string().contains("rank_tolerance"));
+}

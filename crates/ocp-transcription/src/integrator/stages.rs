@@ -1,0 +1,275 @@
+//! Stage evaluations and substeps of the explicit (RK4, Lawson RK4) and implicit midpoint
+//! methods, forward sensitivities alongside.
+
+use super::{Integrator, Pow};
+use crate::dynamics::Dynamics;
+use crate::error::{OcpError, Result};
+use crate::la::{all_finite, axpy, lincomb, norm_inf};
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::lu::partial_pivoting::{factor as lu_factor, solve as lu_solve};
+use faer::{Conj, Par};
+use nalgebra::DMatrix;
+
+impl Integrator {
+    /// Evaluates stage `j` at `(xs, u)` (and its sensitivity at `sx`).
+    pub(super) fn stage<D: Dynamics + ?Sized>(
+        &mut self,
+        model: &D,
+        u: &[f64],
+        j: usize,
+        sens: bool,
+        tape: Option<usize>,
+    ) -> Result<()> {
+        // the model's own `g = f − Lx`, `∂f/∂x − L` when `L` is its linear part (saves a
+        // copy of `W` into the Jacobian and its subtraction at every stage)
+        let remainder = sens
+            && self.model_linear_part
+            && model.remainder_and_jacobians(
+                &self.xs,
+                u,
+                &mut self.k[j],
+                &mut self.fx,
+                &mut self.fu,
+            );
+        // a trial without sensitivities: the model's own `g = f − Lx` when it has one
+        let remainder = remainder
+            || (!sens && self.model_linear_part && model.remainder(&self.xs, u, &mut self.k[j]));
+        if !remainder {
+            if sens {
+                model.rhs_and_jacobians(&self.xs, u, &mut self.k[j], &mut self.fx, &mut self.fu);
+            } else {
+                model.rhs(&self.xs, u, &mut self.k[j]);
+            }
+            if let Some(lw) = &self.lawson {
+                lw.l_op.apply_vec(&mut self.k[j], &self.xs, -1.0, true);
+            }
+        }
+        if !all_finite(&self.k[j]) {
+            return Err(OcpError::NonFiniteDynamics { stage: "rhs" });
+        }
+        // stage 1 reads the substep's `S` in place (no copy into `sx`)
+        let sx = if j == 0 { &self.s } else { &self.sx };
+        if let Some(base) = tape {
+            self.tape_x[base + j].copy_from_slice(&self.xs);
+            self.tape_s[base + j].copy_from(sx);
+        }
+        if sens {
+            if !remainder {
+                if let Some(lw) = &self.lawson {
+                    self.fx -= &lw.l;
+                }
+            }
+            // a NaN/∞ in the Jacobians propagates into the sensitivities, checked once per interval
+            crate::la::mul_right_t(&mut self.ks[j], sx, &self.fx, &mut self.rows);
+            for c in 0..self.nu {
+                for i in 0..self.nx {
+                    self.ks[j][(self.nx + c, i)] += self.fu[(i, c)];
+                }
+            }
+        }
+        Ok(())
+    }
+
+    pub(super) fn explicit_substep<D: Dynamics + ?Sized>(
+        &mut self,
+        model: &D,
+        u: &[f64],
+        sens: bool,
+        tape: Option<usize>,
+    ) -> Result<()> {
+        let h = self.h;
+        let sens = sens || tape.is_some();
+        // stage 1: X1 = x (its sensitivity is `S` itself, read in place by `stage`)
+        self.xs.copy_from_slice(&self.x);
+        self.stage(model, u, 0, sens, tape)?;
+        // E x, E k1 (and E S, E K1) serve stages 2 to 4 and the update, so that E² is never
+        // applied: 4 propagator products per substep instead of 6
+        Self::pow_vec(&self.lawson, Pow::E1, &mut self.ex, &self.x, 1.0, false);
+        Self::pow_vec(&self.lawson, Pow::E1, &mut self.ek1, &self.k[0], 1.0, false);
+        if sens {
+            Self::pow_mat(&self.lawson, Pow::E1, &mut self.es, &self.s, 1.0, false);
+            Self::pow_mat(&self.lawson, Pow::E1, &mut self.eks, &self.ks[0], 1.0, false);
+        }
+        // stage 2: X2 = E (x + h/2 k1) = Ex + h/2 Ek1
+        lincomb(&mut self.xs, &self.ex, 0.5 * h, &self.ek1);
+        if sens {
+            lincomb(self.sx.as_mut_slice(), self.es.as_slice(), 0.5 * h, self.eks.as_slice());
+        }
+        self.stage(model, u, 1, sens, tape)?;
+        // stage 3: X3 = E x + h/2 k2
+        lincomb(&mut self.xs, &self.ex, 0.5 * h, &self.k[1]);
+        if sens {
+            lincomb(self.sx.as_mut_slice(), self.es.as_slice(), 0.5 * h, self.ks[1].as_slice());
+        }
+        self.stage(model, u, 2, sens, tape)?;
+        // stage 4: X4 = E² x + h E k3 = E (Ex + h k3)
+        lincomb(&mut self.t, &self.ex, h, &self.k[2]);
+        Self::pow_vec(&self.lawson, Pow::E1, &mut self.xs, &self.t, 1.0, false);
+        if sens {
+            lincomb(self.tm.as_mut_slice(), self.es.as_slice(), h, self.ks[2].as_slice());
+            Self::pow_mat(&self.lawson, Pow::E1, &mut self.sx, &self.tm, 1.0, false);
+        }
+        self.stage(model, u, 3, sens, tape)?;
+        // x⁺ = E²(x + h/6 k1) + h/3 E(k2 + k3) + h/6 k4
+        //    = E (Ex + h/6 Ek1 + h/3 (k2 + k3)) + h/6 k4
+        for i in 0..self.nx {
+            self.t[i] =
+                self.ex[i] + h / 6.0 * self.ek1[i] + h / 3.0 * (self.k[1][i] + self.k[2][i]);
+        }
+        Self::pow_vec(&self.lawson, Pow::E1, &mut self.x, &self.t, 1.0, false);
+        axpy(&mut self.x, h / 6.0, &self.k[3]);
+        if sens {
+            let (tm, es, eks, k2, k3) = (
+                self.tm.as_mut_slice(),
+                self.es.as_slice(),
+                self.eks.as_slice(),
+                self.ks[1].as_slice(),
+                self.ks[2].as_slice(),
+            );
+            for i in 0..tm.len() {
+                tm[i] = es[i] + h / 6.0 * eks[i] + h / 3.0 * (k2[i] + k3[i]);
+            }
+            Self::pow_mat(&self.lawson, Pow::E1, &mut self.s, &self.tm, 1.0, false);
+            axpy(self.s.as_mut_slice(), h / 6.0, self.ks[3].as_slice());
+        }
+        Ok(())
+    }
+
+    /// Factorises `lu = I − h/2 fx` in place.
+    pub(super) fn factor_newton(&mut self) -> Result<()> {
+        let nx = self.nx;
+        self.lu.copy_from(&self.fx);
+        self.lu *= -0.5 * self.h;
+        for i in 0..nx {
+            self.lu[(i, i)] += 1.0;
+        }
+        let (r, c) = self.lu.shape();
+        let view = faer::MatMut::from_column_major_slice_mut(self.lu.as_mut_slice(), r, c);
+        let _ = lu_factor::lu_in_place(
+            view,
+            &mut self.perm,
+            &mut self.perm_inv,
+            Par::Seq,
+            MemStack::new(&mut self.mem),
+            Default::default(),
+        );
+        for i in 0..nx {
+            let d = self.lu[(i, i)];
+            if d == 0.0 || !d.is_finite() {
+                return Err(OcpError::Singular { what: "implicit midpoint Newton matrix" });
+            }
+        }
+        Ok(())
+    }
+
+    /// Solves with the factorised Newton matrix, in place, for `rhs` (`nx × m`, column-major).
+    pub(super) fn solve_newton(
+        lu: &DMatrix<f64>,
+        perm: &[usize],
+        perm_inv: &[usize],
+        mem: &mut MemBuffer,
+        rhs: &mut [f64],
+        m: usize,
+    ) {
+        let n = lu.nrows();
+        let lu_ref = faer::MatRef::from_column_major_slice(lu.as_slice(), n, n);
+        // SAFETY-free: the permutation arrays come from lu_in_place.
+        let p = faer::perm::PermRef::new_checked(perm, perm_inv, n);
+        lu_solve::solve_in_place_with_conj(
+            lu_ref,
+            lu_ref,
+            p,
+            Conj::No,
+            faer::MatMut::from_column_major_slice_mut(rhs, n, m),
+            Par::Seq,
+            MemStack::new(mem),
+        );
+    }
+
+    pub(super) fn midpoint_substep<D: Dynamics + ?Sized>(
+        &mut self,
+        model: &D,
+        u: &[f64],
+        sens: bool,
+    ) -> Result<()> {
+        let h = self.h;
+        let nx = self.nx;
+        // initial guess: explicit half step
+        model.rhs(&self.x, u, &mut self.k[0]);
+        if !all_finite(&self.k[0]) {
+            return Err(OcpError::NonFiniteDynamics { stage: "rhs" });
+        }
+        self.xs.copy_from_slice(&self.x);
+        axpy(&mut self.xs, 0.5 * h, &self.k[0]);
+        let mut converged = false;
+        let mut residual = f64::INFINITY;
+        let mut it = 0;
+        while it <= self.newton_max_iterations {
+            model.rhs(&self.xs, u, &mut self.k[0]);
+            if !all_finite(&self.k[0]) {
+                return Err(OcpError::NonFiniteDynamics { stage: "rhs" });
+            }
+            for i in 0..nx {
+                self.t[i] = self.xs[i] - self.x[i] - 0.5 * h * self.k[0][i];
+            }
+            residual = norm_inf(&self.t);
+            if residual <= self.newton_tolerance * (1.0 + norm_inf(&self.xs)) {
+                converged = true;
+                break;
+            }
+            if it == self.newton_max_iterations {
+                break;
+            }
+            model.jacobians(&self.xs, u, &mut self.fx, &mut self.fu);
+            if !all_finite(self.fx.as_slice()) {
+                return Err(OcpError::NonFiniteDynamics { stage: "jacobian" });
+            }
+            self.factor_newton()?;
+            Self::solve_newton(&self.lu, &self.perm, &self.perm_inv, &mut self.mem, &mut self.t, 1);
+            for i in 0..nx {
+                self.xs[i] -= self.t[i];
+            }
+            if !all_finite(&self.xs) {
+                return Err(OcpError::NonFiniteDynamics { stage: "state" });
+            }
+            it += 1;
+        }
+        if !converged {
+            return Err(OcpError::NewtonFailed { iterations: it, residual });
+        }
+        if sens {
+            model.jacobians(&self.xs, u, &mut self.fx, &mut self.fu);
+            if !all_finite(self.fx.as_slice()) || !all_finite(self.fu.as_slice()) {
+                return Err(OcpError::NonFiniteDynamics { stage: "jacobian" });
+            }
+            self.factor_newton()?;
+            // (I − h/2 fx) ∂m/∂z = S + h/2 [0 | fu];  S⁺ = 2 ∂m/∂z − S
+            let m = self.nx + self.nu;
+            for j in 0..m {
+                for i in 0..nx {
+                    self.tcm[(i, j)] = self.s[(j, i)];
+                }
+            }
+            axpy(&mut self.tcm.as_mut_slice()[nx * nx..], 0.5 * h, self.fu.as_slice());
+            Self::solve_newton(
+                &self.lu,
+                &self.perm,
+                &self.perm_inv,
+                &mut self.mem,
+                self.tcm.as_mut_slice(),
+                m,
+            );
+            for j in 0..m {
+                for i in 0..nx {
+                    self.tm[(j, i)] = self.tcm[(i, j)];
+                }
+            }
+            self.s *= -1.0;
+            axpy(self.s.as_mut_slice(), 2.0, self.tm.as_slice());
+        }
+        for i in 0..nx {
+            self.x[i] = 2.0 * self.xs[i] - self.x[i];
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,248 @@
+//! SQP settings: mode, Hessian, QP form, globalisation, tolerances.
+
+use crate::error::{invalid, Result};
+use crate::integrator::IntegratorSettings;
+use crate::qp::QpForm;
+
+/// [`QpForm::Auto`] switches to the sparse multiple-shooting QP when the Cholesky-based
+/// condition estimate of the condensed Hessian exceeds this (a condensed solve would keep
+/// fewer than ~6 digits of the step).
+pub const AUTO_SPARSE_CONDITION: f64 = 1e10;
+
+/// Hessian of the QP subproblems.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum HessianApproximation {
+    /// Gauss–Newton: the cost Hessian (exact for the quadratic cost (34), no integrator work).
+    GaussNewton,
+    /// Exact Hessian of the Lagrangian (adds `∇²(λᵀΦ)` from the integrators; needs
+    /// [`Dynamics::weighted_hessian`], an explicit integrator and a condensed QP form).
+    /// Indefinite condensed Hessians are regularised by `δI` until a Cholesky succeeds.
+    Exact,
+}
+
+/// Globalisation of the SQP step `w ← w + t Δw`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum Globalisation {
+    /// `t = 1`.
+    FullStep,
+    /// The paper's fixed sub-relaxation `t = alpha ∈ (0, 1]`.
+    FixedRelaxation {
+        /// Relaxation factor.
+        alpha: f64,
+    },
+    /// Backtracking on the ℓ1 merit `φ(w) = J + ν (Σ‖d_k‖₁ + ‖x0 − s_0‖₁ + state-bound
+    /// violations)` with the Armijo condition `φ(w + tΔw) ≤ φ(w) + armijo·t·Dφ(w; Δw)`,
+    /// `Dφ = ∇JᵀΔw − ν c(w)` (Nocedal & Wright, *Numerical Optimization*, 2nd ed., §18.3).
+    /// A trial integrates the intervals without sensitivities (states and cost only).
+    MeritLineSearch {
+        /// Armijo constant in (0, 0.5). Typical 1e-4.
+        armijo: f64,
+        /// Backtracking factor in (0, 1). Typical 0.5.
+        backtracking: f64,
+        /// Smallest step before giving up (status [`SqpStatus::LineSearchFailed`]), in (0, 1).
+        min_step: f64,
+        /// Penalty rule. `false`: `ν` only grows (`ν ← 2‖λ‖∞` whenever `ν < 1.1‖λ‖∞`) and is
+        /// kept across solves. `true`: `ν` follows the QP multipliers both ways, Powell's rule
+        /// `ν ← max(ν̄, ½(ν + ν̄))` with `ν̄ = 1.1‖(λ, μ)‖∞` (N&W (18.36)), reset at every solve;
+        /// a penalty inflated by early large multipliers otherwise makes the merit see mostly
+        /// the defects and reject steps along the curved constraint manifold.
+        adaptive_penalty: bool,
+        /// Second-order correction (N&W §18.3, (18.24)): when the full step fails the Armijo
+        /// test, the QP is solved again with the defects `d_k + d_k(w + Δw)` (same Hessian and
+        /// Jacobians; a correction of the step against the constraints' curvature, which
+        /// otherwise rejects full steps near the solution — the Maratos effect) and the
+        /// corrected full step is tried before backtracking.
+        second_order_correction: bool,
+    },
+    /// Filter line search on (cost, ℓ1 constraint violation) with the second-order
+    /// correction (the globalisation of IPOPT; see the `filter` module). A trial integrates
+    /// the intervals without sensitivities.
+    Filter {
+        /// Backtracking factor in (0, 1). Typical 0.5.
+        backtracking: f64,
+        /// Smallest step before giving up (status [`SqpStatus::LineSearchFailed`]), in (0, 1).
+        min_step: f64,
+        /// Try the second-order correction when the full step is rejected with a larger
+        /// violation.
+        second_order_correction: bool,
+    },
+}
+
+impl Globalisation {
+    /// Filter line search, `backtracking = 0.5`, `min_step = 1e-8`, second-order correction.
+    pub fn filter() -> Self {
+        Globalisation::Filter { backtracking: 0.5, min_step: 1e-8, second_order_correction: true }
+    }
+
+    /// Merit line search with `armijo = 1e-4`, `backtracking = 0.5`, `min_step = 1e-6`, the
+    /// growing penalty, no second-order correction (what the closed loops use).
+    pub fn merit() -> Self {
+        Globalisation::MeritLineSearch {
+            armijo: 1e-4,
+            backtracking: 0.5,
+            min_step: 1e-6,
+            adaptive_penalty: false,
+            second_order_correction: false,
+        }
+    }
+
+    /// Merit line search with the penalty following the multipliers and the second-order
+    /// correction (`armijo = 1e-4`, `backtracking = 0.5`, `min_step = 1e-8`): what
+    /// [`SqpSettings::converge`] uses.
+    pub fn merit_soc() -> Self {
+        Globalisation::MeritLineSearch {
+            armijo: 1e-4,
+            backtracking: 0.5,
+            min_step: 1e-8,
+            adaptive_penalty: true,
+            second_order_correction: true,
+        }
+    }
+}
+
+/// What one call of [`SqpSolver::solve`] does.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum SqpMode {
+    /// Iterate to the KKT tolerance or the iteration limit.
+    Sqp,
+    /// Real-time iteration: exactly one linearisation, QP and step per call.
+    RealTimeIteration,
+    /// Linear–quadratic (linear MPC): the dynamics are linearised once at the reference
+    /// `(x_r, u_r)` (`Φ(x, u) ≈ Φ(x_r, u_r) + A(x − x_r) + B(u − u_r)`); each call solves
+    /// that QP (one QP per sample).
+    LinearQuadratic,
+}
+
+/// SQP settings. Defaults in parentheses.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SqpSettings {
+    /// Mode (default `SqpMode::Sqp`).
+    pub mode: SqpMode,
+    /// Hessian (default `HessianApproximation::GaussNewton`).
+    pub hessian: HessianApproximation,
+    /// QP form (default `QpForm::Auto`).
+    pub qp_form: QpForm,
+    /// Globalisation (default: [merit line search](Globalisation::merit)).
+    pub globalisation: Globalisation,
+    /// Levenberg–Marquardt term `μ ≥ 0` added to every Hessian block (default 0).
+    pub levenberg_marquardt: f64,
+    /// SQP iteration limit ≥ 1 (default 50).
+    pub max_iterations: usize,
+    /// Termination: max-norm KKT residual (natural residual of stationarity with the bound
+    /// projections, defects, initial condition, state-bound violation) (default 1e-8).
+    pub kkt_tolerance: f64,
+    /// QP solver tolerance (Clarabel gap/feasibility, dense IP residual and μ) (default 1e-11).
+    pub qp_tolerance: f64,
+    /// QP iteration limit (default 200).
+    pub qp_max_iterations: usize,
+    /// Integrator inside the shooting intervals (default RK4, 4 substeps).
+    pub integrator: IntegratorSettings,
+    /// Recovery from a failed QP (numerical failure or iteration limit, not infeasibility):
+    /// solve it again with a Levenberg–Marquardt term `μI` added to the Hessian blocks,
+    /// `μ = 10⁻⁵…10¹ × (1 + max diagonal entry)` growing tenfold per attempt (a shorter,
+    /// better conditioned step); the status is [`SqpStatus::QpFailed`] only when every attempt
+    /// fails (default false).
+    pub qp_recovery: bool,
+    /// Integrate the shooting intervals of a linearisation on the rayon thread pool
+    /// (Gauss–Newton path; exact-Hessian sweeps and line-search trials stay sequential) (default false).
+    pub parallel_intervals: bool,
+}
+
+impl Default for SqpSettings {
+    fn default() -> Self {
+        Self {
+            mode: SqpMode::Sqp,
+            hessian: HessianApproximation::GaussNewton,
+            qp_form: QpForm::Auto,
+            globalisation: Globalisation::merit(),
+            levenberg_marquardt: 0.0,
+            max_iterations: 50,
+            kkt_tolerance: 1e-8,
+            qp_tolerance: 1e-11,
+            qp_max_iterations: 200,
+            integrator: IntegratorSettings::default(),
+            parallel_intervals: false,
+            qp_recovery: false,
+        }
+    }
+}
+
+impl SqpSettings {
+    /// A full SQP to the KKT tolerance 1e-8 (at most 60 iterations) with the
+    /// [second-order-corrected merit line search](Globalisation::merit_soc) and `integrator`:
+    /// the settings that solve one problem to convergence, whatever a real-time loop uses.
+    pub fn converge(integrator: IntegratorSettings) -> Self {
+        Self {
+            mode: SqpMode::Sqp,
+            globalisation: Globalisation::merit_soc(),
+            max_iterations: 60,
+            kkt_tolerance: 1e-8,
+            qp_recovery: true,
+            integrator,
+            ..Self::default()
+        }
+    }
+
+    /// Checks every field's range.
+    pub fn validate(&self) -> Result<()> {
+        self.integrator.validate()?;
+        if !(self.levenberg_marquardt >= 0.0 && self.levenberg_marquardt.is_finite()) {
+            return Err(invalid(
+                "levenberg_marquardt",
+                self.levenberg_marquardt,
+                "must be finite and ≥ 0",
+            ));
+        }
+        if self.max_iterations == 0 {
+            return Err(invalid("max_iterations", self.max_iterations, "must be at least 1"));
+        }
+        if self.kkt_tolerance.is_nan() || self.kkt_tolerance <= 0.0 {
+            return Err(invalid("kkt_tolerance", self.kkt_tolerance, "must be positive"));
+        }
+        if !(self.qp_tolerance > 0.0 && self.qp_tolerance < 1e-2) {
+            return Err(invalid("qp_tolerance", self.qp_tolerance, "must be in (0, 1e-2)"));
+        }
+        if self.qp_max_iterations == 0 {
+            return Err(invalid("qp_max_iterations", self.qp_max_iterations, "must be at least 1"));
+        }
+        match self.globalisation {
+            Globalisation::FullStep => {}
+            Globalisation::FixedRelaxation { alpha } => {
+                if !(alpha > 0.0 && alpha <= 1.0) {
+                    return Err(invalid("globalisation.alpha", alpha, "must be in (0, 1]"));
+                }
+            }
+            Globalisation::Filter { backtracking, min_step, .. } => {
+                if !(backtracking > 0.0 && backtracking < 1.0) {
+                    return Err(invalid(
+                        "globalisation.backtracking",
+                        backtracking,
+                        "must be in (0, 1)",
+                    ));
+                }
+                if !(min_step > 0.0 && min_step < 1.0) {
+                    return Err(invalid("globalisation.min_step", min_step, "must be in (0, 1)"));
+                }
+            }
+            Globalisation::MeritLineSearch { armijo, backtracking, min_step, .. } => {
+                if !(armijo > 0.0 && armijo < 0.5) {
+                    return Err(invalid("globalisation.armijo", armijo, "must be in (0, 0.5)"));
+                }
+                if !(backtracking > 0.0 && backtracking < 1.0) {
+                    return Err(invalid(
+                        "globalisation.backtracking",
+                        backtracking,
+                        "must be in (0, 1)",
+                    ));
+                }
+                if !(min_step > 0.0 && min_step < 1.0) {
+                    return Err(invalid("globalisation.min_step", min_step, "must be in (0, 1)"));
+                }
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,124 @@
+//! The SQP loop.
+
+use super::{status_of, Globalisation, IterationLog, SqpMode, SqpSolver, SqpStats, SqpStatus};
+use crate::dynamics::Dynamics;
+use crate::error::{check_dim, invalid, Result};
+use crate::la::{all_finite, norm_inf};
+use crate::qp::QpFailure;
+use std::time::Instant;
+
+impl<D: Dynamics> SqpSolver<D> {
+    /// Runs the SQP from the current iterate for the initial state `x0`.
+    ///
+    /// Returns the counters (also kept in [`SqpSolver::stats`]); `Err` only for a wrong
+    /// `x0` (dimension or non-finite). Numerical failures end in a [`SqpStatus`].
+    pub fn solve(&mut self, x0: &[f64]) -> Result<SqpStats> {
+        check_dim("x0", self.nx, x0.len())?;
+        if !all_finite(x0) {
+            return Err(invalid("x0", "non-finite entry", "the initial state must be finite"));
+        }
+        let start = Instant::now();
+        let calls0 = self.integrator_calls();
+        self.stats = SqpStats::default();
+        if let Globalisation::MeritLineSearch { adaptive_penalty: true, .. } =
+            self.settings.globalisation
+        {
+            self.merit_nu = 0.0;
+        }
+        self.log.clear();
+        self.x0.copy_from_slice(x0);
+        let rti = self.settings.mode == SqpMode::RealTimeIteration;
+        let max_it = if rti { 1 } else { self.settings.max_iterations };
+        let status;
+        let mut it = 0;
+        loop {
+            if let Err(e) = self.linearise(true, it == 0) {
+                status = status_of(&e);
+                break;
+            }
+            let (kkt, viol) = self.kkt();
+            let s = std::mem::take(&mut self.s);
+            let u = std::mem::take(&mut self.u);
+            let cost = self.cost_of(&s, &u);
+            self.s = s;
+            self.u = u;
+            self.stats.kkt = kkt;
+            self.stats.cost = cost;
+            self.stats.constraint_violation = viol;
+            if !kkt.is_finite() {
+                status = SqpStatus::NonFiniteDynamics;
+                break;
+            }
+            if !rti && kkt <= self.settings.kkt_tolerance {
+                status = SqpStatus::Solved;
+                break;
+            }
+            if it >= max_it {
+                status = if rti { SqpStatus::RealTimeIteration } else { SqpStatus::MaxIterations };
+                break;
+            }
+            let qp_iters = match self.solve_qp_with_recovery() {
+                Ok(q) => q,
+                Err(QpFailure::Infeasible) => {
+                    status = SqpStatus::QpInfeasible;
+                    break;
+                }
+                Err(QpFailure::Failed) => {
+                    status = SqpStatus::QpFailed;
+                    break;
+                }
+            };
+            self.stats.qp_iterations += qp_iters;
+            let mut step_norm = 0.0_f64;
+            for k in 0..=self.n {
+                step_norm = step_norm.max(norm_inf(self.step.ds[k].as_slice()));
+                if k < self.n {
+                    step_norm = step_norm.max(norm_inf(self.step.du[k].as_slice()));
+                }
+            }
+            let Some(t) = self.step_length(it == 0) else {
+                status = SqpStatus::LineSearchFailed;
+                self.log.push(IterationLog {
+                    iteration: it,
+                    cost,
+                    kkt,
+                    constraint_violation: viol,
+                    step_norm,
+                    step_length: 0.0,
+                    qp_iterations: qp_iters,
+                });
+                break;
+            };
+            for k in 0..=self.n {
+                self.s[k].axpy(t, &self.step.ds[k], 1.0);
+                self.lam[k] *= 1.0 - t;
+                self.lam[k].axpy(t, &self.step.lam[k], 1.0);
+                if k < self.n {
+                    self.u[k].axpy(t, &self.step.du[k], 1.0);
+                    for i in 0..self.nu {
+                        self.u[k][i] = self.u[k][i].clamp(self.ocp.u_min[i], self.ocp.u_max[i]);
+                    }
+                }
+            }
+            self.log.push(IterationLog {
+                iteration: it,
+                cost,
+                kkt,
+                constraint_violation: viol,
+                step_norm,
+                step_length: t,
+                qp_iterations: qp_iters,
+            });
+            it += 1;
+            self.stats.iterations = it;
+            if rti {
+                status = SqpStatus::RealTimeIteration;
+                break;
+            }
+        }
+        self.stats.status = status;
+        self.stats.integrator_calls = self.integrator_calls() - calls0;
+        self.stats.time_total = start.elapsed().as_secs_f64();
+        Ok(self.stats)
+    }
+}
