@@ -618,7 +618,7 @@ impl ExactJointsRom {
         })
     }
 
-    /// The state of an FE configuration: full FE vector `x_fe` (LAYOUT.md) and node
+    /// The state of an FE configuration: full FE vector `x_fe` (theory.md §2) and node
     /// kinematics. Velocities and forces are projected (`q1 = Φ1ᵀB1X1`, `p = Zᵀq1`,
     /// `p2 = Z2ᵀΦ2ᵀB2X2`), rotations taken from the end nodes.
     pub fn project_fe(&self, x_fe: &[f64], kinematics: &[Kinematics]) -> Result<Vec<f64>> {
