@@ -40,7 +40,7 @@ pub struct SolveEstimate {
     /// `D`, `Dᵀ` (`n1 n2` each), and eight `nz × nz` work matrices of the SVDs on the
     /// constrained space, `nz = n1 − constraint rows`; 8 bytes per entry.
     pub bytes: f64,
-    /// Expected wall time (s) on one core: [`SECONDS_PER_N3`]` · n1³`.
+    /// Expected wall time (s) on one core: `SECONDS_PER_N3 · n1³`.
     pub seconds: f64,
 }
 

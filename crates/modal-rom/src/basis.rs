@@ -160,7 +160,7 @@ pub struct ModalBasis {
 
 impl ModalBasis {
     /// Solves the constrained eigenproblem and labels the modes. `rigid_candidates` fix the
-    /// rigid-mode basis (see [`crate::eigen::solve`] and [`crate::rigid`]).
+    /// rigid-mode basis (see [`crate::eigen::solve`] and the `rigid` module).
     pub fn compute(
         layout: Layout,
         problem: &SecondOrderProblem,

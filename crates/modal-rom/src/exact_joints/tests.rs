@@ -88,7 +88,7 @@ fn max_abs(v: &[f64]) -> f64 {
     v.iter().fold(0.0f64, |m, x| m.max(x.abs()))
 }
 
-/// Must-show 3: at the reference rotation, with the paper's basis, right-hand side and
+/// At the reference rotation, with the paper's basis, right-hand side and
 /// `(q1, q2, u)` Jacobian equal the paper model's (2D and 3D, damped).
 #[test]
 fn reduces_to_the_paper_model_at_the_reference_rotation() {

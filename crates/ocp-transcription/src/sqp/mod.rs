@@ -389,7 +389,7 @@ impl<D: Dynamics> SqpSolver<D> {
     }
 
     /// Substep count of each interval in the last linearisation (all equal unless
-    /// [`IntegratorSettings::adaptive`] is set).
+    /// [`IntegratorSettings::adaptive`](crate::IntegratorSettings::adaptive) is set).
     pub fn substep_counts(&self) -> &[usize] {
         &self.counts
     }

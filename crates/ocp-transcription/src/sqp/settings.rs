@@ -16,7 +16,8 @@ pub enum HessianApproximation {
     /// Gauss–Newton: the cost Hessian (exact for the quadratic cost (34), no integrator work).
     GaussNewton,
     /// Exact Hessian of the Lagrangian (adds `∇²(λᵀΦ)` from the integrators; needs
-    /// [`Dynamics::weighted_hessian`], an explicit integrator and a condensed QP form).
+    /// [`Dynamics::weighted_hessian`](crate::Dynamics::weighted_hessian), an explicit
+    /// integrator and a condensed QP form).
     /// Indefinite condensed Hessians are regularised by `δI` until a Cholesky succeeds.
     Exact,
 }
@@ -41,7 +42,8 @@ pub enum Globalisation {
         armijo: f64,
         /// Backtracking factor in (0, 1). Typical 0.5.
         backtracking: f64,
-        /// Smallest step before giving up (status [`SqpStatus::LineSearchFailed`]), in (0, 1).
+        /// Smallest step before giving up (status
+        /// [`SqpStatus::LineSearchFailed`](crate::SqpStatus::LineSearchFailed)), in (0, 1).
         min_step: f64,
         /// Penalty rule. `false`: `ν` only grows (`ν ← 2‖λ‖∞` whenever `ν < 1.1‖λ‖∞`) and is
         /// kept across solves. `true`: `ν` follows the QP multipliers both ways, Powell's rule
@@ -62,7 +64,8 @@ pub enum Globalisation {
     Filter {
         /// Backtracking factor in (0, 1). Typical 0.5.
         backtracking: f64,
-        /// Smallest step before giving up (status [`SqpStatus::LineSearchFailed`]), in (0, 1).
+        /// Smallest step before giving up (status
+        /// [`SqpStatus::LineSearchFailed`](crate::SqpStatus::LineSearchFailed)), in (0, 1).
         min_step: f64,
         /// Try the second-order correction when the full step is rejected with a larger
         /// violation.
@@ -102,7 +105,7 @@ impl Globalisation {
     }
 }
 
-/// What one call of [`SqpSolver::solve`] does.
+/// What one call of [`SqpSolver::solve`](crate::SqpSolver::solve) does.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[non_exhaustive]
 pub enum SqpMode {
@@ -143,8 +146,9 @@ pub struct SqpSettings {
     /// Recovery from a failed QP (numerical failure or iteration limit, not infeasibility):
     /// solve it again with a Levenberg–Marquardt term `μI` added to the Hessian blocks,
     /// `μ = 10⁻⁵…10¹ × (1 + max diagonal entry)` growing tenfold per attempt (a shorter,
-    /// better conditioned step); the status is [`SqpStatus::QpFailed`] only when every attempt
-    /// fails (default false).
+    /// better conditioned step); the status is
+    /// [`SqpStatus::QpFailed`](crate::SqpStatus::QpFailed) only when every attempt fails
+    /// (default false).
     pub qp_recovery: bool,
     /// Integrate the shooting intervals of a linearisation on the rayon thread pool
     /// (Gauss–Newton path; exact-Hessian sweeps and line-search trials stay sequential) (default false).

@@ -12,7 +12,8 @@ pub enum SqpStatus {
     Solved,
     /// Iteration limit reached (the iterate is the last one).
     MaxIterations,
-    /// One real-time iteration done ([`SqpMode::RealTimeIteration`]).
+    /// One real-time iteration done
+    /// ([`SqpMode::RealTimeIteration`](crate::SqpMode::RealTimeIteration)).
     RealTimeIteration,
     /// The QP subproblem is primal infeasible (e.g. inconsistent state bounds).
     QpInfeasible,
@@ -67,7 +68,7 @@ pub struct SqpStats {
     /// Total seconds.
     pub time_total: f64,
     /// Mean substeps per interval of the last linearisation (the fixed count unless
-    /// [`IntegratorSettings::adaptive`] is set).
+    /// [`IntegratorSettings::adaptive`](crate::IntegratorSettings::adaptive) is set).
     pub mean_substeps: f64,
 }
 
