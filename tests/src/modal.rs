@@ -941,7 +941,7 @@ fn rom_vs_fe() -> CaseOutcome {
             .ok_or_else(|| format!("missing table entry {omega0} {si} {w}"))
     };
     let (i4, i8, i16, i32) = (0, 1, 2, 3);
-    // the table (T = 2 s), recorded
+    // the table of docs/modal-rom.md §4 (T = 2 s), recorded
     for omega0 in [0.0, 0.1, 1.0, 2.0] {
         for (si, (name, _)) in selections.iter().enumerate() {
             let (et, ea) = get(omega0, si, HORIZON)?;
@@ -959,7 +959,7 @@ fn rom_vs_fe() -> CaseOutcome {
             ));
         }
     }
-    // tip position: the criterion
+    // tip position: the accuracy criterion
     let e = |o, s| get(o, s, HORIZON);
     out.push(Metric::at_most(
         "ω0 = 0.1, rigid + 8: tip error / tip excursion",

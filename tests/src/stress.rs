@@ -33,7 +33,7 @@ use proptest::test_runner::{Config, RngSeed, TestRunner};
 
 use crate::{Case, CaseOutcome, Metric, Tier};
 
-/// Problem sizes: `Quick` for CI and `cargo xtask stress --quick`, `Full` for the sizes.
+/// Problem sizes: `Quick` for CI and `cargo xtask stress --quick`, `Full` for the stress sizes of docs/stress.md.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Size {
     /// Seconds per experiment.
@@ -1067,7 +1067,7 @@ pub fn to_case(runs: Vec<SubRun>) -> CaseOutcome {
     Ok(out)
 }
 
-/// The stress verification cases (quick: CI sizes; full: the sizes).
+/// The stress verification cases (quick: CI sizes; full: the sizes of docs/stress.md).
 pub fn cases() -> Vec<Case> {
     vec![
         Case {
@@ -1473,7 +1473,7 @@ pub mod scene_fuzz {
                 return text[..cut].to_string();
             }
             6..=10 => {
-                // value replacement with an extreme (the main mutation)
+                // value replacement with an extreme (the main mutation)
                 let candidates: Vec<usize> =
                     (0..lines.len()).filter(|&i| !numbers(&lines[i]).is_empty()).collect();
                 if !candidates.is_empty() {
