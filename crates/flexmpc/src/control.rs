@@ -21,6 +21,9 @@ pub struct Overrides {
     pub omega0: Option<f64>,
     /// `--duration` (s).
     pub duration: Option<f64>,
+    /// `--model`; `exact-joints` also switches off the joint-angle check of the plans (it
+    /// reads the paper model's state).
+    pub model: Option<mpc::ModelKind>,
 }
 
 /// The scene's closed-loop setup with `overrides` applied and checked.
@@ -47,6 +50,18 @@ pub fn control_of(scene: &Scene, overrides: &Overrides) -> Result<Control> {
     }
     if let Some(d) = overrides.duration {
         c.scenario.duration = d;
+    }
+    if let Some(m) = overrides.model {
+        c.controller.model = m;
+        if m == mpc::ModelKind::ExactJoints {
+            c.controller.plan_joint_limit_deg = None;
+        }
+    }
+    if c.controller.model == mpc::ModelKind::ExactJoints {
+        // `--controller lmpc` with the exact-joints model, say (a sweep checks each kind)
+        c.controller.validate().map_err(|e| {
+            anyhow::anyhow!("{}: with --model / [controller] model: {e}", scene.file.display())
+        })?;
     }
     // the library's rules; a rule on the duration is the flag's
     c.scenario.validate().map_err(|e| match &e {
@@ -316,6 +331,14 @@ pub fn first_sample(
     converge: bool,
 ) -> Result<serde_json::Value> {
     let control = control_of(scene, overrides)?;
+    if control.controller.model != mpc::ModelKind::Paper {
+        bail!(
+            "{}: `flexmpc ocp` solves and exports the paper model's first sample only; \
+             model = {} runs in `flexmpc mpc` / `sweep`",
+            scene.file.display(),
+            control.controller.model.name()
+        );
+    }
     let setup = Setup::new(&control.scenario)
         .with_context(|| format!("setting up the controller of {}", scene.file.display()))?;
     let problem = match export {

@@ -103,6 +103,9 @@ enum Command {
         /// Controller (default: `[controller] kind`).
         #[arg(long, value_parser = ["nmpc", "lmpc"])]
         controller: Option<String>,
+        /// Controller's reduced model (default: `[controller] model`).
+        #[arg(long, value_parser = ["paper", "exact-joints"])]
+        model: Option<String>,
         /// Plant (default: `[scenario] plant`).
         #[arg(long, value_parser = ["fe", "rom"])]
         plant: Option<String>,
@@ -121,6 +124,9 @@ enum Command {
         /// Controller (default: `[controller] kind`).
         #[arg(long, value_parser = ["nmpc", "lmpc"])]
         controller: Option<String>,
+        /// Controller's reduced model (default: `[controller] model`).
+        #[arg(long, value_parser = ["paper", "exact-joints"])]
+        model: Option<String>,
         /// Disturbance ω0 (rad/s; default: `[scenario] omega0`).
         #[arg(long, allow_hyphen_values = true)]
         omega0: Option<f64>,
@@ -142,6 +148,9 @@ enum Command {
         /// Controllers, comma-separated `nmpc,lmpc` (default: `[sweep] controllers`).
         #[arg(long)]
         controller: Option<String>,
+        /// Controller's reduced model (default: `[controller] model`).
+        #[arg(long, value_parser = ["paper", "exact-joints"])]
+        model: Option<String>,
         /// Plant (default: `[scenario] plant`).
         #[arg(long, value_parser = ["fe", "rom"])]
         plant: Option<String>,
@@ -167,13 +176,23 @@ fn scene_out(scene: &Path) -> PathBuf {
     PathBuf::from("out").join(stem)
 }
 
+/// `""` for the paper's model, `-exact` for the exact-joints model: the folder names of runs
+/// with other controller models differ.
+fn model_tag(m: mpc::ModelKind) -> &'static str {
+    match m {
+        mpc::ModelKind::Paper => "",
+        mpc::ModelKind::ExactJoints => "-exact",
+    }
+}
+
 /// The output folder of one closed loop: `--out`, else
-/// `out/<scene>/<controller>-<plant>-w<ω0>/`.
+/// `out/<scene>/<controller>[-exact]-<plant>-w<ω0>/` (`-exact`: the exact-joints model).
 fn mpc_out(cli: &Cli, scene: &Path, c: &flexmpc::scene::Control) -> PathBuf {
     cli.out.clone().unwrap_or_else(|| {
         scene_out(scene).join(format!(
-            "{}-{}-w{}",
+            "{}{}-{}-w{}",
             c.controller.kind.name(),
+            model_tag(c.controller.model),
             c.plant.name(),
             c.omega0
         ))
@@ -187,6 +206,7 @@ fn sweep_out(
     cli: &Cli,
     scene: &Path,
     kinds: &[mpc::ControllerKind],
+    model: mpc::ModelKind,
     plant: mpc::PlantKind,
     omegas: &[f64],
 ) -> PathBuf {
@@ -202,7 +222,12 @@ fn sweep_out(
             }
             format!("{}-{}-n{}-{:08x}", omegas[0], omegas[omegas.len() - 1], omegas.len(), h as u32)
         };
-        scene_out(scene).join(format!("sweep-{}-{}-w{w}", ctrl.join("+"), plant.name()))
+        scene_out(scene).join(format!(
+            "sweep-{}{}-{}-w{w}",
+            ctrl.join("+"),
+            model_tag(model),
+            plant.name()
+        ))
     })
 }
 
@@ -333,6 +358,16 @@ fn kind_of(name: Option<&str>) -> Result<Option<mpc::ControllerKind>> {
         Some(n) => match scene::controller_kind(n) {
             Some(k) => Ok(Some(k)),
             None => bail!("--controller `{n}` (allowed: nmpc, lmpc)"),
+        },
+    }
+}
+
+fn model_of(name: Option<&str>) -> Result<Option<mpc::ModelKind>> {
+    match name {
+        None => Ok(None),
+        Some(n) => match scene::model_kind(n) {
+            Some(m) => Ok(Some(m)),
+            None => bail!("--model `{n}` (allowed: paper, exact-joints)"),
         },
     }
 }
@@ -549,13 +584,14 @@ fn run(cli: &Cli) -> Result<()> {
                 );
             }
         }
-        Some(Command::Mpc { scene, controller, plant, omega0, duration }) => {
+        Some(Command::Mpc { scene, controller, model, plant, omega0, duration }) => {
             let s = scene::load(scene)?;
             let ov = Overrides {
                 controller: kind_of(controller.as_deref())?,
                 plant: plant_of(plant.as_deref())?,
                 omega0: *omega0,
                 duration: *duration,
+                model: model_of(model.as_deref())?,
             };
             let out = mpc_out(cli, scene, &control::control_of(&s, &ov)?);
             check_modal_size(&s)?;
@@ -563,10 +599,11 @@ fn run(cli: &Cli) -> Result<()> {
             write_vtk(cli, &o)?;
             print_mpc(&o, cli)?;
         }
-        Some(Command::Ocp { scene, controller, omega0, export, converge }) => {
+        Some(Command::Ocp { scene, controller, model, omega0, export, converge }) => {
             let s = scene::load(scene)?;
             let ov = Overrides {
                 controller: kind_of(controller.as_deref())?,
+                model: model_of(model.as_deref())?,
                 omega0: *omega0,
                 ..Default::default()
             };
@@ -608,7 +645,7 @@ fn run(cli: &Cli) -> Result<()> {
                 }
             }
         }
-        Some(Command::Sweep { scene, omega0, controller, plant, duration }) => {
+        Some(Command::Sweep { scene, omega0, controller, model, plant, duration }) => {
             let s = scene::load(scene)?;
             let Some(c) = &s.control else {
                 bail!("{}: no [scenario] section (see scenes/paper-2d-mpc.toml)", scene.display());
@@ -637,9 +674,17 @@ fn run(cli: &Cli) -> Result<()> {
                 plant: plant_of(plant.as_deref())?,
                 omega0: None,
                 duration: *duration,
+                model: model_of(model.as_deref())?,
             };
             let plant = ov.plant.unwrap_or(c.plant);
-            let out = sweep_out(cli, scene, &kinds, plant, &omegas);
+            let out = sweep_out(
+                cli,
+                scene,
+                &kinds,
+                ov.model.unwrap_or(c.controller.model),
+                plant,
+                &omegas,
+            );
             check_modal_size(&s)?;
             let o = control::run_sweep(&s, &ov, &omegas, &kinds, &out, output_options(cli))?;
             if cli.json {

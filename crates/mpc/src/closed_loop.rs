@@ -5,6 +5,7 @@
 use crate::controller::{Controller, ControllerKind, ControllerSettings, SampleReport, Strategy};
 use crate::dynamics::RomDynamics;
 use crate::error::{invalid, Result};
+use crate::exact_dynamics::{default_link_elastic_modes, ExactDynamics, ModelKind};
 use crate::plant::{relative_angle, PlantKind, SimPlant};
 use crate::scenario::{ratio, Setup};
 use crate::validity::JointMonitor;
@@ -229,10 +230,11 @@ pub fn run(
     }
     let start = Instant::now();
     let sc = &setup.scenario;
-    let per_sample = ratio("output_interval per sampling", sc.mpc.sampling, sc.output_interval)?;
-    let n_out = ratio("output_interval per duration", sc.duration, sc.output_interval)?;
+    // checked in this order before any work (`drive` reads the same ratios)
+    ratio("output_interval per sampling", sc.mpc.sampling, sc.output_interval)?;
+    ratio("output_interval per duration", sc.duration, sc.output_interval)?;
     let steps = ratio("plant.dt per output_interval", sc.output_interval, sc.plant.dt)?;
-    let per_snap = ratio("output_interval per snapshot", sc.snapshot_interval, sc.output_interval)?;
+    ratio("output_interval per snapshot", sc.snapshot_interval, sc.output_interval)?;
     let omega = Vector3::from_column_slice(&sc.omega_direction) * omega0;
     let x0 = sc.structure.rigid_rotation_state(omega, Vector3::from_column_slice(&sc.center));
     let mut plant = SimPlant::fe(&sc.structure, sc.plant, steps, &sc.inputs, &x0)?;
@@ -240,9 +242,62 @@ pub fn run(
         let (obs, _) = observe(setup, &plant, false)?;
         plant = SimPlant::rom(&setup.rom, obs.q, sc.output_interval, sc.rom_plant_substeps)?;
     }
-    let mut ctrl =
-        Controller::new(RomDynamics::new(&setup.rom)?, &setup.weights, &sc.mpc, controller)?;
-    ctrl.set_joint_monitor(JointMonitor::new(setup)?);
+    match controller.model {
+        ModelKind::Paper => {
+            let mut ctrl = Controller::new(
+                RomDynamics::new(&setup.rom)?,
+                &setup.weights,
+                &sc.mpc,
+                controller,
+            )?;
+            ctrl.set_joint_monitor(JointMonitor::new(setup)?);
+            drive(setup, omega0, controller, plant_kind, plant, ctrl, start, |_, obs| {
+                Ok(obs.q.clone())
+            })
+        }
+        ModelKind::ExactJoints => {
+            if plant_kind == PlantKind::Rom {
+                return Err(invalid(
+                    "plant",
+                    "rom",
+                    "model = exact-joints needs the FE plant (its state is projected from it)",
+                ));
+            }
+            let elastic = controller
+                .link_elastic_modes
+                .unwrap_or_else(|| default_link_elastic_modes(setup.planar_axis.is_none()));
+            let (dynamics, weights) = ExactDynamics::for_setup(setup, elastic)?;
+            let rom = dynamics.rom().clone();
+            let ctrl = Controller::new(dynamics, &weights, &sc.mpc, controller)?;
+            // state feedback: the FE plant state projected onto the exact-joints state
+            // (theory.md §10)
+            drive(setup, omega0, controller, plant_kind, plant, ctrl, start, move |p, _| match p {
+                SimPlant::Fe { plant, .. } => {
+                    Ok(rom.project_fe(plant.state(), plant.kinematics())?)
+                }
+                SimPlant::Rom { .. } => Err(invalid("plant", "rom", "needs the FE plant")),
+            })
+        }
+    }
+}
+
+/// The sampling loop of [`run`] with the controller `ctrl` on its model `D`; `measure` maps
+/// the plant and its observation to the controller's state.
+#[allow(clippy::too_many_arguments)]
+fn drive<D: ocp_transcription::Dynamics + Clone>(
+    setup: &Setup,
+    omega0: f64,
+    controller: &ControllerSettings,
+    plant_kind: PlantKind,
+    mut plant: SimPlant,
+    mut ctrl: Controller<D>,
+    start: Instant,
+    measure: impl Fn(&SimPlant, &Observation) -> Result<Vec<f64>>,
+) -> Result<RunResult> {
+    let sc = &setup.scenario;
+    let per_sample = ratio("output_interval per sampling", sc.mpc.sampling, sc.output_interval)?;
+    let n_out = ratio("output_interval per duration", sc.duration, sc.output_interval)?;
+    let per_snap = ratio("output_interval per snapshot", sc.snapshot_interval, sc.output_interval)?;
     let nu = sc.inputs.len();
     let mut u = vec![0.0; nu];
     let anchored = sc.mpc.control_grid == ControlGrid::Absolute;
@@ -262,18 +317,19 @@ pub fn run(
             snapshots.push(Snapshot { t, positions: p });
         }
         if k < n_out && k % per_sample == 0 {
+            let x = measure(&plant, &obs)?;
             let rep = match (&plan, anchored) {
                 (Some(p), true) => {
                     // next time on the absolute grid kΔt (t itself when on it)
                     let g = ((t / dt_plan - 1e-9).ceil() * dt_plan).max(t);
-                    match ctrl.predict(&obs.q, p.piece(t, dt_plan), g - t) {
-                        Ok(x) => ctrl.step_from(t, g, &x),
+                    match ctrl.predict(&x, p.piece(t, dt_plan), g - t) {
+                        Ok(xp) => ctrl.step_from(t, g, &xp),
                         // the model diverges from the measured state (far outside its range):
                         // plan from the measurement itself, starting at the sample
-                        Err(_) => ctrl.step(t, &obs.q),
+                        Err(_) => ctrl.step(t, &x),
                     }
                 }
-                _ => ctrl.step(t, &obs.q),
+                _ => ctrl.step(t, &x),
             };
             let rep = match rep {
                 Ok(r) => r,

@@ -3,12 +3,13 @@
 
 use crate::dynamics::RomDynamics;
 use crate::error::{invalid, Result};
+use crate::exact_dynamics::ModelKind;
 use crate::validity::JointMonitor;
 use crate::weights::{MpcSettings, Weights};
 use nalgebra::DVector;
 use ocp_transcription::{
-    Globalisation, HessianApproximation, Integrator, IntegratorKind, IntegratorSettings, Ocp,
-    QpForm, SqpMode, SqpSettings, SqpSolver, SqpStatus,
+    Dynamics, Globalisation, HessianApproximation, Integrator, IntegratorKind, IntegratorSettings,
+    Ocp, QpForm, SqpMode, SqpSettings, SqpSolver, SqpStatus,
 };
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
@@ -99,6 +100,16 @@ pub struct ControllerSettings {
     /// criterion at ω0 = 1.25, 2.0 (limit 20°), with 3 or 5 it meets it at every ω0, with 10
     /// it fails at 1.5 and 1.75].
     pub fallback_hold: usize,
+    /// The controller's reduced model \[paper\]: the paper's (29), or the exact-joints model
+    /// (theory.md §10, [`crate::ExactDynamics`]) with the basis of [`Self::link_elastic_modes`].
+    /// The exact-joints model is controlled by the NMPC only, without the joint-angle check
+    /// (the check reads the paper model's state): `kind = lmpc` or `plan_joint_limit_deg`
+    /// with it is an error.
+    pub model: ModelKind,
+    /// Exact-joints model only: per-link basis of the rigid link motions plus this many
+    /// elastic modes (the lowest constrained modes at the reference, split per link);
+    /// `None`: 4 for planar, 16 for spatial structures (docs/exact-joints-results.md) \[None\].
+    pub link_elastic_modes: Option<usize>,
 }
 
 impl Default for ControllerSettings {
@@ -118,6 +129,8 @@ impl Default for ControllerSettings {
             fallback_to_lmpc: true,
             plan_joint_limit_deg: DEFAULT_PLAN_JOINT_LIMIT,
             fallback_hold: DEFAULT_FALLBACK_HOLD,
+            model: ModelKind::Paper,
+            link_elastic_modes: None,
         }
     }
 }
@@ -200,6 +213,22 @@ impl ControllerSettings {
                 return Err(invalid("plan_joint_limit_deg", a, "must be in (0, 180]"));
             }
         }
+        if self.model == ModelKind::ExactJoints {
+            if self.kind == ControllerKind::Lmpc {
+                return Err(invalid(
+                    "kind",
+                    "lmpc",
+                    "the exact-joints model is controlled by the NMPC only",
+                ));
+            }
+            if let Some(a) = self.plan_joint_limit_deg {
+                return Err(invalid(
+                    "plan_joint_limit_deg",
+                    a,
+                    "must be none with model = exact-joints (the check reads the paper model's state)",
+                ));
+            }
+        }
         Ok(())
     }
 }
@@ -253,13 +282,14 @@ pub struct SampleReport {
     pub joint_limit_rejections: usize,
 }
 
-/// A receding-horizon controller on the augmented modal model.
-pub struct Controller {
+/// A receding-horizon controller on a reduced model `D`: the paper's augmented modal model
+/// ([`RomDynamics`], the default) or the exact-joints model ([`crate::ExactDynamics`]).
+pub struct Controller<D: Dynamics + Clone = RomDynamics> {
     settings: ControllerSettings,
     mpc: MpcSettings,
-    nmpc: Option<SqpSolver<RomDynamics>>,
-    relaxed: Option<SqpSolver<RomDynamics>>,
-    lmpc: SqpSolver<RomDynamics>,
+    nmpc: Option<SqpSolver<D>>,
+    relaxed: Option<SqpSolver<D>>,
+    lmpc: SqpSolver<D>,
     samples: usize,
     /// Samples left on the linear MPC after a fallback ([`ControllerSettings::fallback_hold`]).
     hold: usize,
@@ -267,12 +297,12 @@ pub struct Controller {
     last_start: Option<f64>,
     /// The model used to predict a measured state to the plan's start: the nonlinear model
     /// (29) for both controllers (a linearised predictor made the 3D LMPC diverge at ω0 = 0.5).
-    predictor: RomDynamics,
+    predictor: D,
     /// Joint angles of plans, for the validity check and the reports.
     monitor: Option<JointMonitor>,
 }
 
-impl std::fmt::Debug for Controller {
+impl<D: Dynamics + Clone> std::fmt::Debug for Controller<D> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Controller")
             .field("settings", &self.settings)
@@ -285,18 +315,18 @@ fn status_name(s: SqpStatus) -> String {
     format!("{s:?}")
 }
 
-impl Controller {
+impl<D: Dynamics + Clone> Controller<D> {
     /// Builds the controller for `model` with the assembled `weights`.
     pub fn new(
-        model: RomDynamics,
+        model: D,
         weights: &Weights,
         mpc: &MpcSettings,
         settings: &ControllerSettings,
     ) -> Result<Self> {
         mpc.validate()?;
         settings.validate()?;
-        let nu = ocp_transcription::Dynamics::nu(&model);
-        let nx = ocp_transcription::Dynamics::nx(&model);
+        let nu = model.nu();
+        let nx = model.nx();
         let mut ocp = Ocp::new(nx, nu, mpc.horizon, mpc.intervals)?;
         ocp.q = weights.q.clone();
         ocp.r = weights.r.clone();
@@ -372,7 +402,7 @@ impl Controller {
     }
 
     /// Largest predicted joint angle (deg) over the nodes of `solver`'s plan.
-    fn plan_angle(&self, solver: &SqpSolver<RomDynamics>) -> Option<f64> {
+    fn plan_angle(&self, solver: &SqpSolver<D>) -> Option<f64> {
         self.monitor.as_ref().map(|m| m.plan_max_angle(solver.states()).to_degrees())
     }
 
@@ -653,7 +683,7 @@ fn accepted(st: &ocp_transcription::SqpStats, accept: f64) -> bool {
 }
 
 /// Copies nodes and controls of `from` into `to` (same problem dimensions).
-fn copy_plan(from: &SqpSolver<RomDynamics>, to: &mut SqpSolver<RomDynamics>) {
+fn copy_plan<D: Dynamics>(from: &SqpSolver<D>, to: &mut SqpSolver<D>) {
     for (d, s) in to.states_mut().iter_mut().zip(from.states()) {
         d.copy_from(s);
     }

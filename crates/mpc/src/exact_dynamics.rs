@@ -143,6 +143,58 @@ impl ExactDynamics {
     }
 }
 
+/// Default of [`crate::ControllerSettings::link_elastic_modes`]: 4 elastic modes per link for
+/// planar, 16 for spatial structures (docs/exact-joints-results.md).
+pub fn default_link_elastic_modes(spatial: bool) -> usize {
+    if spatial {
+        16
+    } else {
+        4
+    }
+}
+
+impl ExactDynamics {
+    /// The exact-joints controller model of a scenario's setup: per-link basis of the rigid link
+    /// motions plus the lowest `elastic` constrained modes at the reference split per link, the
+    /// structure's damping and the scenario's inputs; with the cost of the module docs at the
+    /// reference state. The joints' outboard lengths assume the beams are ordered from the root
+    /// outward along a chain (every scenario of the paper).
+    pub fn for_setup(setup: &crate::Setup, elastic: usize) -> Result<(Self, Weights)> {
+        use modal_rom::exact_joints::{from_fields, LinkBasisSettings};
+        use modal_rom::{BasisSettings, ModeSelection};
+        let sc = &setup.scenario;
+        let structure = &sc.structure;
+        let model = &setup.model;
+        let modes = model.modes(&BasisSettings::default())?;
+        let sel = modes.select(&ModeSelection::Lowest(modes.n_rigid() + elastic))?;
+        let inputs =
+            sc.inputs.iter().map(|i| i.modal(structure, model)).collect::<Result<Vec<_>>>()?;
+        let rom = from_fields(
+            structure,
+            model,
+            &[sel.phi1()],
+            &LinkBasisSettings::default(),
+            Some(&model.damping),
+            &inputs,
+        )?;
+        let lengths: Vec<f64> = structure.beams().iter().map(|b| b.beam.mesh().length()).collect();
+        let total: f64 = lengths.iter().sum();
+        let outboard: Vec<f64> = structure
+            .joints()
+            .iter()
+            .filter(|j| !j.ground && j.ends.len() == 2)
+            .map(|j| {
+                let child = j.ends.iter().map(|&(b, _)| b).max().unwrap_or(0);
+                lengths[child..].iter().sum()
+            })
+            .collect();
+        let dynamics = Self::new(rom)?;
+        let refs = vec![None; outboard.len()];
+        let weights = dynamics.weights(&sc.mpc, total, &outboard, None, &refs)?;
+        Ok((dynamics, weights))
+    }
+}
+
 impl Dynamics for ExactDynamics {
     fn nx(&self) -> usize {
         self.rom.n_state()

@@ -667,3 +667,81 @@ fn held_samples_iterate_the_nmpc_under_rti() {
     // 0.13 here (measured); 1e-6 only separates "iterated" from "copied" (exactly 0 above)
     assert!(diff(&shadow) > 1e-6, "RTI held sample did not iterate the NMPC: {}", diff(&shadow));
 }
+
+/// First-sample NMPC control of the paper's 2D scenario (coarse mesh) at ω0 = 1, as bits.
+fn paper_first_sample_bits(settings: &ControllerSettings) -> Vec<u64> {
+    let setup = setup_2d();
+    let s = &setup.scenario;
+    let x0 = s
+        .structure
+        .rigid_rotation_state(nalgebra::Vector3::new(0.0, 1.0, 0.0), nalgebra::Vector3::zeros());
+    let q = setup.rom.project_full(&x0, None).unwrap();
+    let mut c =
+        Controller::new(RomDynamics::new(&setup.rom).unwrap(), &setup.weights, &s.mpc, settings)
+            .unwrap();
+    c.step(0.0, &q).unwrap().u.iter().map(|v| v.to_bits()).collect()
+}
+
+/// `model = paper` (the default) is the controller as it was before the model choice: the
+/// first sample's control bits are those the controller gave before `model` existed.
+#[test]
+fn paper_model_controls_are_unchanged() {
+    let bits = paper_first_sample_bits(&ControllerSettings {
+        model: ModelKind::Paper,
+        ..ControllerSettings::default()
+    });
+    assert_eq!(bits, PAPER_FIRST_SAMPLE_BITS);
+}
+
+/// Bits of the first sample's control of [`paper_model_controls_are_unchanged`], computed on
+/// the controller before the model choice was added (same scenario, same code path).
+const PAPER_FIRST_SAMPLE_BITS: [u64; 3] =
+    [13831740066684223502, 4589398429732434489, 4609990541550897318];
+
+/// The exact-joints model is NMPC only and without the paper model's joint-angle check.
+#[test]
+fn exact_joints_rejects_paper_only_settings() {
+    let ej = ControllerSettings {
+        model: ModelKind::ExactJoints,
+        plan_joint_limit_deg: None,
+        ..ControllerSettings::default()
+    };
+    assert!(ej.validate().is_ok());
+    let e = ControllerSettings { kind: ControllerKind::Lmpc, ..ej.clone() }.validate();
+    assert!(e.unwrap_err().to_string().contains("kind"));
+    let e = ControllerSettings { plan_joint_limit_deg: Some(20.0), ..ej.clone() }.validate();
+    assert!(e.unwrap_err().to_string().contains("plan_joint_limit_deg"));
+    let e = run(setup_2d(), 0.5, &ej, PlantKind::Rom);
+    assert!(e.unwrap_err().to_string().contains("plant"));
+}
+
+/// A short closed loop with the exact-joints NMPC on the FE plant (2D, coarse mesh, 1.6 s):
+/// runs without error, its controls are finite and within the bounds, it spins the structure
+/// down, and a second run is identical.
+#[test]
+fn exact_joints_closed_loop_slows_the_spin() {
+    let mut sc = setup_2d().scenario.clone();
+    sc.duration = 1.6;
+    let setup = Setup::new(&sc).unwrap();
+    let c = ControllerSettings {
+        model: ModelKind::ExactJoints,
+        plan_joint_limit_deg: None,
+        ..ControllerSettings::default()
+    };
+    let a = run(&setup, 1.0, &c, PlantKind::Fe).unwrap();
+    let b = run(&setup, 1.0, &c, PlantKind::Fe).unwrap();
+    assert_eq!(a.without_timings(), b.without_timings());
+    assert!(a.summary.error.is_none(), "{:?}", a.summary.error);
+    assert_eq!(a.samples.len(), 8);
+    for s in &a.samples {
+        assert!(s.u.iter().all(|v| v.is_finite() && v.abs() <= sc.mpc.u_max + 1e-9), "{s:?}");
+    }
+    let r = &a.summary;
+    eprintln!(
+        "exact-joints 1.6 s: V ratio {:.3e}, rigid rate ratio {:.3}, strategies {:?}",
+        r.v_ratio_final,
+        r.rigid_rate_ratio,
+        a.samples.iter().map(|s| s.strategy).collect::<Vec<_>>()
+    );
+    assert!(r.rigid_rate_ratio < 1.0, "rigid rate ratio {}", r.rigid_rate_ratio);
+}

@@ -117,6 +117,11 @@ pub fn controller_kind(name: &str) -> Option<mpc::ControllerKind> {
     mpc::ControllerKind::deserialize(IntoDeserializer::<value::Error>::into_deserializer(name)).ok()
 }
 
+/// `paper` / `exact-joints` (the names of `[controller] model`).
+pub fn model_kind(name: &str) -> Option<mpc::ModelKind> {
+    mpc::ModelKind::deserialize(IntoDeserializer::<value::Error>::into_deserializer(name)).ok()
+}
+
 /// `fe` / `rom` (the names of `[scenario] plant`).
 pub fn plant_kind(name: &str) -> Option<mpc::PlantKind> {
     mpc::PlantKind::deserialize(IntoDeserializer::<value::Error>::into_deserializer(name)).ok()
@@ -170,6 +175,15 @@ fn controller_of(
             cs.plan_joint_limit_deg,
         )?,
     );
+    set(&mut c.model, cs.model);
+    if c.model == mpc::ModelKind::ExactJoints
+        && cs.joint_limit.is_none()
+        && cs.plan_joint_limit_deg.is_none()
+    {
+        // the joint-angle check reads the paper model's state: off by default
+        c.plan_joint_limit_deg = None;
+    }
+    set(&mut c.link_elastic_modes, cs.link_elastic_modes.map(Some));
     set(&mut c.integrator.kind, cs.integrator.map(|i| i.kind()));
     set(&mut c.integrator.substeps, cs.substeps);
     if let Some(w) = &cs.weights {

@@ -126,6 +126,8 @@ const KEYS: &[(&str, &str, &str)] = &[
     ("controller", "retry_relaxation", "controller.retry_relaxation"),
     ("controller", "plan_joint_limit_deg", "controller.plan_joint_limit_deg"),
     ("controller", "integrator.substeps", "controller.substeps"),
+    ("controller", "kind", "controller.kind"),
+    ("controller", "link_elastic_modes", "controller.link_elastic_modes"),
     ("scenario", "mpc.kx1", "controller.weights.kx1"),
     ("scenario", "mpc.kx2", "controller.weights.kx2"),
     ("scenario", "mpc.k_dxi", "controller.weights.k_dxi"),

@@ -22,7 +22,7 @@ use multibody_constraints::Structure;
 use multibody_constraints::{MultibodyError, Plant, PlantSettings};
 use nalgebra::Vector3;
 
-pub use control::{controller_kind, plant_kind};
+pub use control::{controller_kind, model_kind, plant_kind};
 pub use error::SceneError;
 use error::{field_at, field_from_message, table_at, Ctx};
 pub use names::*;

@@ -327,6 +327,14 @@ pub struct ControllerSpec {
     pub substeps: Option<usize>,
     /// Weights of the cost, the paper's by default.
     pub weights: Option<Spanned<WeightsSpec>>,
+    /// The controller's reduced model: `paper` (the paper's augmented modal model) or
+    /// `exact-joints` (joint rows at the current relative rotation, docs/theory.md §10; NMPC
+    /// on the FE plant only, and without the joint-angle check, which is off by default with
+    /// it) (default paper). `--model` overrides.
+    pub model: Option<mpc::ModelKind>,
+    /// `exact-joints` only: elastic modes per link of its basis (rigid link motions + this
+    /// many of the lowest constrained modes, split per link) (default 4 planar, 16 spatial).
+    pub link_elastic_modes: Option<usize>,
 }
 
 /// `[scenario]`: one closed-loop stabilisation run (paper §5.2–5.3) of `flexmpc mpc`.

@@ -152,6 +152,45 @@ fn mpc_short_run_writes_csv_solver_log_and_report() {
     }
 }
 
+/// `flexmpc mpc --model exact-joints` on the paper's 2D scene (2 × 8 elements, 1 s): the
+/// NMPC on the exact-joints model runs on the FE plant, writes its summary into a folder of
+/// its own (`nmpc-exact-fe-w1`, next to the paper model's `nmpc-fe-w1`), and slows the spin;
+/// `ocp` and an LMPC with it are clear errors naming the model.
+#[test]
+fn mpc_with_the_exact_joints_model() {
+    let (scene, out) = small_2d_scene("mpc-exact");
+    let dir = out.parent().unwrap().to_path_buf();
+    let o = flexmpc()
+        .current_dir(&dir)
+        .args(["--json", "mpc"])
+        .arg(&scene)
+        .args(["--model", "exact-joints", "--duration", "1"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "stderr: {}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("stdout is only JSON");
+    assert_summary_shape(&v);
+    assert_eq!(v["controller"], "nmpc");
+    assert!(v["error"].is_null(), "{v}");
+    assert!(v["rigid_rate_ratio"].as_f64().unwrap() < 0.5, "{v}");
+    let folder = dir.join("out/small-2d/nmpc-exact-fe-w1");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(folder.join("summary.json")).unwrap())
+            .unwrap();
+    assert_eq!(summary["v_ratio_final"], v["v_ratio_final"]);
+    assert!(!dir.join("out/small-2d/nmpc-fe-w1").exists());
+    for (args, needle) in [
+        (vec!["ocp", "--model", "exact-joints"], "exact-joints"),
+        (vec!["mpc", "--model", "exact-joints", "--controller", "lmpc"], "kind"),
+    ] {
+        let o = flexmpc().current_dir(&dir).args(&args[..1]).arg(&scene).args(&args[1..]).output();
+        let o = o.unwrap();
+        assert!(!o.status.success(), "{args:?} succeeded");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(needle), "{args:?}: {err}");
+    }
+}
+
 /// `flexmpc sweep` with two ω0 in parallel (`--threads 2`): results in input order, one CSV
 /// row each, the Fig. 6-style plot; a larger disturbance bends the elbow more.
 #[test]
