@@ -21,7 +21,7 @@ usage: cargo xtask ci
 
 Runs, in order, stopping at the first failure: tidy (xtask/src/tidy.rs), cargo fmt --all
 --check, cargo clippy --workspace --all-targets --release -- -D warnings, cargo doc
---workspace --no-deps (RUSTDOCFLAGS=-D warnings), cargo test --workspace --release, cargo
+--workspace --no-deps --release (RUSTDOCFLAGS=-D warnings), cargo test --workspace --release, cargo
 xtask verify --quick. Prints each step's wall time and a summary.";
 
 /// One CI step: a name and what runs.
@@ -44,7 +44,13 @@ const STEPS: &[(&str, Step)] = &[
             &[],
         ),
     ),
-    ("doc", Step::Cargo(&["doc", "--workspace", "--no-deps"], &[("RUSTDOCFLAGS", "-D warnings")])),
+    (
+        "doc",
+        Step::Cargo(
+            &["doc", "--workspace", "--no-deps", "--release"],
+            &[("RUSTDOCFLAGS", "-D warnings")],
+        ),
+    ),
     ("test", Step::Cargo(&["test", "--workspace", "--release"], &[])),
     ("verify --quick", Step::VerifyQuick),
 ];
