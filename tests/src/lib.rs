@@ -94,6 +94,13 @@ pub struct Row {
     pub seconds: f64,
 }
 
+/// Thread CPU time of the calling thread (s), from `/proc/thread-self/schedstat` (Linux);
+/// `None` elsewhere.
+pub fn thread_cpu() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
+    Some(s.split_whitespace().next()?.parse::<f64>().ok()? * 1e-9)
+}
+
 /// Every case of every crate, in crate order.
 pub fn all_cases() -> Vec<Case> {
     let mut cases = Vec::new();

@@ -2,6 +2,7 @@
 //! 2D and 3D two-links (§5.2–5.3) against the stabilisation criterion of docs/mpc.md, solve times,
 //! and reproducibility.
 
+use crate::thread_cpu;
 use crate::{Case, CaseOutcome, Metric, Tier};
 use mpc::{
     run, sweep, ControllerKind, ControllerSettings, PlantKind, RunSummary, Scenario, Setup,
@@ -308,14 +309,7 @@ fn stabilisation_3d() -> CaseOutcome {
     Ok(out)
 }
 
-/// Thread CPU time of the calling thread (s), from `/proc/thread-self/schedstat` (Linux);
-/// `None` elsewhere.
-fn thread_cpu() -> Option<f64> {
-    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
-    Some(s.split_whitespace().next()?.parse::<f64>().ok()? * 1e-9)
-}
-
-/// Must-show 3 on the real-time NMPC of the shipped scenes, FE plant: 2D
+/// The real-time goal on the real-time NMPC of the shipped scenes, FE plant: 2D
 /// `ControllerSettings::real_time(false)` (RTI, no relaxed retry, full steps;
 /// `scenes/paper-2d-mpc.toml`), 3D `ControllerSettings::real_time_spatial()` with the `k_u`
 /// option (`scenes/paper-3d-mpc-ku1.toml`, which stabilises every ω0 = 0.25…1.0). Asserts
