@@ -233,13 +233,13 @@ fn sweep_out(
 
 /// With `--vtk`, writes the closed loop's snapshots as `vtk/mpc-<k>.vtu` and `vtk/mpc.pvd` into
 /// its output folder.
-fn write_vtk(cli: &Cli, o: &control::MpcOutput) -> Result<()> {
+fn write_vtk(cli: &Cli, s: &scene::Scene, o: &control::MpcOutput) -> Result<()> {
     if cli.vtk {
         let dir = o.report.parent().unwrap_or(Path::new(".")).join("vtk");
         let pvd = flexmpc::vtk::write(
             &dir,
             "mpc",
-            &flexmpc::vtk::frames_of_snapshots(&o.result.snapshots),
+            &flexmpc::vtk::frames_of_snapshots(&o.result.snapshots, &s.structure),
         )?;
         if chatty(cli) {
             say!("ParaView: {}", pvd.display());
@@ -596,7 +596,7 @@ fn run(cli: &Cli) -> Result<()> {
             let out = mpc_out(cli, scene, &control::control_of(&s, &ov)?);
             check_modal_size(&s)?;
             let o = control::run_mpc(&s, &ov, &out, output_options(cli))?;
-            write_vtk(cli, &o)?;
+            write_vtk(cli, &s, &o)?;
             print_mpc(&o, cli)?;
         }
         Some(Command::Ocp { scene, controller, model, omega0, export, converge }) => {
@@ -772,7 +772,7 @@ fn run(cli: &Cli) -> Result<()> {
                 );
             }
             let o = control::run_mpc(&s, &Overrides::default(), &out, output_options(cli))?;
-            write_vtk(cli, &o)?;
+            write_vtk(cli, &s, &o)?;
             print_mpc(&o, cli)?;
             if chatty(cli) {
                 say!(

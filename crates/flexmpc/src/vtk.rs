@@ -7,8 +7,10 @@
 //! `n` at `r_n` gives the two points `r_n ∓ ½ w e2,n`, with `e2,n = T(ξ_n) e2` the section's
 //! second axis in global components (`docs/theory.md §1`), and element `e` is the quad between
 //! nodes `e` and `e + 1`; a twist of the section turns the ribbon, so torsion shows. The
-//! centreline is the midpoint of each pair. Without orientations (the closed loops of `mpc`,
-//! whose snapshots hold node positions only) every beam is a polyline of its nodes.
+//! centreline is the midpoint of each pair. `simulate` writes the FE plant at every output
+//! step; `mpc` writes the closed loop's snapshots, which carry the plant's node positions,
+//! orientations and state (the FE plant's own; for the ROM plant, the fields rebuilt from
+//! its modal state). Without orientations a beam is a polyline of its nodes.
 //!
 //! Data. Point data: the node's global translational and angular velocity; the element
 //! values averaged onto the nodes — sectional force `F` and moment `M` (section frame, eq. 2)
@@ -300,17 +302,20 @@ pub fn write(dir: &Path, name: &str, frames: &[Frame]) -> Result<PathBuf> {
     c.finish()
 }
 
-/// The frames of a closed loop: its snapshots (node positions; polyline geometry).
-pub fn frames_of_snapshots(snapshots: &[mpc::Snapshot]) -> Vec<Frame> {
+/// The frames of a closed loop on `structure`: every snapshot as ribbons through its node
+/// positions and section orientations, with the velocities, sectional loads and strains of
+/// the plant's state (the FE plant's own; the ROM plant's rebuilt from its modal state).
+/// Snapshots without orientations give polylines; without a state of the structure's size,
+/// geometry only.
+pub fn frames_of_snapshots(
+    snapshots: &[mpc::Snapshot],
+    structure: &multibody_constraints::Structure,
+) -> Vec<Frame> {
     snapshots
         .iter()
-        .map(|s| Frame {
-            t: s.t,
-            beams: s
-                .positions
-                .iter()
-                .map(|p| BeamFrame { positions: p.clone(), ..Default::default() })
-                .collect(),
+        .map(|s| {
+            let state = (s.state.len() == structure.dim()).then_some(s.state.as_slice());
+            frame_of_state(structure, s.t, &s.positions, &s.orientations, state)
         })
         .collect()
 }
@@ -318,24 +323,54 @@ pub fn frames_of_snapshots(snapshots: &[mpc::Snapshot]) -> Vec<Frame> {
 /// The current state of a constrained FE plant as a frame: positions, section axes,
 /// velocities, sectional loads and strains.
 pub fn frame_of_plant(plant: &multibody_constraints::Plant) -> Frame {
-    let s = plant.structure();
-    let x = plant.state();
-    let beams = s
-        .beams()
+    let kin = plant.kinematics();
+    let positions: Vec<Vec<[f64; 3]>> =
+        kin.iter().map(|k| k.r.iter().map(|r| [r.x, r.y, r.z]).collect()).collect();
+    let xi: Vec<Vec<[f64; 4]>> =
+        kin.iter().map(|k| k.xi.iter().map(|q| [q[0], q[1], q[2], q[3]]).collect()).collect();
+    frame_of_state(plant.structure(), plant.time(), &positions, &xi, Some(plant.state()))
+}
+
+/// One frame from node positions, node quaternions `xi` (section frame → global; empty or
+/// short: polyline geometry and no velocities) and the full FE state `x` of `structure`
+/// (velocities `x1` rotated to global by `T(ξ)`, element loads `x2`, strains `C x2`).
+fn frame_of_state(
+    s: &multibody_constraints::Structure,
+    t: f64,
+    positions: &[Vec<[f64; 3]>],
+    xi: &[Vec<[f64; 4]>],
+    x: Option<&[f64]>,
+) -> Frame {
+    let beams = positions
         .iter()
         .enumerate()
-        .map(|(b, sb)| {
-            let beam = &sb.beam;
-            let kin = &plant.kinematics()[b];
-            let xb = s.beam_slice(b, x);
-            let rot: Vec<nalgebra::Matrix3<f64>> = kin.xi.iter().map(rotation).collect();
-            let v = |n: usize, a: usize| -> [f64; 3] {
-                let x1 = beam.x1(xb, n);
-                let l = nalgebra::Vector3::new(x1[a], x1[a + 1], x1[a + 2]);
-                let g = rot[n] * l;
-                [g.x, g.y, g.z]
+        .map(|(b, pos)| {
+            let rot: Option<Vec<nalgebra::Matrix3<f64>>> =
+                xi.get(b).filter(|q| q.len() == pos.len()).map(|q| {
+                    q.iter().map(|q| rotation(&nalgebra::Vector4::from_column_slice(q))).collect()
+                });
+            let mut frame = BeamFrame {
+                positions: pos.clone(),
+                e2: rot
+                    .as_ref()
+                    .map(|r| r.iter().map(|t| [t[(0, 1)], t[(1, 1)], t[(2, 1)]]).collect()),
+                ..Default::default()
             };
-            let n_nodes = beam.n_nodes();
+            let Some(sb) = s.beams().get(b).filter(|sb| sb.beam.n_nodes() == pos.len()) else {
+                return frame;
+            };
+            let Some(x) = x else { return frame };
+            let beam = &sb.beam;
+            let xb = s.beam_slice(b, x);
+            if let Some(rot) = &rot {
+                let v = |n: usize, a: usize| -> [f64; 3] {
+                    let x1 = beam.x1(xb, n);
+                    let g = rot[n] * nalgebra::Vector3::new(x1[a], x1[a + 1], x1[a + 2]);
+                    [g.x, g.y, g.z]
+                };
+                frame.velocity = Some((0..pos.len()).map(|n| v(n, 0)).collect());
+                frame.angular_velocity = Some((0..pos.len()).map(|n| v(n, 3)).collect());
+            }
             let force: Vec<[f64; 6]> = (0..beam.n_elements())
                 .map(|e| {
                     let f = beam.x2(xb, e);
@@ -343,24 +378,20 @@ pub fn frame_of_plant(plant: &multibody_constraints::Plant) -> Frame {
                 })
                 .collect();
             let c = beam.section().compliance;
-            let strain: Vec<[f64; 6]> = force
-                .iter()
-                .map(|f| {
-                    let g = c * nalgebra::Vector6::from_column_slice(f);
-                    std::array::from_fn(|k| g[k])
-                })
-                .collect();
-            BeamFrame {
-                positions: kin.r.iter().map(|r| [r.x, r.y, r.z]).collect(),
-                e2: Some(rot.iter().map(|t| [t[(0, 1)], t[(1, 1)], t[(2, 1)]]).collect()),
-                velocity: Some((0..n_nodes).map(|n| v(n, 0)).collect()),
-                angular_velocity: Some((0..n_nodes).map(|n| v(n, 3)).collect()),
-                force: Some(force),
-                strain: Some(strain),
-            }
+            frame.strain = Some(
+                force
+                    .iter()
+                    .map(|f| {
+                        let g = c * nalgebra::Vector6::from_column_slice(f);
+                        std::array::from_fn(|k| g[k])
+                    })
+                    .collect(),
+            );
+            frame.force = Some(force);
+            frame
         })
         .collect();
-    Frame { t: plant.time(), beams }
+    Frame { t, beams }
 }
 
 /// `T(ξ)`, local → global, of a unit quaternion `ξ` (scalar first).

@@ -33,13 +33,25 @@ pub struct Record {
     pub q: Vec<f64>,
 }
 
-/// Node positions of every beam at one time.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+/// The deformed structure at one time: node positions and section orientations, and the
+/// plant's state for velocities and sectional loads.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Snapshot {
     /// Time (s).
     pub t: f64,
     /// `positions[beam][node]` (global).
     pub positions: Vec<Vec<[f64; 3]>>,
+    /// `orientations[beam][node]`: the node quaternion `ξ` (scalar first; section frame →
+    /// global, `docs/theory.md §1`). The FE plant's own; for the ROM plant its modal
+    /// quaternion field, or the reference orientations when the model has no quaternion
+    /// states.
+    #[serde(default)]
+    pub orientations: Vec<Vec<[f64; 4]>>,
+    /// The full FE state vector (ordering of `docs/theory.md §2`: node velocities `x1` and
+    /// element forces and moments `x2`, section frame) — the FE plant's, or for the ROM plant
+    /// the fields rebuilt from its modal state. Kept in memory only (not serialised).
+    #[serde(skip)]
+    pub state: Vec<f64>,
 }
 
 /// The summary of one closed loop.
@@ -139,8 +151,6 @@ impl Plan {
 }
 
 /// Node positions per beam.
-type Positions = Vec<Vec<[f64; 3]>>;
-
 /// Observation of the plant in modal and physical terms.
 struct Observation {
     q: Vec<f64>,
@@ -152,7 +162,7 @@ fn observe(
     setup: &Setup,
     plant: &SimPlant,
     with_positions: bool,
-) -> Result<(Observation, Option<Positions>)> {
+) -> Result<(Observation, Option<Snapshot>)> {
     match plant {
         SimPlant::Fe { plant, .. } => {
             let xi: Vec<[f64; 4]> = plant
@@ -164,8 +174,17 @@ fn observe(
             let nb = plant.structure().beams().len();
             let kin = plant.kinematics();
             let last = kin[nb - 1].r[kin[nb - 1].r.len() - 1];
-            let pos = with_positions.then(|| {
-                kin.iter().map(|k| k.r.iter().map(|r| [r.x, r.y, r.z]).collect()).collect()
+            let pos = with_positions.then(|| Snapshot {
+                t: plant.time(),
+                positions: kin
+                    .iter()
+                    .map(|k| k.r.iter().map(|r| [r.x, r.y, r.z]).collect())
+                    .collect(),
+                orientations: kin
+                    .iter()
+                    .map(|k| k.xi.iter().map(|v| [v[0], v[1], v[2], v[3]]).collect())
+                    .collect(),
+                state: plant.state().to_vec(),
             });
             Ok((
                 Observation {
@@ -204,10 +223,16 @@ fn observe(
                 .collect();
             let positions = setup.rom.positions(q)?;
             let lb = positions.last().and_then(|b| b.last()).copied().unwrap_or([0.0; 3]);
-            Ok((
-                Observation { q: q.clone(), joint_angles: angles, tip: lb },
-                with_positions.then_some(positions),
-            ))
+            let snapshot = if with_positions {
+                let mut flat = xi.iter().map(|v| [v[0], v[1], v[2], v[3]]);
+                let orientations =
+                    positions.iter().map(|b| flat.by_ref().take(b.len()).collect()).collect();
+                let state = setup.rom.reconstruct_full(q)?;
+                Some(Snapshot { t: 0.0, positions, orientations, state })
+            } else {
+                None
+            };
+            Ok((Observation { q: q.clone(), joint_angles: angles, tip: lb }, snapshot))
         }
     }
 }
@@ -313,8 +338,8 @@ fn drive<D: ocp_transcription::Dynamics + Clone>(
     for k in 0..=n_out {
         let t = k as f64 * sc.output_interval;
         let (obs, pos) = observe(setup, &plant, k % per_snap == 0)?;
-        if let Some(p) = pos {
-            snapshots.push(Snapshot { t, positions: p });
+        if let Some(s) = pos {
+            snapshots.push(Snapshot { t, ..s });
         }
         if k < n_out && k % per_sample == 0 {
             let x = measure(&plant, &obs)?;

@@ -509,8 +509,11 @@ fn chord_orientation_of_a_bent_and_a_rotated_link() {
     let theta = 0.5f64;
     let rotated: Vec<[f64; 3]> =
         straight.iter().map(|p| [p[0] * theta.cos(), p[0] * theta.sin(), 0.0]).collect();
-    let snap =
-        |t: f64, p: &Vec<[f64; 3]>| Snapshot { t, positions: vec![p.clone(), vec![[0.0; 3]; 2]] };
+    let snap = |t: f64, p: &Vec<[f64; 3]>| Snapshot {
+        t,
+        positions: vec![p.clone(), vec![[0.0; 3]; 2]],
+        ..Default::default()
+    };
     let s = vec![snap(0.0, &straight), snap(0.25, &rotated), snap(0.5, &arc)];
     let c = chord_orientation(&s, 0).unwrap();
     // chord of the arc: turned by α about e2 (exact geometry; round-off only)

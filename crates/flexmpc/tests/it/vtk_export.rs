@@ -1,7 +1,8 @@
 //! `--vtk`: the VTK files parse as XML (quick-xml), the `.pvd` lists one `.vtu` per output
 //! step with its time, and the geometry is the one of the CSV time series: the ribbon's
 //! centreline (the midpoint of each pair of points) at the beam ends equals the positions of
-//! `simulate`'s `timeseries.csv`; the closed loop's last node equals its `tip` columns.
+//! `simulate`'s `timeseries.csv`; the closed loop's centreline equals its snapshots and its last
+//! node its `tip` columns.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -181,18 +182,29 @@ fn simulate_3d_ribbons_match_the_csv() {
     assert!(turned > 1e-3, "the tip section's e2 axis leaves the y direction: {turned}");
 }
 
-/// The 3D closed loop (`paper-3d-mpc.toml` on 8 elements per link, 0.6 s) under `mpc --vtk`:
-/// one `.vtu` per snapshot with its time, a polyline per beam through the snapshot's nodes,
-/// and the last node at the CSV's `tip` at that time.
+/// The 3D closed loop (`paper-3d-mpc.toml` on 8 elements per link, 0.6 s) under `mpc --vtk`,
+/// on the FE plant and on the ROM plant: one `.vtu` per snapshot with its time; ribbons of
+/// two points per node and one quad per element whose centreline is the snapshot's node
+/// positions (`snapshots.json`) and whose last node is the CSV's `tip` at that time; the
+/// ribbon's direction `e2` is the second axis of the snapshot's node quaternions, stays across
+/// each element's chord (from the positions) and turns as the structure spins; at t = 0 the point
+/// velocity is the initial rigid rotation `ω × r`, `ω = ω0 (0, 1, 1)`; sectional force and
+/// strain on every point.
 #[test]
-fn mpc_3d_snapshots_match_the_csv() {
-    let dir = scratch("mpc-3d");
+fn mpc_3d_ribbons_match_the_csv() {
+    for plant in ["fe", "rom"] {
+        mpc_3d_ribbons(plant);
+    }
+}
+
+fn mpc_3d_ribbons(plant: &str) {
+    let dir = scratch(&format!("mpc-3d-{plant}"));
     let text = std::fs::read_to_string(root().join("scenes/paper-3d-mpc.toml")).unwrap();
     assert_eq!(text.matches("elements = 50").count(), 2);
     let scene = dir.join("small-3d.toml");
     std::fs::write(&scene, text.replace("elements = 50", "elements = 8")).unwrap();
     let out = dir.join("out");
-    run(&["mpc", scene.to_str().unwrap(), "--duration", "0.6"], &out);
+    run(&["mpc", scene.to_str().unwrap(), "--duration", "0.6", "--plant", plant], &out);
     let snaps: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("snapshots.json")).unwrap())
             .unwrap();
@@ -202,27 +214,114 @@ fn mpc_3d_snapshots_match_the_csv() {
     assert!(sets.len() >= 2);
     let (h, rows) = read_csv(&out.join("timeseries.csv"));
     let col = |n: &str| h.iter().position(|c| c == n).unwrap();
+    let (nodes, elements) = (18, 16);
+    let mut turned = 0.0f64;
+    let mut largest_force = 0.0f64;
+    let mut worst = 0.0f64;
     for ((t, file), s) in sets.iter().zip(snaps) {
         assert!(close(*t, s["t"].as_f64().unwrap()));
         let v = parse_vtu(&out.join("vtk").join(file));
-        assert_eq!(v.n_points, 18, "9 nodes per link");
-        assert_eq!(v.n_cells, 16);
-        assert!(v.arrays["Cells/types"].iter().all(|&c| c == 3.0), "VTK_LINE");
+        assert_eq!(v.n_points, 2 * nodes, "{plant}: two ribbon points per node, 9 nodes per link");
+        assert_eq!(v.n_cells, elements);
+        assert!(v.arrays["Cells/types"].iter().all(|&c| c == 9.0), "VTK_QUAD");
+        for key in ["PointData/velocity", "PointData/strain", "PointData/force"] {
+            assert_eq!(v.arrays[key].len(), 3 * v.n_points, "{plant}: {key}");
+            assert!(v.arrays[key].iter().all(|x| x.is_finite()), "{plant}: {key}");
+        }
         let pts = &v.arrays["Points/Points"];
-        let json: Vec<f64> = s["positions"]
+        let mid = |node: usize| -> [f64; 3] {
+            std::array::from_fn(|k| 0.5 * (pts[6 * node + k] + pts[6 * node + 3 + k]))
+        };
+        let half = |node: usize| -> [f64; 3] {
+            std::array::from_fn(|k| 0.5 * (pts[6 * node + 3 + k] - pts[6 * node + k]))
+        };
+        let json: Vec<[f64; 3]> = s["positions"]
             .as_array()
             .unwrap()
             .iter()
             .flat_map(|b| b.as_array().unwrap().iter())
-            .flat_map(|p| p.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()))
+            .map(|p| std::array::from_fn(|k| p[k].as_f64().unwrap()))
             .collect();
-        assert_eq!(pts.len(), json.len());
-        assert!(pts.iter().zip(&json).all(|(a, b)| close(*a, *b)), "{file}: points");
+        assert_eq!(json.len(), nodes);
+        for (n, p) in json.iter().enumerate() {
+            let m = mid(n);
+            assert!((0..3).all(|k| close(m[k], p[k])), "{plant} {file}: node {n} {m:?} vs {p:?}");
+        }
         let row = rows.iter().find(|r| close(r[0], *t)).expect("a CSV row at the snapshot time");
         for (k, x) in ["tip.x", "tip.y", "tip.z"].iter().enumerate() {
             let c = row[col(x)];
-            let p = pts[pts.len() - 3 + k];
+            let p = mid(nodes - 1)[k];
             assert!((p - c).abs() <= 1e-9 * (1.0 + c.abs()), "{file}: {x} = {p} vs CSV {c}");
         }
+        // one width; e2 across the tangent of each element (shear strains are small)
+        let norm = |a: [f64; 3]| a.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let w0 = norm(half(0));
+        assert!(w0 > 0.0);
+        for link in 0..2 {
+            for e in 0..8 {
+                let n = 9 * link + e;
+                let (a, b) = (json[n], json[n + 1]);
+                let tan: [f64; 3] = std::array::from_fn(|k| b[k] - a[k]);
+                assert!(close(norm(half(n)), w0), "{plant}: width at node {n}");
+                // the element's e2: the mean of its nodes' (the chord is T(ξ_mid)(e1 + γ))
+                let e2: [f64; 3] = std::array::from_fn(|k| half(n)[k] + half(n + 1)[k]);
+                let c = (0..3).map(|k| tan[k] * e2[k]).sum::<f64>() / (norm(tan) * norm(e2));
+                worst = worst.max(c.abs());
+            }
+        }
+        // e2 is the second column of T(ξ) of the snapshot's node quaternions
+        let xi: Vec<[f64; 4]> = s["orientations"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|b| b.as_array().unwrap().iter())
+            .map(|q| std::array::from_fn(|k| q[k].as_f64().unwrap()))
+            .collect();
+        assert_eq!(xi.len(), nodes);
+        for (n, &[w, x, y, z]) in xi.iter().enumerate() {
+            let e2 = [2.0 * (x * y - w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + w * x)];
+            let h = half(n);
+            assert!((0..3).all(|k| (h[k] - w0 * e2[k]).abs() < 1e-9), "{plant}: e2 at node {n}");
+        }
+        // e2 is the second column of T(ξ) of the snapshot's node quaternions
+        let xi: Vec<[f64; 4]> = s["orientations"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|b| b.as_array().unwrap().iter())
+            .map(|q| std::array::from_fn(|k| q[k].as_f64().unwrap()))
+            .collect();
+        assert_eq!(xi.len(), nodes);
+        for (n, &[w, x, y, z]) in xi.iter().enumerate() {
+            let e2 = [2.0 * (x * y - w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + w * x)];
+            let h = half(n);
+            assert!((0..3).all(|k| (h[k] - w0 * e2[k]).abs() < 1e-9), "{plant}: e2 at node {n}");
+        }
+        let tip = half(nodes - 1);
+        turned = turned.max(((tip[0] / w0).powi(2) + (tip[2] / w0).powi(2)).sqrt());
+        largest_force =
+            v.arrays["PointData/force"].iter().fold(largest_force, |m, x| m.max(x.abs()));
+        if *t == 0.0 {
+            // the initial rigid rotation about the root: ω × r with ω = (0, 1, 1)
+            let vel = &v.arrays["PointData/velocity"];
+            for (n, r) in json.iter().enumerate() {
+                let want = [r[2] - r[1], r[0], -r[0]];
+                for k in 0..3 {
+                    let got = vel[6 * n + k];
+                    assert_eq!(got, vel[6 * n + 3 + k], "both ribbon points carry the node's");
+                    assert!(
+                        (got - want[k]).abs() < 1e-6,
+                        "{plant}: velocity at node {n}: {got} vs ω × r = {}",
+                        want[k]
+                    );
+                }
+            }
+        }
     }
+    // the plant's node positions and orientations are integrated side by side, so they agree
+    // to its discretisation (measured on this 8-element mesh: ≤ 2e-2); a wrong axis, node or
+    // beam would be O(1)
+    assert!(worst < 0.05, "{plant}: e2 · chord = {worst}");
+    assert!(turned > 1e-3, "{plant}: the tip section's e2 leaves the y direction: {turned}");
+    assert!(largest_force > 0.0, "{plant}: the sectional loads are recorded");
 }
