@@ -16,6 +16,7 @@
 //! - [`results`]: run results as data (`SweepRun`) and their CSV files.
 //! - [`progress`]: progress indicators on stderr.
 //! - [`vtk`]: the deformed structure over time as VTK files for ParaView (`--vtk`).
+//! - [`bug_report`]: what an internal error (a bug) tells the user, the binary's panic hook.
 //! - [`timings`]: the measured timings, kept in their own files so that every other output
 //!   is a pure function of the inputs (`--no-timings` leaves them out).
 //!
@@ -46,6 +47,7 @@
 //! assert_eq!(scene.structure.beams().len(), 1);
 //! ```
 
+pub mod bug_report;
 pub mod control;
 pub mod figures;
 pub mod modes;

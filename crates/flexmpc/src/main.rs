@@ -17,7 +17,7 @@
 //!
 //! Errors: a mistake in the input (scene, option, file) prints `error: …` and its causes, one
 //! line each, whatever `RUST_BACKTRACE` says, and exits with 1; an internal error (a panic)
-//! prints where to report it and exits with 101. A closed stdout (`flexmpc … | head -1`) ends
+//! says that it is a bug and how to report it ([`flexmpc::bug_report`]) and exits with 101. A closed stdout (`flexmpc … | head -1`) ends
 //! the run quietly.
 
 use flexmpc::control::{self, Overrides};
@@ -158,6 +158,9 @@ enum Command {
         #[arg(long)]
         duration: Option<f64>,
     },
+    /// Fails with an internal error on purpose: what a user sees on a bug (for tests).
+    #[command(hide = true)]
+    InternalErrorCheck,
 }
 
 /// Prints a line on stdout; a write error (a closed pipe) becomes an error of the run.
@@ -390,35 +393,6 @@ fn modes_json(report: &modal_rom::ModeReport) -> serde_json::Value {
     })
 }
 
-/// Where internal errors are reported.
-const REPORT_AT: &str = concat!(env!("CARGO_PKG_REPOSITORY"), "/issues");
-
-/// An internal error (a panic) says that it is one and where to report it; no stack trace
-/// unless `RUST_BACKTRACE` asks for one.
-fn install_panic_hook() {
-    std::panic::set_hook(Box::new(|info| {
-        let msg = info
-            .payload()
-            .downcast_ref::<&str>()
-            .map(|s| s.to_string())
-            .or_else(|| info.payload().downcast_ref::<String>().cloned())
-            .unwrap_or_else(|| "(no message)".into());
-        let at =
-            info.location().map(|l| format!(" at {}:{}", l.file(), l.line())).unwrap_or_default();
-        let mut e = std::io::stderr().lock();
-        let _ = writeln!(
-            e,
-            "internal error in flexmpc {}: {msg}{at}\nThis is a bug in flexmpc, not in your \
-             input: please report it at {REPORT_AT} with the command line and the scene file.",
-            env!("CARGO_PKG_VERSION")
-        );
-        let bt = std::backtrace::Backtrace::capture();
-        if bt.status() == std::backtrace::BacktraceStatus::Captured {
-            let _ = writeln!(e, "{bt}");
-        }
-    }));
-}
-
 /// Whether `e` comes from writing to a closed stdout.
 fn is_broken_pipe(e: &anyhow::Error) -> bool {
     e.chain().any(|c| {
@@ -428,7 +402,7 @@ fn is_broken_pipe(e: &anyhow::Error) -> bool {
 }
 
 fn main() -> ExitCode {
-    install_panic_hook();
+    flexmpc::bug_report::install_panic_hook();
     let cli = Cli::parse();
     match run(&cli) {
         Ok(()) => ExitCode::SUCCESS,
@@ -759,6 +733,7 @@ fn run(cli: &Cli) -> Result<()> {
                 say!("report: {}", o.report.display());
             }
         }
+        Some(Command::InternalErrorCheck) => flexmpc::bug_report::fail_on_purpose(),
         None => {
             let path = Path::new(DEFAULT_SCENE_PATH);
             let s = scene::load_str(path, DEFAULT_SCENE)?;

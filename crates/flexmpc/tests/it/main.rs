@@ -1,9 +1,10 @@
 //! flexmpc's integration tests, one binary: the CLI end to end, its failure modes, every
-//! shipped and malformed scene, reproducible outputs, the report in headless Chromium and the
-//! ParaView export.
+//! shipped and malformed scene, internal errors, reproducible outputs, the report in headless
+//! Chromium and the ParaView export.
 
 mod cli;
 mod cli_breaks;
+mod internal_error;
 mod report_chromium;
 mod reproducible;
 mod scenes;
