@@ -439,7 +439,7 @@ pub fn closed_loop_2d() -> CaseOutcome {
     use ocp_transcription::{Ocp, SqpMode, SqpSettings, SqpSolver};
     let mut out = Vec::new();
     let settings = MpcSettings::default();
-    let ctrl = ControllerSettings::default();
+    let ctrl = ControllerSettings::full_sqp();
     let duration = 7.5;
     for omega0 in [0.5, 1.0, 2.0] {
         let run =

@@ -39,7 +39,7 @@ fn nmpc_short() -> CaseOutcome {
     let mut sc = Scenario::paper_2d(ELEMENTS).map_err(err)?;
     sc.duration = 2.0;
     let setup = Setup::new(&sc).map_err(err)?;
-    let r = run(&setup, 0.5, &ControllerSettings::default(), PlantKind::Fe).map_err(err)?;
+    let r = run(&setup, 0.5, &ControllerSettings::full_sqp(), PlantKind::Fe).map_err(err)?;
     if let Some(e) = &r.summary.error {
         return Err(e.clone());
     }
@@ -63,7 +63,7 @@ fn nmpc_safeguards() -> CaseOutcome {
     let mut sc = Scenario::paper_2d(ELEMENTS).map_err(err)?;
     sc.duration = 1.6;
     let setup = Setup::new(&sc).map_err(err)?;
-    let r = run(&setup, 2.0, &ControllerSettings::default(), PlantKind::Fe).map_err(err)?;
+    let r = run(&setup, 2.0, &ControllerSettings::full_sqp(), PlantKind::Fe).map_err(err)?;
     if let Some(e) = &r.summary.error {
         return Err(e.clone());
     }
@@ -147,7 +147,7 @@ fn sweep_case_on(
     time_goal: bool,
     plant: PlantKind,
 ) -> CaseOutcome {
-    let mut c = ControllerSettings::of(kind);
+    let mut c = ControllerSettings { kind, ..ControllerSettings::full_sqp() };
     if plant == PlantKind::Rom {
         // the joint-angle limit guards against the FE plant leaving the range where the
         // 0°-mode model predicts it; with the model itself as the plant there is no such
@@ -271,7 +271,8 @@ fn stabilisation_3d() -> CaseOutcome {
         ));
     }
     // the paper's weights at ω0 = 1.0, reported: what the option is for
-    for (what, c) in [("full SQP", ControllerSettings::default()), ("real-time spatial", spatial)] {
+    for (what, c) in [("full SQP", ControllerSettings::full_sqp()), ("real-time spatial", spatial)]
+    {
         for (s, _) in runs(&paper, &c, &[1.0])? {
             out.push(Metric::at_most(
                 format!("NMPC (paper k_u, {what}) ω0=1: stabilised (1) or not (0) (report)"),

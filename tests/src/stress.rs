@@ -467,7 +467,13 @@ fn disturbance_runs(
                     Some(Err(e)) => return Err(Stop::Error(format!("setup: {e}"))),
                     None => return Err(Stop::Error("setup missing".into())),
                 };
-                let r = run(setup, w, &ControllerSettings::of(kind), plant).map_err(lib)?;
+                let r = run(
+                    setup,
+                    w,
+                    &ControllerSettings { kind, ..ControllerSettings::full_sqp() },
+                    plant,
+                )
+                .map_err(lib)?;
                 closed_loop_figures(&r)
             })
         })

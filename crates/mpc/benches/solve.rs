@@ -63,7 +63,7 @@ fn bench(c: &mut Criterion) {
         g.sample_size(10).measurement_time(Duration::from_secs(if name == "3d" { 60 } else { 10 }));
         for (label, rti) in [("sqp", false), ("rti", true)] {
             let settings =
-                ControllerSettings { real_time_iteration: rti, ..ControllerSettings::default() };
+                ControllerSettings { real_time_iteration: rti, ..ControllerSettings::full_sqp() };
             // a warm sample: the controller has solved the first sample; time the second
             g.bench_function(format!("{label}-warm-sample"), |b| {
                 b.iter_batched(

@@ -40,7 +40,8 @@ pub const DEFAULT_PLAN_JOINT_LIMIT: Option<f64> = Some(20.0);
 /// Default of [`ControllerSettings::fallback_hold`] (samples).
 pub const DEFAULT_FALLBACK_HOLD: usize = 5;
 
-/// Settings of the controllers' solvers. Defaults in brackets.
+/// Settings of the controllers' solvers. Defaults ([`Default`]: the real-time NMPC) in
+/// brackets; [`ControllerSettings::full_sqp`] is the full SQP.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ControllerSettings {
     /// Which controller \[NMPC\].
@@ -49,8 +50,9 @@ pub struct ControllerSettings {
     /// `Δt = 0.25 s`; theory.md §8 measured a one-interval error 1.2e-2 at ω0 = 2].
     pub integrator: IntegratorSettings,
     /// Real-time iteration: one SQP iteration (one QP) per sample from the shifted plan,
-    /// instead of iterating to the KKT tolerance [false]. The retry and fallback still apply
-    /// when that iteration fails. The real-time option, not the default (docs/mpc.md, "Real
+    /// instead of iterating to the KKT tolerance \[true; false in
+    /// [`ControllerSettings::full_sqp`]\]. The retry and fallback still apply when that
+    /// iteration fails. Measured (docs/mpc.md, "Real
     /// time"; FE plant, one core): with `retry_relaxation = None` the worst sample is ≤ 11 ms
     /// in 2D and 25–52 ms in 3D (full SQP: 16–196 ms and 0.24–0.76 s) and the 3D criterion
     /// holds at ω0 = 0.25–0.75 as with the full SQP, but the 2D criterion is lost at
@@ -77,7 +79,7 @@ pub struct ControllerSettings {
     pub qp_form: QpForm,
     /// When the first attempt fails: retry from the linear MPC plan with the paper's fixed
     /// sub-relaxation `α` and a Levenberg–Marquardt term ([`Self::retry_levenberg_marquardt`])
-    /// [Some(0.5)]; `None`: no retry.
+    /// \[None; Some(0.5) in [`ControllerSettings::full_sqp`]\]; `None`: no retry.
     pub retry_relaxation: Option<f64>,
     /// Levenberg–Marquardt term of the retry [1e-3].
     pub retry_levenberg_marquardt: f64,
@@ -112,8 +114,30 @@ pub struct ControllerSettings {
     pub link_elastic_modes: Option<usize>,
 }
 
+/// The default is the real-time NMPC ([`ControllerSettings::real_time`] with merit line
+/// search): one SQP iteration per sample, no relaxed retry. It meets the paper's sampling time
+/// `τs = 0.2 s` with a wide margin (FE plant, one core, docs/mpc.md "Real time": worst sample
+/// 5–20 ms in 2D, 29–37 ms in 3D), where the full SQP ([`ControllerSettings::full_sqp`])
+/// takes up to 0.2 s in 2D and 0.76 s in 3D. Merit line search, because full steps diverge in
+/// 3D at ω0 = 0.75; in 2D full steps keep more ω0 (`scenes/paper-2d-mpc.toml` sets
+/// `line_search = false`).
 impl Default for ControllerSettings {
     fn default() -> Self {
+        Self::real_time(true)
+    }
+}
+
+impl ControllerSettings {
+    /// Defaults with the given kind.
+    pub fn of(kind: ControllerKind) -> Self {
+        Self { kind, ..Self::default() }
+    }
+
+    /// The full SQP NMPC: up to 10 SQP iterations per sample to the KKT tolerance 1e-4, merit
+    /// line search, the paper's relaxed retry from the linear MPC plan, then the linear MPC
+    /// fallback. The most robust setting, not real time (worst samples 16–196 ms in 2D,
+    /// 0.24–0.76 s in 3D; docs/mpc.md).
+    pub fn full_sqp() -> Self {
         Self {
             kind: ControllerKind::Nmpc,
             integrator: IntegratorSettings::new(IntegratorKind::LawsonRk4, 16),
@@ -133,13 +157,6 @@ impl Default for ControllerSettings {
             link_elastic_modes: None,
         }
     }
-}
-
-impl ControllerSettings {
-    /// Defaults with the given kind.
-    pub fn of(kind: ControllerKind) -> Self {
-        Self { kind, ..Self::default() }
-    }
 
     /// The real-time NMPC of the paper's scenes (`scenes/paper-{2d,3d}-mpc.toml`; docs/mpc.md,
     /// "Real time"): one SQP iteration per sample (RTI; held samples after a fallback spend
@@ -157,7 +174,7 @@ impl ControllerSettings {
                 Globalisation::FullStep
             },
             retry_relaxation: None,
-            ..Self::default()
+            ..Self::full_sqp()
         }
     }
 

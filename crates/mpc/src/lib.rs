@@ -27,9 +27,12 @@
 //! `|u| ≤ 5`.
 //!
 //! **Controllers** ([`Controller`]). NMPC: multiple-shooting SQP (Gauss–Newton, merit line
-//! search) warm-started from the previous plan shifted by `τs`; on failure a retry from the
-//! linear MPC plan with the paper's sub-relaxation and a Levenberg–Marquardt term; if that
-//! fails too, the linear MPC plan is applied and kept for the next `fallback_hold` samples.
+//! search) warm-started from the previous plan shifted by `τs`. By default one SQP iteration
+//! per sample (real-time iteration, [`ControllerSettings::default`]); the full SQP
+//! ([`ControllerSettings::full_sqp`]) iterates to its KKT tolerance and on failure retries
+//! from the linear MPC plan with the paper's sub-relaxation and a Levenberg–Marquardt term.
+//! If the NMPC fails, the linear MPC plan is applied and kept for the next `fallback_hold`
+//! samples.
 //! A plan whose predicted joint angle between links exceeds `plan_joint_limit_deg` (20°; the
 //! modes are computed at 0°) counts as a failed attempt ([`JointMonitor`]). Linear MPC: the
 //! same problem with (29) linearised at `q_r`, one QP per sample. By default the controls lie

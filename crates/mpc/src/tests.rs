@@ -204,7 +204,7 @@ fn settings_validation_names_the_field() {
     assert!(bad.validate().unwrap_err().to_string().contains("ku"));
     let bad = MpcSettings { sampling: 7.0, ..MpcSettings::default() };
     assert!(bad.validate().unwrap_err().to_string().contains("sampling"));
-    let bad = ControllerSettings { retry_relaxation: Some(1.5), ..ControllerSettings::default() };
+    let bad = ControllerSettings { retry_relaxation: Some(1.5), ..ControllerSettings::full_sqp() };
     assert!(bad.validate().unwrap_err().to_string().contains("retry_relaxation"));
     let mut s = Scenario::paper_2d(10).unwrap();
     s.output_interval = 0.03;
@@ -234,7 +234,8 @@ fn nmpc_reduces_to_lmpc_for_small_disturbances() {
                 kkt_tolerance: 1e-12,
                 levenberg_marquardt: 0.0,
                 max_iterations: 50,
-                ..ControllerSettings::of(kind)
+                kind,
+                ..ControllerSettings::full_sqp()
             },
         )
         .unwrap();
@@ -273,7 +274,7 @@ fn nmpc_on_the_fe_plant_short_run() {
     let mut sc = Scenario::paper_2d(10).unwrap();
     sc.duration = 2.0;
     let setup = Setup::new(&sc).unwrap();
-    let r = run(&setup, 0.5, &ControllerSettings::default(), PlantKind::Fe).unwrap();
+    let r = run(&setup, 0.5, &ControllerSettings::full_sqp(), PlantKind::Fe).unwrap();
     assert!(r.summary.error.is_none());
     assert_eq!(r.samples.len(), 10);
     assert!(r.samples.iter().all(|s| s.strategy == crate::Strategy::Sqp), "{:?}", r.samples);
@@ -303,7 +304,7 @@ fn spatial_nmpc_stabilises_the_3d_two_link_at_omega_one() {
 #[test]
 fn first_sample_export_round_trip() {
     let setup = setup_2d();
-    let c = ControllerSettings::default();
+    let c = ControllerSettings::full_sqp();
     let dir = std::env::temp_dir().join(format!("mpc-export-{}", std::process::id()));
     let p = export_first_sample(setup, 0.5, &c, &dir).unwrap();
     let text = std::fs::read_to_string(dir.join("ocp.json")).unwrap();
@@ -414,7 +415,7 @@ fn predictor_is_consistent() {
         RomDynamics::new(&setup.rom).unwrap(),
         &setup.weights,
         &s.mpc,
-        &ControllerSettings::of(ControllerKind::Nmpc),
+        &ControllerSettings::full_sqp(),
     )
     .unwrap();
     assert_eq!(n.predict(&q, &u, 0.0).unwrap(), q);
@@ -467,7 +468,7 @@ fn without_fallback_the_nmpc_iterate_is_applied() {
             accept_violation: 1e-300,
             retry_relaxation: None,
             fallback_to_lmpc: fallback,
-            ..ControllerSettings::default()
+            ..ControllerSettings::full_sqp()
         };
         let model = RomDynamics::new(&setup.rom).unwrap();
         Controller::new(model, &setup.weights, &s.mpc, &c).unwrap().step(0.0, &x0).unwrap()
@@ -591,21 +592,26 @@ fn plans_outside_the_joint_limit_fall_back_to_the_lmpc_plan() {
         let mut c = controller(settings);
         c.step(0.0, &q).unwrap()
     };
-    let free = step(&ControllerSettings { plan_joint_limit_deg: None, ..Default::default() });
+    let free =
+        step(&ControllerSettings { plan_joint_limit_deg: None, ..ControllerSettings::full_sqp() });
     assert_eq!(free.strategy, Strategy::Sqp);
     assert_eq!(free.joint_limit_rejections, 0);
     let planned = free.plan_joint_angle_deg.unwrap();
     assert!(planned > 0.5, "{planned}");
-    let tight =
-        ControllerSettings { plan_joint_limit_deg: Some(0.1 * planned), ..Default::default() };
+    let tight = ControllerSettings {
+        plan_joint_limit_deg: Some(0.1 * planned),
+        ..ControllerSettings::full_sqp()
+    };
     let r = step(&tight);
     assert_eq!(r.strategy, Strategy::Fallback);
     assert!(r.joint_limit_rejections >= 1, "{r:?}");
     let lmpc = step(&ControllerSettings::of(ControllerKind::Lmpc));
     assert_eq!(r.u, lmpc.u);
     // a limit above the plan changes nothing
-    let loose =
-        ControllerSettings { plan_joint_limit_deg: Some(2.0 * planned), ..Default::default() };
+    let loose = ControllerSettings {
+        plan_joint_limit_deg: Some(2.0 * planned),
+        ..ControllerSettings::full_sqp()
+    };
     assert_eq!(step(&loose).u, free.u);
 
     // closed loops of 3 samples: without the hold every sample is rejected and falls back;
@@ -629,12 +635,15 @@ fn plans_outside_the_joint_limit_fall_back_to_the_lmpc_plan() {
 
 #[test]
 fn joint_limit_validation_names_the_field() {
-    assert_eq!(ControllerSettings::default().plan_joint_limit_deg, DEFAULT_PLAN_JOINT_LIMIT);
+    assert_eq!(ControllerSettings::full_sqp().plan_joint_limit_deg, DEFAULT_PLAN_JOINT_LIMIT);
     for bad in [0.0, -1.0, 181.0, f64::NAN] {
-        let c = ControllerSettings { plan_joint_limit_deg: Some(bad), ..Default::default() };
+        let c = ControllerSettings {
+            plan_joint_limit_deg: Some(bad),
+            ..ControllerSettings::full_sqp()
+        };
         assert!(c.validate().unwrap_err().to_string().contains("plan_joint_limit_deg"), "{bad}");
     }
-    let c = ControllerSettings { plan_joint_limit_deg: None, ..Default::default() };
+    let c = ControllerSettings { plan_joint_limit_deg: None, ..ControllerSettings::full_sqp() };
     assert!(c.validate().is_ok());
 }
 
@@ -654,7 +663,7 @@ fn held_samples_iterate_the_nmpc_under_rti() {
     let base = ControllerSettings {
         plan_joint_limit_deg: Some(1e-3),
         retry_relaxation: None,
-        ..Default::default()
+        ..ControllerSettings::full_sqp()
     };
     let (_, _, lmpc) = two_samples(&ControllerSettings::of(ControllerKind::Lmpc));
     let diff = |plan: &[nalgebra::DVector<f64>]| {
@@ -691,7 +700,7 @@ fn paper_first_sample_bits(settings: &ControllerSettings) -> Vec<u64> {
 fn paper_model_controls_are_unchanged() {
     let bits = paper_first_sample_bits(&ControllerSettings {
         model: ModelKind::Paper,
-        ..ControllerSettings::default()
+        ..ControllerSettings::full_sqp()
     });
     assert_eq!(bits, PAPER_FIRST_SAMPLE_BITS);
 }
@@ -707,7 +716,7 @@ fn exact_joints_rejects_paper_only_settings() {
     let ej = ControllerSettings {
         model: ModelKind::ExactJoints,
         plan_joint_limit_deg: None,
-        ..ControllerSettings::default()
+        ..ControllerSettings::full_sqp()
     };
     assert!(ej.validate().is_ok());
     let e = ControllerSettings { kind: ControllerKind::Lmpc, ..ej.clone() }.validate();
@@ -729,7 +738,7 @@ fn exact_joints_closed_loop_slows_the_spin() {
     let c = ControllerSettings {
         model: ModelKind::ExactJoints,
         plan_joint_limit_deg: None,
-        ..ControllerSettings::default()
+        ..ControllerSettings::full_sqp()
     };
     let a = run(&setup, 1.0, &c, PlantKind::Fe).unwrap();
     let b = run(&setup, 1.0, &c, PlantKind::Fe).unwrap();

@@ -15,12 +15,12 @@ use mpc::{
 /// A named controller configuration.
 fn configs(quick: bool) -> Vec<(String, ControllerSettings)> {
     let mut out = vec![("LMPC".to_string(), ControllerSettings::of(ControllerKind::Lmpc))];
-    let mut rti = ControllerSettings::of(ControllerKind::Nmpc);
+    let mut rti = ControllerSettings::full_sqp();
     rti.real_time_iteration = true;
     out.push(("NMPC RTI".into(), rti));
     let limits: &[usize] = if quick { &[3] } else { &[1, 2, 3, 5, 10] };
     for &m in limits {
-        let mut c = ControllerSettings::of(ControllerKind::Nmpc);
+        let mut c = ControllerSettings::full_sqp();
         c.max_iterations = m;
         out.push((format!("NMPC SQP ≤{m} it."), c));
     }
@@ -233,7 +233,7 @@ fn run_3d(ctx: &mut Ctx, elements: usize) -> Result<(Table, Chart, Vec<String>)>
     if !quick {
         configs.extend([
             ("NMPC RTI spatial", &paper, spatial),
-            ("NMPC SQP ≤10 it. (default)", &paper, ControllerSettings::default()),
+            ("NMPC SQP ≤10 it. (full SQP)", &paper, ControllerSettings::full_sqp()),
         ]);
     }
     let mut table = Table::new(

@@ -99,6 +99,7 @@ fn switched(
     (switch, on): (&str, Option<bool>),
     field: &str,
     value: Option<f64>,
+    when_on: Option<f64>,
 ) -> Result<Option<Option<f64>>, SceneError> {
     match (on, value) {
         (Some(false), Some(_)) => ctx.err(
@@ -107,6 +108,7 @@ fn switched(
             format!("is unused with `{switch} = false`; remove one of them"),
         ),
         (Some(false), None) => Ok(Some(None)),
+        (Some(true), None) => Ok(when_on.map(Some)),
         (_, Some(v)) => Ok(Some(Some(v))),
         (_, None) => Ok(None),
     }
@@ -163,7 +165,14 @@ fn controller_of(
     set(&mut c.fallback_to_lmpc, cs.fallback_to_lmpc);
     set(
         &mut c.retry_relaxation,
-        switched(ctx, span.clone(), ("retry", cs.retry), "retry_relaxation", cs.retry_relaxation)?,
+        switched(
+            ctx,
+            span.clone(),
+            ("retry", cs.retry),
+            "retry_relaxation",
+            cs.retry_relaxation,
+            mpc::ControllerSettings::full_sqp().retry_relaxation,
+        )?,
     );
     set(
         &mut c.plan_joint_limit_deg,
@@ -173,6 +182,7 @@ fn controller_of(
             ("joint_limit", cs.joint_limit),
             "plan_joint_limit_deg",
             cs.plan_joint_limit_deg,
+            mpc::DEFAULT_PLAN_JOINT_LIMIT,
         )?,
     );
     set(&mut c.model, cs.model);
