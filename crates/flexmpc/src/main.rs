@@ -457,7 +457,8 @@ fn run(cli: &Cli) -> Result<()> {
                 }
                 None => vec![None],
             };
-            check_modal_size(&base)?;
+            modes::plan(&base.structure)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", base.file.display()))?;
             let dir = cli.out.clone().unwrap_or_else(|| scene_out(scene).join("modes"));
             let mut all = Vec::new();
             for a in &angles {

@@ -1,25 +1,43 @@
 //! `flexmpc modes`: constrained linear modes of a scene's structure (paper §3.2, eqs. 30–32),
 //! printed as a table or JSON and drawn in the style of the paper's Figs. 4–5.
 //!
-//! The modal basis is a dense computation (`docs/theory.md §4`): the blocks `B1`, `B2`, `D` of
-//! the linearised problem are assembled as dense matrices and the null space and eigenvectors
-//! come from dense SVDs and eigen decompositions, `O(n²)` memory and `O(n³)` time in the
-//! number `n` of node unknowns. [`estimate`] predicts both from the mesh before anything is
-//! allocated, and [`check_size`] refuses a structure whose estimate is above
-//! [`MAX_DENSE_BYTES`].
+//! Two routes compute the same report (`docs/theory.md §4`):
+//!
+//! - **dense** ([`modal_rom::mode_report`]): the blocks `B1`, `B2`, `D` are dense matrices and
+//!   the null space and modes come from dense SVDs; it returns every mode, in `O(n²)` memory
+//!   and `O(n³)` time in the number `n` of node unknowns. It is taken for meshes up to
+//!   [`DENSE_ROUTE_MAX_N1`] node unknowns (every shipped scene), and it is what `mpc`,
+//!   `sweep` and `ocp` build their modal basis with ([`check_size`] guards them).
+//! - **sparse** ([`modal_rom::sparse_mode_report`]): the lowest modes only, by shift-invert
+//!   Lanczos on the sparse saddle-point pencil factorised once by sparse LU, in memory and
+//!   time linear in the mesh. Frequencies agree with the dense route to about `1e-10`
+//!   relative, labels and rigid modes are the same, shapes agree up to sign.
+//!
+//! [`estimate`] predicts the memory and time of both from the mesh before anything is
+//! allocated; [`plan`] picks the route and refuses a structure whose sparse estimate is above
+//! [`MAX_SPARSE_BYTES`].
 
 use std::io::Write;
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
-use modal_rom::{mode_report, BasisSettings, ModeReport};
+use modal_rom::{mode_report, sparse_mode_report, BasisSettings, ModeReport, SparseSettings};
 use multibody_constraints::Structure;
 use plotters::prelude::*;
 
 /// Largest dense memory (bytes) the modal basis may use: 4 GiB. A structure whose
-/// [`estimate`] is above it is refused before anything is allocated (a mesh of more than about
-/// 2,100 planar or 1,050 spatial elements in all).
+/// [`estimate`] is above it is refused by the commands that need the whole dense basis
+/// (`mpc`, `sweep`, `ocp`) before anything is allocated (a mesh of more than about 2,100
+/// planar or 1,050 spatial elements in all).
 pub const MAX_DENSE_BYTES: f64 = 4.0 * 1024.0 * 1024.0 * 1024.0;
+
+/// Largest memory (bytes) the sparse route of `modes` may use: 4 GiB.
+pub const MAX_SPARSE_BYTES: f64 = 4.0 * 1024.0 * 1024.0 * 1024.0;
+
+/// `modes` takes the dense route up to this many node unknowns `n1` (a planar mesh of about
+/// 400 elements, a spatial one of about 200; the dense route then takes about a second), the
+/// sparse route above.
+pub const DENSE_ROUTE_MAX_N1: usize = 1200;
 
 /// Seconds per `n1³` (cubed node unknowns) of the dense modal computation, measured on one
 /// core of the development machine (a planar two-link of 2 × 300 elements, `n1 = 1806`, took
@@ -27,7 +45,25 @@ pub const MAX_DENSE_BYTES: f64 = 4.0 * 1024.0 * 1024.0 * 1024.0;
 /// loaded machine).
 const SECONDS_PER_N3: f64 = 6e-10;
 
-/// An estimate, from the mesh alone, of what the dense modal computation costs.
+/// Bytes per unknown of the saddle-point system (`n1 + n2 + constraint rows`) for its sparse
+/// LU factors, pattern and work vectors, measured (peak resident memory of `flexmpc modes` on
+/// planar two-links of 2 × 1000 to 2 × 5000 elements, less the Krylov basis).
+const SPARSE_BYTES_PER_UNKNOWN: f64 = 2000.0;
+
+/// Seconds per unknown of the saddle-point system and Lanczos step of the sparse route,
+/// measured as [`SPARSE_BYTES_PER_UNKNOWN`].
+const SPARSE_SECONDS_PER_UNKNOWN_STEP: f64 = 2e-7;
+
+/// Which computation `modes` runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Route {
+    /// Dense SVDs on the whole problem: every mode.
+    Dense,
+    /// Shift-invert Lanczos on the sparse pencil: the lowest modes.
+    Sparse,
+}
+
+/// An estimate, from the mesh alone, of what the modal computation costs.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SolveEstimate {
     /// Node unknowns `n1 = k Σ (N_b + 1)` (the velocity block `B1` is `n1 × n1`).
@@ -40,8 +76,15 @@ pub struct SolveEstimate {
     /// `D`, `Dᵀ` (`n1 n2` each), and eight `nz × nz` work matrices of the SVDs on the
     /// constrained space, `nz = n1 − constraint rows`; 8 bytes per entry.
     pub bytes: f64,
-    /// Expected wall time (s) on one core: `SECONDS_PER_N3 · n1³`.
+    /// Expected wall time (s) of the dense route on one core: `SECONDS_PER_N3 · n1³`.
     pub seconds: f64,
+    /// Peak memory (bytes) of the sparse route: the saddle-point system and its LU factors
+    /// (`SPARSE_BYTES_PER_UNKNOWN` per unknown) and the Krylov basis (`n1 × max_steps`
+    /// doubles, its largest size).
+    pub sparse_bytes: f64,
+    /// Expected wall time (s) of the sparse route on one core, for a typical 100 Lanczos
+    /// steps per shift.
+    pub sparse_seconds: f64,
 }
 
 /// Memory and time of the modal basis of `structure`, from its mesh and constraint count.
@@ -54,7 +97,28 @@ pub fn estimate(structure: &Structure) -> SolveEstimate {
     let nz = n1.saturating_sub(constraint_rows) as f64;
     let (a, b) = (n1 as f64, n2 as f64);
     let bytes = 8.0 * (2.0 * a * a + b * b + 2.0 * a * b + 8.0 * nz * nz);
-    SolveEstimate { n1, n2, constraint_rows, bytes, seconds: SECONDS_PER_N3 * a * a * a }
+    let unknowns = a + b + constraint_rows as f64;
+    let steps = SparseSettings::default().max_steps as f64;
+    SolveEstimate {
+        n1,
+        n2,
+        constraint_rows,
+        bytes,
+        seconds: SECONDS_PER_N3 * a * a * a,
+        sparse_bytes: SPARSE_BYTES_PER_UNKNOWN * unknowns + 8.0 * a * steps,
+        sparse_seconds: SPARSE_SECONDS_PER_UNKNOWN_STEP * unknowns * 100.0,
+    }
+}
+
+impl SolveEstimate {
+    /// The route `modes` takes: dense up to [`DENSE_ROUTE_MAX_N1`] node unknowns.
+    pub fn route(&self) -> Route {
+        if self.n1 <= DENSE_ROUTE_MAX_N1 && self.bytes <= MAX_DENSE_BYTES {
+            Route::Dense
+        } else {
+            Route::Sparse
+        }
+    }
 }
 
 /// `bytes` as `12.3 GB` / `456 MB`.
@@ -79,17 +143,21 @@ pub fn human_seconds(s: f64) -> String {
     }
 }
 
+fn elements(structure: &Structure) -> usize {
+    structure.beams().iter().map(|b| b.beam.n_elements()).sum()
+}
+
 /// The [`estimate`] of `structure`, or an error naming the estimate and the cap
-/// [`MAX_DENSE_BYTES`] when it is above the cap.
+/// [`MAX_DENSE_BYTES`] when the dense modal basis (`mpc`, `sweep`, `ocp`) is above the cap.
 pub fn check_size(structure: &Structure) -> Result<SolveEstimate> {
     let e = estimate(structure);
     if e.bytes > MAX_DENSE_BYTES {
-        let elements: usize = structure.beams().iter().map(|b| b.beam.n_elements()).sum();
         bail!(
-            "the modal basis of this structure ({elements} elements, {} node unknowns, {} \
+            "the modal basis of this structure ({} elements, {} node unknowns, {} \
              constraint rows) is a dense computation that would need about {} of memory and \
              {} on one core; the cap is {} (flexmpc::modes::MAX_DENSE_BYTES): use fewer \
              `elements` per beam (the modes converge with a few dozen per link)",
+            elements(structure),
             e.n1,
             e.constraint_rows,
             human_bytes(e.bytes),
@@ -100,8 +168,30 @@ pub fn check_size(structure: &Structure) -> Result<SolveEstimate> {
     Ok(e)
 }
 
+/// The [`estimate`] of `structure` and the route `modes` takes, or an error naming the sparse
+/// estimate and the cap [`MAX_SPARSE_BYTES`] when even the sparse route is above it.
+pub fn plan(structure: &Structure) -> Result<(SolveEstimate, Route)> {
+    let e = estimate(structure);
+    let route = e.route();
+    if route == Route::Sparse && e.sparse_bytes > MAX_SPARSE_BYTES {
+        bail!(
+            "the lowest modes of this structure ({} elements, {} node unknowns, {} constraint \
+             rows) need the sparse eigen route, which would need about {} of memory and {} on \
+             one core; the cap is {} (flexmpc::modes::MAX_SPARSE_BYTES): use fewer `elements` \
+             per beam (the modes converge with a few dozen per link)",
+            elements(structure),
+            e.n1,
+            e.constraint_rows,
+            human_bytes(e.sparse_bytes),
+            human_seconds(e.sparse_seconds),
+            human_bytes(MAX_SPARSE_BYTES)
+        );
+    }
+    Ok((e, route))
+}
+
 /// The first `n_modes` modes of `structure` (fewer if the structure has fewer), after
-/// [`check_size`], without a progress indicator.
+/// [`plan`], without a progress indicator.
 pub fn report(structure: &Structure, n_modes: usize) -> Result<ModeReport> {
     report_with_progress(structure, n_modes, false)
 }
@@ -113,29 +203,39 @@ pub fn report_with_progress(
     n_modes: usize,
     quiet: bool,
 ) -> Result<ModeReport> {
-    let est = check_size(structure)?;
+    let (est, route) = plan(structure)?;
+    let (seconds, bytes, what) = match route {
+        Route::Dense => (est.seconds, est.bytes, "dense eigenproblem"),
+        Route::Sparse => (est.sparse_seconds, est.sparse_bytes, "sparse Lanczos eigenproblem"),
+    };
     let bar = crate::progress::progress_bar(
         None,
-        quiet || est.seconds < 1.0,
+        quiet || seconds < 1.0,
         &format!(
-            "modes: dense eigenproblem of {} unknowns (about {}, {})",
+            "modes: {what} of {} unknowns (about {}, {})",
             est.n1,
-            human_seconds(est.seconds),
-            human_bytes(est.bytes)
+            human_seconds(seconds),
+            human_bytes(bytes)
         ),
     );
     let settings = BasisSettings::default();
-    // Ask for what exists: the basis knows its size only once solved.
-    let r = match mode_report(structure, n_modes, &settings) {
-        Ok(r) => Ok(r),
-        Err(first) => {
-            let all = modal_rom::StructureModel::new(structure)?.modes(&settings)?;
-            if n_modes > all.n_modes() && all.n_modes() > 0 {
-                Ok(modal_rom::report_of(&all, all.n_modes())?)
-            } else {
-                Err(first.into())
-            }
+    let r = match route {
+        Route::Sparse => {
+            sparse_mode_report(structure, n_modes, &settings, &SparseSettings::default())
+                .map_err(anyhow::Error::from)
         }
+        // Ask for what exists: the basis knows its size only once solved.
+        Route::Dense => match mode_report(structure, n_modes, &settings) {
+            Ok(r) => Ok(r),
+            Err(first) => {
+                let all = modal_rom::StructureModel::new(structure)?.modes(&settings)?;
+                if n_modes > all.n_modes() && all.n_modes() > 0 {
+                    Ok(modal_rom::report_of(&all, all.n_modes())?)
+                } else {
+                    Err(first.into())
+                }
+            }
+        },
     };
     bar.finish_and_clear();
     r

@@ -56,6 +56,49 @@ impl ModeKind {
     }
 }
 
+/// Kind and energy fractions `[axial, torsion, bending-e2, bending-e3]` of one mode from its
+/// kinetic terms `φ1ᵢ (B1φ1)ᵢ` and strain terms `φ2ᵢ (B2φ2)ᵢ`, in index order (local component
+/// `i mod k`): the mean of the kinetic and strain fractions of each family; a family holding at
+/// least `threshold` of it names the mode, else `mixed`; `rigid` modes are `Rigid`.
+pub(crate) fn classify(
+    comps: Components,
+    rigid: bool,
+    threshold: f64,
+    kinetic: impl Iterator<Item = f64>,
+    strain: impl Iterator<Item = f64>,
+) -> (ModeKind, [f64; 4]) {
+    let k = comps.k();
+    let mut kin = [0.0; 4];
+    let mut stn = [0.0; 4];
+    for (i, e) in kinetic.enumerate() {
+        kin[ModeKind::family(comps.spatial_index(i % k))] += e;
+    }
+    for (i, e) in strain.enumerate() {
+        stn[ModeKind::family(comps.spatial_index(i % k))] += e;
+    }
+    let (tk, ts) = (kin.iter().sum::<f64>(), stn.iter().sum::<f64>());
+    let mut frac = [0.0; 4];
+    for f in 0..4 {
+        let a = if tk > 0.0 { kin[f] / tk } else { 0.0 };
+        let b = if ts > 0.0 { stn[f] / ts } else { a };
+        frac[f] = 0.5 * (a + b);
+    }
+    let kind = if rigid {
+        ModeKind::Rigid
+    } else {
+        let (best, val) =
+            frac.iter()
+                .enumerate()
+                .fold((0, f64::MIN), |acc, (i, &v)| if v > acc.1 { (i, v) } else { acc });
+        if val >= threshold {
+            [ModeKind::Axial, ModeKind::Torsion, ModeKind::BendingE2, ModeKind::BendingE3][best]
+        } else {
+            ModeKind::Mixed
+        }
+    };
+    (kind, frac)
+}
+
 /// Settings of [`ModalBasis::compute`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct BasisSettings {
@@ -214,47 +257,15 @@ impl ModalBasis {
 
     fn label(&mut self, threshold: f64) {
         let comps = self.layout.components;
-        let k = comps.k();
         let b1p = self.b1_blocks.apply(self.phi1.as_ref());
         let b2p = self.b2_blocks.apply(self.phi2.as_ref());
         let m = self.omega.len();
         self.kinds.clear();
         self.fractions.clear();
         for j in 0..m {
-            let mut kin = [0.0; 4];
-            let mut strain = [0.0; 4];
-            for i in 0..self.phi1.nrows() {
-                kin[ModeKind::family(comps.spatial_index(i % k))] +=
-                    self.phi1[(i, j)] * b1p[(i, j)];
-            }
-            for i in 0..self.phi2.nrows() {
-                strain[ModeKind::family(comps.spatial_index(i % k))] +=
-                    self.phi2[(i, j)] * b2p[(i, j)];
-            }
-            let (tk, ts) = (kin.iter().sum::<f64>(), strain.iter().sum::<f64>());
-            let mut frac = [0.0; 4];
-            for f in 0..4 {
-                let a = if tk > 0.0 { kin[f] / tk } else { 0.0 };
-                let b = if ts > 0.0 { strain[f] / ts } else { a };
-                frac[f] = 0.5 * (a + b);
-            }
-            let kind = if j < self.n_rigid {
-                ModeKind::Rigid
-            } else {
-                let (best, val) = frac.iter().enumerate().fold((0, f64::MIN), |acc, (i, &v)| {
-                    if v > acc.1 {
-                        (i, v)
-                    } else {
-                        acc
-                    }
-                });
-                if val >= threshold {
-                    [ModeKind::Axial, ModeKind::Torsion, ModeKind::BendingE2, ModeKind::BendingE3]
-                        [best]
-                } else {
-                    ModeKind::Mixed
-                }
-            };
+            let kinetic = (0..self.phi1.nrows()).map(|i| self.phi1[(i, j)] * b1p[(i, j)]);
+            let strain = (0..self.phi2.nrows()).map(|i| self.phi2[(i, j)] * b2p[(i, j)]);
+            let (kind, frac) = classify(comps, j < self.n_rigid, threshold, kinetic, strain);
             self.kinds.push(kind);
             self.fractions.push(frac);
         }

@@ -38,6 +38,44 @@ impl BlockDiag {
         Ok(BlockDiag { k, blocks })
     }
 
+    /// Collects `(row, col, value)` entries of an `n × n` matrix (duplicates summed, in order)
+    /// into `k × k` diagonal blocks, checking that none lies outside them.
+    pub(crate) fn from_entries(
+        what: &str,
+        n: usize,
+        k: usize,
+        entries: &[(usize, usize, f64)],
+    ) -> Result<Self> {
+        if n % k != 0 {
+            return Err(invalid(what, n, format!("size must be a multiple of {k}")));
+        }
+        let mut blocks = vec![vec![0.0; k * k]; n / k];
+        for &(i, j, v) in entries {
+            if i >= n || j >= n || i / k != j / k {
+                if v == 0.0 && i < n && j < n {
+                    continue;
+                }
+                return Err(invalid(
+                    format!("{what}[({i}, {j})]"),
+                    v,
+                    format!("must be block diagonal with {k}×{k} blocks"),
+                ));
+            }
+            blocks[i / k][(i % k) * k + j % k] += v;
+        }
+        Ok(BlockDiag { k, blocks })
+    }
+
+    /// Block size `k`.
+    pub(crate) fn k(&self) -> usize {
+        self.k
+    }
+
+    /// Number of blocks.
+    pub(crate) fn n_blocks(&self) -> usize {
+        self.blocks.len()
+    }
+
     /// `self · x` for `x` with `n` rows.
     pub fn apply(&self, x: MatRef<'_, f64>) -> Mat<f64> {
         let k = self.k;

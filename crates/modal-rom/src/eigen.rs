@@ -37,7 +37,8 @@
 //! structure at 0°) and each block is solved on its own: exact, and much faster.
 
 use crate::error::{invalid, shape, ModalError, Result};
-use crate::layout::{FullIndex, Layout};
+use crate::layout::Layout;
+use crate::sparse_modes::SparseProblem;
 use faer::{Mat, MatRef, Side};
 
 /// Settings of the constrained eigen solver.
@@ -165,91 +166,7 @@ impl SecondOrderProblem {
         g_rows: usize,
         g: impl IntoIterator<Item = (usize, usize, f64)>,
     ) -> Result<Self> {
-        let (n1, n2, nf) = (layout.n1(), layout.n2(), layout.n_full());
-        let mut b1 = Mat::<f64>::zeros(n1, n1);
-        let mut b2 = Mat::<f64>::zeros(n2, n2);
-        let mut d = Mat::<f64>::zeros(n1, n2);
-        let mut dt = Mat::<f64>::zeros(n2, n1);
-        let cls = |i: usize, what: &str| -> Result<FullIndex> {
-            match layout.classify_full(i) {
-                FullIndex::OutOfRange => {
-                    Err(invalid(what, i, format!("index past the FE vector length {nf}")))
-                }
-                c => Ok(c),
-            }
-        };
-        for (i, j, v) in b {
-            match (cls(i, "B row")?, cls(j, "B column")?) {
-                (FullIndex::X1(p), FullIndex::X1(q)) => b1[(p, q)] += v,
-                (FullIndex::X2(p), FullIndex::X2(q)) => b2[(p, q)] += v,
-                _ if v == 0.0 => {}
-                _ => {
-                    return Err(invalid(
-                        format!("B[({i}, {j})]"),
-                        v,
-                        "B must be block diagonal (nodes, elements, zero on end values)",
-                    ))
-                }
-            }
-        }
-        for (i, j, v) in a {
-            match (cls(i, "A row")?, cls(j, "A column")?) {
-                (FullIndex::X1(p), FullIndex::X2(q)) => d[(p, q)] += v,
-                (FullIndex::X2(p), FullIndex::X1(q)) => dt[(p, q)] += v,
-                _ => {}
-            }
-        }
-        let scale = max_abs(d.as_ref()).max(f64::MIN_POSITIVE);
-        for p in 0..n1 {
-            for q in 0..n2 {
-                if (d[(p, q)] + dt[(q, p)]).abs() > 1e-12 * scale {
-                    return Err(invalid(
-                        format!("A (node {p}, element {q})"),
-                        d[(p, q)],
-                        format!("A must be skew: the element-row entry is {}", dt[(q, p)]),
-                    ));
-                }
-            }
-        }
-        let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); g_rows];
-        let mut kinds = vec![(false, false); g_rows];
-        for (i, j, v) in g {
-            if i >= g_rows {
-                return Err(invalid("G row", i, format!("G has {g_rows} rows")));
-            }
-            if v == 0.0 {
-                continue;
-            }
-            match cls(j, "G column")? {
-                FullIndex::X1(q) => {
-                    rows[i].push((q, v));
-                    kinds[i].0 = true;
-                }
-                FullIndex::End => kinds[i].1 = true,
-                _ => {
-                    return Err(invalid(
-                        format!("G[({i}, {j})]"),
-                        v,
-                        "constraint rows on element values are not supported",
-                    ))
-                }
-            }
-        }
-        let kept: Vec<usize> = (0..g_rows).filter(|&r| kinds[r].0).collect();
-        if let Some(&r) = kept.iter().find(|&&r| kinds[r].1) {
-            return Err(invalid(
-                format!("G row {r}"),
-                "mixed",
-                "a row mixes node velocities and end values",
-            ));
-        }
-        let mut g1 = Mat::<f64>::zeros(kept.len(), n1);
-        for (new, &r) in kept.iter().enumerate() {
-            for &(q, v) in &rows[r] {
-                g1[(new, q)] += v;
-            }
-        }
-        SecondOrderProblem::new(b1, b2, d, g1)
+        SparseProblem::from_full_entries(layout, b, a, g_rows, g)?.to_dense()
     }
 
     /// `n1`, the length of `X1`.
@@ -307,17 +224,17 @@ fn symmetrize(m: &mut Mat<f64>) {
     }
 }
 
-struct UnionFind(Vec<usize>);
+pub(crate) struct UnionFind(pub(crate) Vec<usize>);
 
 impl UnionFind {
-    fn find(&mut self, mut a: usize) -> usize {
+    pub(crate) fn find(&mut self, mut a: usize) -> usize {
         while self.0[a] != a {
             self.0[a] = self.0[self.0[a]];
             a = self.0[a];
         }
         a
     }
-    fn union(&mut self, a: usize, b: usize) {
+    pub(crate) fn union(&mut self, a: usize, b: usize) {
         let (ra, rb) = (self.find(a), self.find(b));
         if ra != rb {
             let (lo, hi) = if ra < rb { (ra, rb) } else { (rb, ra) };
@@ -757,11 +674,25 @@ fn exact_rigid_fields(
     candidates: Option<MatRef<'_, f64>>,
 ) -> Vec<(Vec<f64>, Vec<f64>)> {
     let Some(c) = candidates else { return Vec::new() };
-    let n1 = problem.n1();
     let (gmax, dmax) = (max_abs(problem.g.as_ref()), max_abs(problem.d.as_ref()));
     let gres = &problem.g * c;
     let dres = problem.d.transpose() * c;
     let bc = &problem.b1 * c;
+    admissible_rigid_fields(c, gres.as_ref(), dres.as_ref(), bc.as_ref(), gmax, dmax)
+}
+
+/// The candidates `c` whose residuals `G1 c` (`gres`) and `Dᵀ c` (`dres`) are below `1e-10`
+/// of `max|G1| max|c|` and `max|D| max|c|`, `B1`-orthonormalised in order (Gram–Schmidt,
+/// twice; `bc = B1 c`), dropping those left with under `1e-6` of their norm.
+pub(crate) fn admissible_rigid_fields(
+    c: MatRef<'_, f64>,
+    gres: MatRef<'_, f64>,
+    dres: MatRef<'_, f64>,
+    bc: MatRef<'_, f64>,
+    gmax: f64,
+    dmax: f64,
+) -> Vec<(Vec<f64>, Vec<f64>)> {
+    let n1 = c.nrows();
     let mut done: Vec<(Vec<f64>, Vec<f64>)> = Vec::new();
     for col in 0..c.ncols() {
         let vmax = (0..n1).fold(0.0f64, |a, i| a.max(c[(i, col)].abs()));
@@ -796,11 +727,19 @@ fn exact_rigid_fields(
 /// Canonical basis of the rigid eigenspace spanned by the `B1`-orthonormal columns of `rigid`:
 /// the projections of the unit vectors `e_0, e_1, …` onto it, orthonormalised in order.
 fn canonical_rigid_basis(b1: &Mat<f64>, rigid: &Mat<f64>) -> Result<Mat<f64>> {
+    if rigid.ncols() == 0 {
+        return Ok(Mat::zeros(rigid.nrows(), 0));
+    }
+    canonical_rigid_basis_of(&(b1 * rigid), rigid)
+}
+
+/// [`canonical_rigid_basis`] given `b1r = B1 R` (the coordinates of `c` in the rigid basis are
+/// `(B1 R)ᵀ c`).
+pub(crate) fn canonical_rigid_basis_of(b1r: &Mat<f64>, rigid: &Mat<f64>) -> Result<Mat<f64>> {
     let (n1, r) = (rigid.nrows(), rigid.ncols());
     if r == 0 {
         return Ok(Mat::zeros(n1, 0));
     }
-    let b1r = b1 * rigid; // coordinates of c in the rigid basis: (B1 R)ᵀ c
     let row_norm_max = (0..n1)
         .map(|i| (0..r).map(|j| b1r[(i, j)].powi(2)).sum::<f64>().sqrt())
         .fold(0.0f64, f64::max);

@@ -57,6 +57,7 @@ mod eigen;
 mod error;
 pub mod exact_joints;
 mod export;
+mod lanczos;
 mod layout;
 mod midpoint;
 pub mod npy;
@@ -65,6 +66,7 @@ mod report;
 mod rigid;
 mod rom;
 pub mod samples;
+mod sparse_modes;
 mod structure;
 mod tensor;
 
@@ -79,6 +81,9 @@ pub use projection::Fields;
 pub use report::{mode_report, report_of, BeamShape, ModeReport, ModeShape};
 pub use rigid::{chain_rotations, rigid_rotation_fields, RigidRotation};
 pub use rom::{Input, ModalRom, QuaternionModel, RomOptions};
+pub use sparse_modes::{
+    solve_sparse, sparse_mode_report, SparseModes, SparseProblem, SparseSettings,
+};
 pub use structure::StructureModel;
 pub use tensor::SparseTensor3;
 

@@ -3,6 +3,7 @@
 
 use crate::basis::{BasisSettings, ModalBasis};
 use crate::error::{invalid, Result};
+use crate::layout::Layout;
 use crate::structure::StructureModel;
 use intrinsic_beam::rotation::rotation;
 use multibody_constraints::Structure;
@@ -68,10 +69,26 @@ pub fn report_of(basis: &ModalBasis, n_modes: usize) -> Result<ModeReport> {
     if n_modes == 0 || n_modes > basis.n_modes() {
         return Err(invalid("n_modes", n_modes, format!("must lie in 1..={}", basis.n_modes())));
     }
-    let layout = basis.layout();
-    let comps = layout.components;
     let labels = basis.labels();
-    let shapes = (0..n_modes)
+    Ok(report_from_parts(
+        basis.layout(),
+        &basis.omega()[..n_modes],
+        &labels[..n_modes],
+        basis.n_rigid(),
+        |j, b, n| basis.phi1_at(j, b, n),
+    ))
+}
+
+/// The report of modes given by their frequencies, labels and `φ1` at `(mode, beam, node)`.
+pub(crate) fn report_from_parts(
+    layout: &Layout,
+    omega: &[f64],
+    labels: &[String],
+    n_rigid: usize,
+    phi1_at: impl Fn(usize, usize, usize) -> Vec<f64>,
+) -> ModeReport {
+    let comps = layout.components;
+    let shapes = (0..omega.len())
         .map(|j| {
             let beams = layout
                 .beams
@@ -83,7 +100,7 @@ pub fn report_of(basis: &ModalBasis, n_modes: usize) -> Result<ModeReport> {
                         s.push(s.last().copied().unwrap_or(0.0) + h);
                     }
                     let phi1: Vec<Vec<f64>> =
-                        (0..beam.n_nodes()).map(|n| basis.phi1_at(j, b, n)).collect();
+                        (0..beam.n_nodes()).map(|n| phi1_at(j, b, n)).collect();
                     let velocity_global = (0..beam.n_nodes())
                         .map(|n| {
                             let e = comps.embed(&phi1[n]);
@@ -100,18 +117,8 @@ pub fn report_of(basis: &ModalBasis, n_modes: usize) -> Result<ModeReport> {
                     }
                 })
                 .collect();
-            ModeShape {
-                index: j,
-                frequency_rad_s: basis.omega()[j],
-                label: labels[j].clone(),
-                beams,
-            }
+            ModeShape { index: j, frequency_rad_s: omega[j], label: labels[j].clone(), beams }
         })
         .collect();
-    Ok(ModeReport {
-        frequencies_rad_s: basis.omega()[..n_modes].to_vec(),
-        labels: labels[..n_modes].to_vec(),
-        n_rigid: basis.n_rigid(),
-        shapes,
-    })
+    ModeReport { frequencies_rad_s: omega.to_vec(), labels: labels.to_vec(), n_rigid, shapes }
 }

@@ -45,36 +45,94 @@ fn reachable(structure: &Structure, start: &[usize], skip: Option<usize>) -> Vec
     (0..nb).filter(|&b| seen[b]).collect()
 }
 
+/// Beam layout and reference configuration of `structure`.
+pub(crate) fn layout_of(structure: &Structure) -> Result<Layout> {
+    let components: Components = structure.components();
+    let mut beams = Vec::new();
+    for (b, sb) in structure.beams().iter().enumerate() {
+        let kin = &structure.reference()[b];
+        let start_from = match &sb.placement {
+            Placement::Attached { joint, .. } => {
+                let ji = structure.joint_index(joint).ok_or_else(|| {
+                    invalid(format!("beam `{}` placement joint", sb.name), joint, "unknown joint")
+                })?;
+                let (b0, e0) = structure.joints()[ji].ends[0];
+                Some((b0, structure.end_node(b0, e0)))
+            }
+            _ => None,
+        };
+        beams.push(BeamLayout {
+            name: sb.name.clone(),
+            element_lengths: sb.beam.mesh().lengths().to_vec(),
+            reference_quaternions: kin.xi.iter().map(|q| [q[0], q[1], q[2], q[3]]).collect(),
+            reference_positions: kin.r.iter().map(|r| [r.x, r.y, r.z]).collect(),
+            start_from,
+        });
+    }
+    Layout::new(components, beams)
+}
+
+/// The rigid rotations fixing the rigid-mode basis (theory.md §4) as `X1` fields (n1 × count):
+/// about the free axes of the supports first, then joint by joint by distance from the ground.
+pub(crate) fn rigid_candidates_of(structure: &Structure, layout: &Layout) -> Result<Mat<f64>> {
+    // Rigid candidates: supports first, then joints by distance from the ground.
+    let joints = structure.joints();
+    let grounded: Vec<usize> = joints.iter().filter(|j| j.ground).map(|j| j.ends[0].0).collect();
+    let depth = |b: usize| -> usize {
+        let mut d = 0;
+        let mut frontier = grounded.clone();
+        let mut seen = vec![false; structure.beams().len()];
+        while !frontier.is_empty() {
+            if frontier.contains(&b) {
+                return d;
+            }
+            frontier.iter().for_each(|&x| seen[x] = true);
+            let mut next = Vec::new();
+            for &x in &frontier {
+                for j in joints.iter().filter(|j| !j.ground && j.ends.iter().any(|e| e.0 == x)) {
+                    next.extend(j.ends.iter().map(|e| e.0).filter(|&y| !seen[y]));
+                }
+            }
+            next.sort_unstable();
+            next.dedup();
+            frontier = next;
+            d += 1;
+        }
+        usize::MAX
+    };
+    let mut order: Vec<usize> = (0..joints.len()).collect();
+    order.sort_by_key(|&ji| (!joints[ji].ground, depth(joints[ji].ends[0].0), ji));
+    let mut rotations = Vec::new();
+    for ji in order {
+        let j = &joints[ji];
+        let rots: Vec<Matrix3<f64>> = j
+            .ends
+            .iter()
+            .map(|&(b, e)| rotation(&structure.reference()[b].xi[structure.end_node(b, e)]))
+            .collect();
+        let (b0, e0) = j.ends[0];
+        let pivot = structure.reference()[b0].r[structure.end_node(b0, e0)];
+        let beams = if j.ground {
+            reachable(structure, &[b0], None)
+        } else {
+            reachable(structure, &j.ends[1..].iter().map(|e| e.0).collect::<Vec<_>>(), Some(ji))
+        };
+        for axis in j.free_rotation_axes().into_iter().map(|i| &j.axes[i]) {
+            let global: Vector3<f64> = rots[0] * axis.local_at(0, &rots);
+            rotations.push(RigidRotation {
+                pivot: [pivot.x, pivot.y, pivot.z],
+                axis: [global.x, global.y, global.z],
+                beams: beams.clone(),
+            });
+        }
+    }
+    rigid_rotation_fields(layout, &rotations)
+}
+
 impl StructureModel {
     /// Extracts layout, operators, damping and rigid candidates from `structure`.
     pub fn new(structure: &Structure) -> Result<Self> {
-        let components: Components = structure.components();
-        let mut beams = Vec::new();
-        for (b, sb) in structure.beams().iter().enumerate() {
-            let kin = &structure.reference()[b];
-            let start_from = match &sb.placement {
-                Placement::Attached { joint, .. } => {
-                    let ji = structure.joint_index(joint).ok_or_else(|| {
-                        invalid(
-                            format!("beam `{}` placement joint", sb.name),
-                            joint,
-                            "unknown joint",
-                        )
-                    })?;
-                    let (b0, e0) = structure.joints()[ji].ends[0];
-                    Some((b0, structure.end_node(b0, e0)))
-                }
-                _ => None,
-            };
-            beams.push(BeamLayout {
-                name: sb.name.clone(),
-                element_lengths: sb.beam.mesh().lengths().to_vec(),
-                reference_quaternions: kin.xi.iter().map(|q| [q[0], q[1], q[2], q[3]]).collect(),
-                reference_positions: kin.r.iter().map(|r| [r.x, r.y, r.z]).collect(),
-                start_from,
-            });
-        }
-        let layout = Layout::new(components, beams)?;
+        let layout = layout_of(structure)?;
         let (b, a, d) = structure.linear_operators();
         let g = structure.constraint_matrix();
         let problem = SecondOrderProblem::from_full_entries(
@@ -93,60 +151,7 @@ impl StructureModel {
                 damping[(p, q)] += v;
             }
         }
-        // Rigid candidates: supports first, then joints by distance from the ground.
-        let joints = structure.joints();
-        let grounded: Vec<usize> =
-            joints.iter().filter(|j| j.ground).map(|j| j.ends[0].0).collect();
-        let depth = |b: usize| -> usize {
-            let mut d = 0;
-            let mut frontier = grounded.clone();
-            let mut seen = vec![false; structure.beams().len()];
-            while !frontier.is_empty() {
-                if frontier.contains(&b) {
-                    return d;
-                }
-                frontier.iter().for_each(|&x| seen[x] = true);
-                let mut next = Vec::new();
-                for &x in &frontier {
-                    for j in joints.iter().filter(|j| !j.ground && j.ends.iter().any(|e| e.0 == x))
-                    {
-                        next.extend(j.ends.iter().map(|e| e.0).filter(|&y| !seen[y]));
-                    }
-                }
-                next.sort_unstable();
-                next.dedup();
-                frontier = next;
-                d += 1;
-            }
-            usize::MAX
-        };
-        let mut order: Vec<usize> = (0..joints.len()).collect();
-        order.sort_by_key(|&ji| (!joints[ji].ground, depth(joints[ji].ends[0].0), ji));
-        let mut rotations = Vec::new();
-        for ji in order {
-            let j = &joints[ji];
-            let rots: Vec<Matrix3<f64>> = j
-                .ends
-                .iter()
-                .map(|&(b, e)| rotation(&structure.reference()[b].xi[structure.end_node(b, e)]))
-                .collect();
-            let (b0, e0) = j.ends[0];
-            let pivot = structure.reference()[b0].r[structure.end_node(b0, e0)];
-            let beams = if j.ground {
-                reachable(structure, &[b0], None)
-            } else {
-                reachable(structure, &j.ends[1..].iter().map(|e| e.0).collect::<Vec<_>>(), Some(ji))
-            };
-            for axis in j.free_rotation_axes().into_iter().map(|i| &j.axes[i]) {
-                let global: Vector3<f64> = rots[0] * axis.local_at(0, &rots);
-                rotations.push(RigidRotation {
-                    pivot: [pivot.x, pivot.y, pivot.z],
-                    axis: [global.x, global.y, global.z],
-                    beams: beams.clone(),
-                });
-            }
-        }
-        let rigid_candidates = rigid_rotation_fields(&layout, &rotations)?;
+        let rigid_candidates = rigid_candidates_of(structure, &layout)?;
         Ok(StructureModel { layout, problem, damping, rigid_candidates })
     }
 
