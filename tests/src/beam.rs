@@ -1,17 +1,19 @@
 //! Verification cases of the `intrinsic-beam` crate (names `intrinsic-beam/<case>`).
 //!
-//! Each case runs one of `intrinsic_beam::studies` and compares the measured numbers with
+//! Each case runs one of the [`studies`] and compares the measured numbers with
 //! tolerances justified by the method (solver tolerance, second-order discretisation).
+
+pub mod studies;
 
 use intrinsic_beam::closed_form::Supports;
 use intrinsic_beam::samples::ELASTICA_TIP_LOAD_1;
-use intrinsic_beam::studies::{self, FrequencyRow};
 use intrinsic_beam::Family;
 use intrinsic_beam::{
     Beam, BeamError, BeamProblem, Components, EndCondition, ImplicitMidpoint, Kinematics,
     LoadFrame, Loads, Mesh, NewtonSettings, Section,
 };
 use nalgebra::Vector6;
+use studies::FrequencyRow;
 
 use crate::{Case, CaseOutcome, Metric, Tier};
 

@@ -5,7 +5,9 @@
 //! order or conditioning justifies. `cargo xtask verify` runs them in release mode and prints a
 //! table (CI runs the quick tier).
 //!
-//! Each crate contributes its cases in its own module; [`all_cases`] gathers them.
+//! Each crate contributes its cases in its own module; [`all_cases`] gathers them. The
+//! experiments behind the cases live beside them (`beam::studies`, `multibody::studies`), and
+//! [`perf`] holds the numerics of `cargo xtask bench`.
 
 pub mod beam;
 pub mod exact_joints;
@@ -13,6 +15,7 @@ pub mod modal;
 pub mod mpc;
 pub mod multibody;
 pub mod ocp;
+pub mod perf;
 pub mod stress;
 
 use std::time::Instant;

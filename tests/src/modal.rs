@@ -385,14 +385,12 @@ fn mode_kinds() -> CaseOutcome {
     Ok(out)
 }
 
+/// `n` numbers uniform in `[−1, 1)` from the seeded generator.
 fn pseudo_random(n: usize, seed: u64) -> Vec<f64> {
-    let mut s = seed;
-    (0..n)
-        .map(|_| {
-            s = s.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
-            ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-        })
-        .collect()
+    intrinsic_beam::samples::random::random_vec(
+        &mut intrinsic_beam::samples::random::seeded(seed),
+        n,
+    )
 }
 
 fn energy() -> CaseOutcome {

@@ -1,10 +1,10 @@
 //! Verification cases of the `multibody-constraints` crate (names `multibody-constraints/<case>`).
 //!
-//! Each case runs one of `multibody_constraints::studies`; tolerances follow from the Newton
+//! Each case runs one of the [`studies`]; tolerances follow from the Newton
 //! tolerance (1e-12 relative update), round-off on O(1) direction cosines, and the O(h²)
 //! convergence of the lumped-mass links.
 
-use multibody_constraints::studies;
+pub mod studies;
 
 use crate::{Case, CaseOutcome, Metric, Tier};
 

@@ -13,6 +13,7 @@ use std::fmt::Display;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::time::Instant;
 
+use crate::multibody::studies::beam_rigid_rotation;
 use intrinsic_beam::closed_form::{self, Supports};
 use intrinsic_beam::{family, linear_modes, Family};
 use intrinsic_beam::{
@@ -22,7 +23,6 @@ use intrinsic_beam::{
 use modal_rom::{BasisSettings, StructureModel};
 use mpc::{run, ControllerKind, ControllerSettings, PlantKind, RunResult, Scenario, Setup};
 use multibody_constraints::null_space;
-use multibody_constraints::studies::beam_rigid_rotation;
 use multibody_constraints::{samples, Plant, PlantSettings};
 use multibody_constraints::{End, EndRef, Frame, Freedom, Joint, JointKind, Support};
 use multibody_constraints::{Placement, Structure, StructureBeam, StructureSettings};

@@ -14,6 +14,8 @@ mod plot;
 mod report;
 mod timestep;
 
+pub(crate) use flexmpc_verification::perf::{orders, timed};
+
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use report::Study;
@@ -129,62 +131,9 @@ fn machine() -> String {
     format!("{cpus} CPUs (nproc), {model}")
 }
 
-/// Median wall time (s) per call of `f` over up to `k` timing samples, stopping early once
-/// `budget` seconds are spent (at least one sample). Calls shorter than 20 ms are batched so
-/// that each sample lasts about 20 ms (the clock and scheduler noise stay small against it).
-/// Returns the last call's value with the median time per call.
-pub(crate) fn timed<T>(
-    k: usize,
-    budget: f64,
-    mut f: impl FnMut() -> Result<T>,
-) -> Result<(T, f64)> {
-    const SAMPLE: f64 = 0.02;
-    let start = Instant::now();
-    let t = Instant::now();
-    let mut last = f()?;
-    let first = t.elapsed().as_secs_f64();
-    let batch = if first < SAMPLE { (SAMPLE / first.max(1e-7)).ceil() as usize } else { 1 };
-    let mut times = vec![first];
-    while times.len() < k.max(1) && start.elapsed().as_secs_f64() < budget {
-        let t = Instant::now();
-        for _ in 0..batch {
-            last = f()?;
-        }
-        times.push(t.elapsed().as_secs_f64() / batch as f64);
-    }
-    if times.len() > 1 {
-        times.remove(0); // the first call warms caches and allocations
-    }
-    Ok((last, median(&mut times)))
-}
-
-/// Median of a non-empty slice (NaN for an empty one).
-pub(crate) fn median(v: &mut [f64]) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(|a, b| a.total_cmp(b));
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
-}
-
-/// Observed order of convergence between consecutive refinements: `log(e_i/e_{i+1}) /
-/// log(h_i/h_{i+1})` (NaN where an error is not positive and finite).
-pub(crate) fn orders(h: &[f64], e: &[f64]) -> Vec<f64> {
-    let mut out = vec![f64::NAN];
-    for i in 1..h.len() {
-        let ok = |x: f64| x.is_finite() && x > 0.0;
-        out.push(if ok(e[i]) && ok(e[i - 1]) {
-            (e[i - 1] / e[i]).ln() / (h[i - 1] / h[i]).ln()
-        } else {
-            f64::NAN
-        });
-    }
-    out
+/// A verification-crate study result as an `anyhow` result.
+pub(crate) fn ok<T>(r: flexmpc_verification::perf::Result<T>) -> Result<T> {
+    r.map_err(anyhow::Error::from_boxed)
 }
 
 /// Entry point of `cargo xtask bench ARGS`.

@@ -218,8 +218,9 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::random::Lcg;
+    use crate::samples::random::seeded;
     use nalgebra::DMatrix;
+    use rand::Rng;
 
     /// Random diagonally dominant block-tridiagonal matrix (plus the extra block) solved
     /// against a dense LU: agreement to round-off.
@@ -227,7 +228,7 @@ mod tests {
     where
         Const<K>: DimMin<Const<K>, Output = Const<K>>,
     {
-        let mut rng = Lcg::new(seed);
+        let mut rng = seeded(seed);
         let mut m = BlockTridiagonal::<K>::new(n);
         let mut dense = DMatrix::<f64>::zeros(K * n, K * n);
         for r in 0..n {
@@ -235,7 +236,7 @@ mod tests {
                 for a in 0..K {
                     for b in 0..K {
                         let Some(slot) = m.slot(r, c, a, b) else { continue };
-                        let mut v = rng.uniform(-1.0, 1.0);
+                        let mut v = rng.random_range(-1.0..1.0);
                         if r == c && a == b {
                             v += 4.0 * K as f64;
                         }
@@ -246,7 +247,7 @@ mod tests {
             }
         }
         m.factorize().unwrap();
-        let rhs: Vec<f64> = (0..K * n).map(|_| rng.uniform(-1.0, 1.0)).collect();
+        let rhs: Vec<f64> = (0..K * n).map(|_| rng.random_range(-1.0..1.0)).collect();
         let mut x = rhs.clone();
         assert!(m.solve_in_place(&mut x));
         let want = dense.lu().solve(&nalgebra::DVector::from_vec(rhs)).unwrap();

@@ -43,8 +43,8 @@
 //! * [`ExplicitRk4`] — explicit RK4 for cross-checks when the problem is an ODE.
 //! * [`linear_modes`] — linear modes of a single beam (second-order reduction, faer dense eigen) and
 //!   closed-form beam frequencies.
-//! * [`samples`] — canonical problems with provenance and known answers; [`studies`] — the
-//!   experiments behind the tests, verification cases and benches.
+//! * [`samples`] — canonical problems with provenance and known answers, and seeded random
+//!   sections and states ([`samples::random`]) for property checks.
 //!
 //! A multi-beam assembler places each beam's vector at a column offset and its rows at a row
 //! offset, appends its own end/joint rows (on the `x2_L`, `x2_R` and end-node `x1` unknowns,
@@ -95,14 +95,12 @@ pub mod operators;
 mod problem;
 #[cfg(test)]
 mod proptests;
-mod random;
 mod rk4;
 pub mod rotation;
 pub mod samples;
 mod section;
 mod sparse;
 mod step_system;
-pub mod studies;
 
 pub use beam::{Beam, LinearOperators, StepInput, StepPower};
 pub use components::{Components, OUT_OF_PLANE_INDICES, PLANAR_INDICES, SPATIAL_INDICES};

@@ -4,6 +4,8 @@
 //! Units are consistent and nondimensional: `L = 1`, bending stiffness `EI = 1`, mass per
 //! length `m = 1` unless stated.
 
+pub mod random;
+
 use nalgebra::{Matrix6, Vector6};
 
 use crate::beam::Beam;

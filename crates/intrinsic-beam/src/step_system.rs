@@ -495,10 +495,11 @@ mod tests {
     use crate::loads::{Amplitude, LoadFrame, Loads, PointLoad};
     use crate::mesh::Mesh;
     use crate::problem::EndCondition;
-    use crate::random::{random_section, random_vec, Lcg};
     use crate::rotation::quaternion_step;
     use crate::samples;
+    use crate::samples::random::{random_section, random_vec, seeded};
     use nalgebra::{DMatrix, DVector, Vector3, Vector6};
+    use rand::Rng;
 
     /// A random curved beam with `D0` (no flux damping), dead and follower loads, rotated
     /// kinematics and the given end conditions; random old/new states.
@@ -508,14 +509,14 @@ mod tests {
         left: EndCondition,
         right: EndCondition,
     ) -> (BeamProblem, Kinematics, Vec<f64>, Vec<f64>) {
-        let mut rng = Lcg::new(seed);
+        let mut rng = seeded(seed);
         let mut section = random_section(&mut rng, components, true, true);
         section.d1 = Matrix6::zeros();
         section.d2 = Matrix6::zeros();
         let beam = Beam::new(section, Mesh::graded(1.3, 6, 2.0).unwrap(), components).unwrap();
         let planar = components == Components::Planar;
-        let pick = |rng: &mut Lcg| {
-            let mut v = Vector6::from_fn(|_, _| rng.uniform(-1.0, 1.0));
+        let pick = |rng: &mut rand_chacha::ChaCha8Rng| {
+            let mut v = Vector6::from_fn(|_, _| rng.random_range(-1.0..1.0));
             if planar {
                 for j in [1, 3, 5] {
                     v[j] = 0.0;
@@ -538,9 +539,9 @@ mod tests {
             let axis = if planar {
                 Vector3::new(0.0, 1.0, 0.0)
             } else {
-                Vector3::from_fn(|_, _| rng.uniform(-1.0, 1.0))
+                Vector3::from_fn(|_, _| rng.random_range(-1.0..1.0))
             };
-            *xi = quaternion_step(xi, &axis, rng.uniform(-1.0, 1.0));
+            *xi = quaternion_step(xi, &axis, rng.random_range(-1.0..1.0));
         }
         let old = random_vec(&mut rng, beam.dim());
         let new = random_vec(&mut rng, beam.dim());
@@ -645,7 +646,7 @@ mod tests {
                 let (problem, kin, old, new) =
                     setup(50 + i as u64, components, left.clone(), right.clone());
                 let values = values(&problem, &kin, &old, &new);
-                let mut rng = Lcg::new(7);
+                let mut rng = seeded(7);
                 let rhs = random_vec(&mut rng, problem.dim());
                 let want =
                     dense(&problem, &values).lu().solve(&DVector::from_vec(rhs.clone())).unwrap();

@@ -38,7 +38,7 @@
 //! * [`Plant`]: steps, inputs (point loads follower/dead, gravity, joint torques,
 //!   changeable every step), outputs (joint angles, reactions, positions, energy).
 //! * [`samples`] — the paper's two-links, Fig. 2's ball joint, an L-frame, the rigid double
-//!   pendulum; [`studies`] — the experiments behind the verification cases.
+//!   pendulum.
 //!
 //! ```
 //! use intrinsic_beam::Section;
@@ -62,7 +62,6 @@ mod nullspace;
 mod plant;
 pub mod samples;
 mod structure;
-pub mod studies;
 
 pub use error::{MultibodyError, Result};
 pub use joint::{

@@ -1,69 +1,17 @@
-//! Study (d): closed-loop cost against compute time for linear MPC, real-time-iteration NMPC
-//! and full SQP NMPC (with several SQP iteration limits) on the paper's 2D scenario (§5.2):
-//! FE plant 2×50 elements, the paper's weights, horizon, sampling and modes (`mpc::run`); and
+//! Study (d): closed-loop cost against compute time — the tables, plots and notes. The
+//! configurations and the cost of a run are `flexmpc_verification::perf::control`: linear MPC,
+//! real-time-iteration NMPC and full SQP NMPC (several SQP iteration limits) on the paper's 2D
+//! scenario (§5.2, FE plant 2×50 elements, the paper's weights, horizon, sampling and modes);
 //! on the 3D scenario (§5.3) the LMPC, the full SQP and the real-time spatial NMPC with the
 //! paper's `k_u` and the `k_u = 1` option.
 
 use super::plot::{Chart, Series};
 use super::report::{Fmt, Study, Table};
-use super::{median, Ctx};
+use super::{ok, Ctx};
 use anyhow::Result;
-use mpc::{
-    run as closed_loop, ControllerKind, ControllerSettings, PlantKind, RunResult, Scenario, Setup,
+use flexmpc_verification::perf::control::{
+    closed_loop, configs, configs_3d, figures, setup_2d, setups_3d, Figures, PlantKind,
 };
-
-/// A named controller configuration.
-fn configs(quick: bool) -> Vec<(String, ControllerSettings)> {
-    let mut out = vec![("LMPC".to_string(), ControllerSettings::of(ControllerKind::Lmpc))];
-    let mut rti = ControllerSettings::full_sqp();
-    rti.real_time_iteration = true;
-    out.push(("NMPC RTI".into(), rti));
-    let limits: &[usize] = if quick { &[3] } else { &[1, 2, 3, 5, 10] };
-    for &m in limits {
-        let mut c = ControllerSettings::full_sqp();
-        c.max_iterations = m;
-        out.push((format!("NMPC SQP ≤{m} it."), c));
-    }
-    out
-}
-
-/// Closed-loop cost `∫ (V_state + ½ k_u |u|²) dt` over the run, divided by `T · V(0)`, and the
-/// time average of `V_state / V(0)`.
-fn closed_loop_cost(r: &RunResult, ku: f64) -> (f64, f64) {
-    let rec = &r.records;
-    if rec.len() < 2 {
-        return (f64::NAN, f64::NAN);
-    }
-    let (mut jv, mut ju) = (0.0, 0.0);
-    for w in rec.windows(2) {
-        let dt = w[1].t - w[0].t;
-        jv += 0.5 * dt * (w[0].v_state + w[1].v_state);
-        // the control recorded at a row is held over the interval that starts there
-        ju += dt * 0.5 * ku * w[0].u.iter().map(|v| v * v).sum::<f64>();
-    }
-    let t = rec[rec.len() - 1].t - rec[0].t;
-    let v0 = rec[0].v_state;
-    ((jv + ju) / (t * v0), jv / (t * v0))
-}
-
-/// Per-run figures of a closed loop: solve time per sample (median, mean; s), SQP iterations
-/// per sample, and the two costs of [`closed_loop_cost`].
-struct Figures {
-    median: f64,
-    mean: f64,
-    iterations: f64,
-    cost: f64,
-    mean_v: f64,
-}
-
-fn figures(r: &RunResult, ku: f64) -> Figures {
-    let mut times: Vec<f64> = r.samples.iter().map(|x| x.solve_time).collect();
-    let n = times.len().max(1) as f64;
-    let mean = times.iter().sum::<f64>() / n;
-    let iterations = r.samples.iter().map(|x| x.iterations as f64).sum::<f64>() / n;
-    let (cost, mean_v) = closed_loop_cost(r, ku);
-    Figures { median: median(&mut times), mean, iterations, cost, mean_v }
-}
 
 /// Runs study (d).
 pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
@@ -74,7 +22,7 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
     // 2D runs, their setup, and the 3D part's ticks (one per run)
     ctx.plan((1 + omegas.len() * configs.len() + if quick { 2 } else { 8 }) as u64);
     ctx.progress(&format!("(d) setup of the paper's 2D scenario, 2×{elements} elements"));
-    let setup = Setup::new(&Scenario::paper_2d(elements)?)?;
+    let setup = ok(setup_2d(elements))?;
     let ku = setup.scenario.mpc.ku;
     ctx.tick();
     let mut table = Table::new(
@@ -220,22 +168,9 @@ fn run_3d(ctx: &mut Ctx, elements: usize) -> Result<(Table, Chart, Vec<String>)>
     let quick = ctx.quick;
     let omegas: &[f64] = if quick { &[0.5] } else { &[0.5, 1.0] };
     ctx.progress(&format!("(d) setup of the paper's 3D scenario, 2×{elements} elements"));
-    let paper = Setup::new(&Scenario::paper_3d(elements)?)?;
-    let mut option_sc = Scenario::paper_3d(elements)?;
-    option_sc.mpc.ku = mpc::SPATIAL_INPUT_WEIGHT;
-    let option = Setup::new(&option_sc)?;
+    let (paper, option) = ok(setups_3d(elements))?;
     let ku = paper.scenario.mpc.ku;
-    let spatial = ControllerSettings::real_time_spatial();
-    let mut configs: Vec<(&str, &Setup, ControllerSettings)> = vec![
-        ("LMPC", &paper, ControllerSettings::of(ControllerKind::Lmpc)),
-        ("NMPC RTI spatial, k_u = 1", &option, spatial.clone()),
-    ];
-    if !quick {
-        configs.extend([
-            ("NMPC RTI spatial", &paper, spatial),
-            ("NMPC SQP ≤10 it. (full SQP)", &paper, ControllerSettings::full_sqp()),
-        ]);
-    }
+    let configs = configs_3d(quick, &paper, &option);
     let mut table = Table::new(
         "closed-loop-3d",
         format!(

@@ -1,4 +1,5 @@
-//! Study (a): FE mesh against frequency error and time. The clamped–free cantilever
+//! Study (a): FE mesh against frequency error and time — the tables, plots and notes; the
+//! models and solves are `flexmpc_verification::perf::mesh`. The clamped–free cantilever
 //! (`L = EI = m = 1`, Euler–Bernoulli section) against the closed-form first bending frequency,
 //! by the beam crate's dense single-beam route and by modal-rom's constrained SVD route; the
 //! cost of an implicit-midpoint step of the same mesh (slender cantilever released from a
@@ -6,87 +7,11 @@
 
 use super::plot::{Chart, Series};
 use super::report::{Fmt, Study, Table};
-use super::{orders, timed, Ctx};
-use anyhow::{anyhow, Result};
-use intrinsic_beam::closed_form::{bending, Supports};
-use intrinsic_beam::samples;
-use intrinsic_beam::{family, linear_modes, Family};
-use intrinsic_beam::{
-    Beam, BeamProblem, Components, EndCondition, ImplicitMidpoint, Loads, Mesh, NewtonSettings,
-    Section,
+use super::{ok, orders, timed, Ctx};
+use anyhow::Result;
+use flexmpc_verification::perf::mesh::{
+    dense_omega1, exact_omega1, rom_omega1, step_cost, two_link,
 };
-use modal_rom::{BasisSettings, StructureModel};
-use multibody_constraints::{End, EndRef, JointKind, Support};
-use multibody_constraints::{Placement, Structure, StructureBeam, StructureSettings};
-
-fn cantilever_structure(n: usize) -> Result<Structure> {
-    let beam =
-        Beam::new(samples::euler_bernoulli_section(), Mesh::uniform(1.0, n)?, Components::Planar)?;
-    Ok(Structure::new(
-        vec![StructureBeam::new("beam", beam, Placement::origin())],
-        vec![],
-        vec![Support {
-            name: "clamp".into(),
-            end: EndRef::new("beam", End::Start),
-            kind: JointKind::Weld,
-        }],
-        StructureSettings::default(),
-    )?)
-}
-
-/// First bending frequency by the dense single-beam route.
-fn dense_omega1(n: usize) -> Result<f64> {
-    let beam =
-        Beam::new(samples::euler_bernoulli_section(), Mesh::uniform(1.0, n)?, Components::Planar)?;
-    let problem = BeamProblem::new(beam, EndCondition::Clamped, EndCondition::Free, Loads::none())?;
-    let modes = linear_modes(&problem)?;
-    modes
-        .iter()
-        .find(|m| m.omega > 1e-3 && family(&problem.beam, m) == Family::BendingE2)
-        .map(|m| m.omega)
-        .ok_or_else(|| anyhow!("no bending mode at {n} elements"))
-}
-
-/// First elastic frequency (the first bending mode: axial and shear lie far above) and its
-/// label by modal-rom (structure operators + constrained modes).
-fn rom_omega1(n: usize) -> Result<(f64, String)> {
-    let s = cantilever_structure(n)?;
-    let basis = StructureModel::new(&s)?.modes(&BasisSettings::default())?;
-    let j = basis.n_rigid();
-    if j >= basis.n_modes() {
-        return Err(anyhow!("no elastic mode at {n} elements (modal-rom)"));
-    }
-    Ok((basis.omega()[j], basis.labels()[j].clone()))
-}
-
-/// First five elastic frequencies of the paper's 2D two-link at 0° with `n` elements per link.
-fn two_link(n: usize) -> Result<Vec<f64>> {
-    let s = multibody_constraints::samples::paper_2d(Section::paper_2d(), n, 0.0)?;
-    let basis = StructureModel::new(&s)?.modes(&BasisSettings::default())?;
-    let r = basis.n_rigid();
-    Ok(basis.omega()[r..(r + 5).min(basis.n_modes())].to_vec())
-}
-
-/// Median µs per implicit-midpoint step and Newton iterations per step, cantilever release.
-fn step_cost(n: usize, steps: usize, k: usize) -> Result<(f64, f64)> {
-    let s = samples::cantilever_release(Components::Planar, n)?;
-    let mut sim =
-        ImplicitMidpoint::new(s.problem, s.state, s.kinematics, NewtonSettings::default())?;
-    for _ in 0..10 {
-        sim.step(1e-3)?;
-    }
-    let c0 = sim.counters().newton_iterations;
-    let mut runs = 0;
-    let (_, t) = timed(k, 5.0, || {
-        runs += 1;
-        for _ in 0..steps {
-            sim.step(1e-3)?;
-        }
-        Ok(())
-    })?;
-    let its = (sim.counters().newton_iterations - c0) as f64 / (runs * steps) as f64;
-    Ok((t / steps as f64 * 1e6, its))
-}
 
 /// Runs study (a).
 pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
@@ -96,7 +21,7 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
         (&[10, 20, 50, 100, 200, 400], &[5, 10, 20, 50, 100], 200, 7)
     };
     ctx.plan((meshes.len() + links.len() + 1) as u64);
-    let exact = bending(Supports::ClampedFree, 1.0, 1.0, 1.0, 1)[0];
+    let exact = exact_omega1();
     let mut table = Table::new(
         "cantilever",
         "Clamped–free cantilever: first bending frequency error and cost against elements",
@@ -121,10 +46,10 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
     let mut rows = Vec::new();
     for &n in meshes {
         ctx.progress(&format!("(a) cantilever, {n} elements"));
-        let (wd, td) = timed(k, 3.0, || dense_omega1(n))?;
-        let ((wr, label), tr) = timed(k, 3.0, || rom_omega1(n))?;
+        let (wd, td) = ok(timed(k, 3.0, || dense_omega1(n)))?;
+        let ((wr, label), tr) = ok(timed(k, 3.0, || rom_omega1(n)))?;
         let steps = (20_000 / n).clamp(20, 400);
-        let (us, its) = step_cost(n, steps, k)?;
+        let (us, its) = ok(step_cost(n, steps, k))?;
         let (ed, er) = ((wd - exact).abs() / exact, (wr - exact).abs() / exact);
         dense_err.push(ed);
         s_dense.add(td * 1e3, ed, format!("{n}"));
@@ -150,7 +75,7 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
     }
     // two-link against a fine mesh
     ctx.progress(&format!("(a) two-link reference, 2×{reference} elements"));
-    let (fine, t_fine) = timed(1, 0.0, || two_link(reference))?;
+    let (fine, t_fine) = ok(timed(1, 0.0, || two_link(reference)))?;
     ctx.tick();
     let mut tl = Table::new(
         "two-link",
@@ -172,7 +97,7 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
     let mut two = Vec::new();
     for &n in links {
         ctx.progress(&format!("(a) two-link, 2×{n} elements"));
-        let (w, t) = timed(k, 3.0, || two_link(n))?;
+        let (w, t) = ok(timed(k, 3.0, || two_link(n)))?;
         let e = w.iter().zip(&fine).map(|(a, b)| (a - b).abs() / b).fold(0.0, f64::max);
         two.push((n, w, e, t));
         s_two.add(t * 1e3, e, format!("2×{n}"));

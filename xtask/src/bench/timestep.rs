@@ -1,97 +1,16 @@
-//! Study (c): time step against error and time. The paper's 2D two-link spun at ω0 about the
-//! root and kicked by a transverse follower tip force for the first 0.05 s: the FE plant
-//! (implicit midpoint, `multibody-constraints`) and the paper's reduced model (2 rigid +
-//! 4 axial + 4 bending modes with quaternion modes, `mpc::Setup`) integrated by the three
-//! shooting integrators of `ocp-transcription` (implicit midpoint, RK4, Lawson RK4 on `W`),
-//! each from coarse to fine steps against a tight reference of the same model.
+//! Study (c): time step against error and time — the table, plots and notes. The model, the
+//! runs and the error measure are `flexmpc_verification::perf::timestep`: the paper's 2D
+//! two-link spun and kicked, integrated by the FE plant and by the paper's reduced model with
+//! the three shooting integrators, each from coarse to fine steps against a tight reference of
+//! the same model.
 
 use super::plot::{Chart, Legend, Series};
 use super::report::{Fmt, Study, Table};
-use super::{orders, timed, Ctx};
+use super::{ok, orders, timed, Ctx};
 use anyhow::Result;
-use intrinsic_beam::{Amplitude, LoadFrame, PointLoad};
-use mpc::{RomDynamics, Scenario, Setup};
-use multibody_constraints::{Plant, PlantSettings};
-use nalgebra::{Vector3, Vector6};
-use ocp_transcription::{Integrator, IntegratorKind, IntegratorSettings};
-
-const ELEMENTS: usize = 20;
-/// Output (and control) interval: every step count divides it.
-const INTERVAL: f64 = 0.05;
-const OMEGA0: f64 = 1.0;
-const KICK: f64 = 0.05;
-
-/// Tip positions at the ends of the output intervals.
-type Tips = Vec<[f64; 3]>;
-
-fn fe_tips(setup: &Setup, per_interval: usize, horizon: f64) -> Result<Tips> {
-    let structure = &setup.scenario.structure;
-    let dt = INTERVAL / per_interval as f64;
-    let mut plant = Plant::new(structure.clone(), PlantSettings { dt, ..Default::default() })?;
-    plant.set_state(
-        &structure.rigid_rotation_state(Vector3::new(0.0, OMEGA0, 0.0), Vector3::zeros()),
-    )?;
-    plant.loads_mut(1).point.push(PointLoad {
-        node: ELEMENTS,
-        frame: LoadFrame::Follower,
-        value: Vector6::new(0.0, 0.0, KICK, 0.0, 0.0, 0.0),
-        amplitude: Amplitude::Constant,
-    });
-    let intervals = (horizon / INTERVAL).round() as usize;
-    let mut tips = Vec::with_capacity(intervals);
-    for i in 0..intervals {
-        if i == 1 {
-            plant.loads_mut(1).point.clear();
-        }
-        for _ in 0..per_interval {
-            plant.step()?;
-        }
-        let r = plant.kinematics()[1].r[ELEMENTS];
-        tips.push([r.x, r.y, r.z]);
-    }
-    Ok(tips)
-}
-
-/// The ROM trajectory's states at the ends of the output intervals.
-fn rom_states(
-    setup: &Setup,
-    model: &RomDynamics,
-    kind: IntegratorKind,
-    substeps: usize,
-    q0: &[f64],
-    horizon: f64,
-) -> Result<Vec<Vec<f64>>> {
-    let mut integ = Integrator::new(model, &IntegratorSettings::new(kind, substeps), INTERVAL)?;
-    let intervals = (horizon / INTERVAL).round() as usize;
-    let nu = setup.rom.n_inputs();
-    let mut x = q0.to_vec();
-    let mut next = vec![0.0; x.len()];
-    let mut out = Vec::with_capacity(intervals);
-    for i in 0..intervals {
-        let mut u = vec![0.0; nu];
-        if i == 0 {
-            u[nu - 1] = KICK; // "tip force e3", the last input of the paper's 2D scenario
-        }
-        integ.integrate(model, &x, &u, &mut next)?;
-        if next.iter().any(|v| !v.is_finite() || v.abs() > 1e6) {
-            anyhow::bail!("unstable");
-        }
-        std::mem::swap(&mut x, &mut next);
-        out.push(x.clone());
-    }
-    Ok(out)
-}
-
-fn rom_tips(setup: &Setup, states: &[Vec<f64>]) -> Result<Tips> {
-    states.iter().map(|q| Ok(setup.rom.positions(q)?[1][ELEMENTS])).collect()
-}
-
-/// Max over output times of the tip error, relative to the reference's largest excursion.
-fn tip_error(tips: &Tips, reference: &Tips, r0: [f64; 3]) -> f64 {
-    let d = |a: &[f64; 3], b: &[f64; 3]| (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt();
-    let scale = reference.iter().map(|r| d(r, &r0)).fold(0.0, f64::max);
-    tips.iter().zip(reference).map(|(a, b)| d(a, b)).fold(0.0, f64::max) / scale
-}
+use flexmpc_verification::perf::timestep::{
+    tip_error, IntegratorKind, Model, ELEMENTS, INTERVAL, KICK, OMEGA0,
+};
 
 struct Line {
     name: &'static str,
@@ -112,26 +31,18 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
         };
     ctx.plan((fe_steps.len() + 1 + 3 * rom_steps.len() + 1) as u64);
     ctx.progress("(c) setup of the paper's 2D reduced model");
-    let setup = Setup::new(&Scenario::paper_2d(ELEMENTS)?)?;
-    let model = RomDynamics::new(&setup.rom)?;
-    let structure = &setup.scenario.structure;
-    let x0 = structure.rigid_rotation_state(Vector3::new(0.0, OMEGA0, 0.0), Vector3::zeros());
-    let q0 = setup.rom.project_full(&x0, None)?;
-    let fe_r0 = {
-        let r = structure.reference()[1].r[ELEMENTS];
-        [r.x, r.y, r.z]
-    };
-    let rom_r0 = setup.rom.positions(&q0)?[1][ELEMENTS];
+    let model = ok(Model::paper_2d())?;
+    let (fe_r0, rom_r0) = (model.fe_r0, model.rom_r0);
 
     ctx.progress(&format!("(c) FE reference, dt = {:.2e}", INTERVAL / fe_ref as f64));
-    let fe_reference = fe_tips(&setup, fe_ref, horizon)?;
+    let fe_reference = ok(model.fe_tips(fe_ref, horizon))?;
     ctx.tick();
     let mut lines = Vec::new();
     let mut fe =
         Line { name: "FE plant, implicit midpoint", dt: vec![], err: vec![], time: vec![] };
     for &n in fe_steps {
         ctx.progress(&format!("(c) FE plant, dt = {:.2e}", INTERVAL / n as f64));
-        let (tips, t) = timed(k, 6.0, || fe_tips(&setup, n, horizon))?;
+        let (tips, t) = ok(timed(k, 6.0, || model.fe_tips(n, horizon)))?;
         fe.dt.push(INTERVAL / n as f64);
         fe.err.push(tip_error(&tips, &fe_reference, fe_r0));
         fe.time.push(t);
@@ -140,8 +51,8 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
     lines.push(fe);
 
     ctx.progress("(c) ROM reference (Lawson RK4)");
-    let ref_states = rom_states(&setup, &model, IntegratorKind::LawsonRk4, rom_ref, &q0, horizon)?;
-    let rom_reference = rom_tips(&setup, &ref_states)?;
+    let ref_states = ok(model.rom_states(IntegratorKind::LawsonRk4, rom_ref, horizon))?;
+    let rom_reference = ok(model.rom_tips(&ref_states))?;
     ctx.tick();
     for (name, kind) in [
         ("ROM, implicit midpoint", IntegratorKind::ImplicitMidpoint),
@@ -152,9 +63,9 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
         for &n in rom_steps {
             ctx.progress(&format!("(c) {name}, dt = {:.2e}", INTERVAL / n as f64));
             l.dt.push(INTERVAL / n as f64);
-            match timed(k, 4.0, || rom_states(&setup, &model, kind, n, &q0, horizon)) {
+            match timed(k, 4.0, || model.rom_states(kind, n, horizon)) {
                 Ok((states, t)) => {
-                    l.err.push(tip_error(&rom_tips(&setup, &states)?, &rom_reference, rom_r0));
+                    l.err.push(tip_error(&ok(model.rom_tips(&states))?, &rom_reference, rom_r0));
                     l.time.push(t);
                 }
                 Err(_) => {

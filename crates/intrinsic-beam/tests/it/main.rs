@@ -1,113 +1,14 @@
-//! Integration tests of `intrinsic-beam`: the "must show" items 1–7 on cheap settings
-//! (the `cargo xtask verify` cases run the same studies, some with finer settings).
+//! Integration tests of `intrinsic-beam` through its public API: errors on bad input, the
+//! paper's sections as DAEs, loads and boundary work, graded meshes, the two step solvers.
+//! The experiments with measured figures (energy, decay, frequencies, elastica, roll-up) are
+//! tested in the verification crate (`tests/tests/it/beam_studies.rs`).
 
 use intrinsic_beam::closed_form::Supports;
-use intrinsic_beam::samples::{self, ELASTICA_TIP_LOAD_1};
-use intrinsic_beam::studies::*;
-use intrinsic_beam::Family;
+use intrinsic_beam::samples;
 use intrinsic_beam::*;
 use nalgebra::Vector6;
 
-/// Item 1 (also proptests in the crate): identities hold to round-off on random data.
-#[test]
-fn section2_identities_hold_on_random_sections() {
-    let worst = identity_residuals(200, 7).unwrap();
-    // relative round-off of sums of O(10–100) products
-    assert!(worst.iter().all(|&w| w < 1e-13), "{worst:?}");
-}
-
-/// Item 2: energy drift below 1e-10 over 10⁴ steps from a large-amplitude state.
-#[test]
-fn energy_is_conserved_over_ten_thousand_steps() {
-    let study = energy_conservation(Components::Planar, 10, 1e-3, 10_000).unwrap();
-    assert!(study.max_tip_deflection > 0.3, "amplitude {}", study.max_tip_deflection);
-    // solver tolerance 1e-12 per step, errors of random sign: ~1e-14 expected
-    assert!(study.max_relative_drift < 1e-10, "drift {:e}", study.max_relative_drift);
-}
-
-/// Item 2: with D2 > 0 the energy falls monotonically, by exactly the dissipated work.
-#[test]
-fn damped_energy_falls_monotonically() {
-    let study = damped_decay(Components::Planar, 10, 1e-3, 1e-3, 2000).unwrap();
-    // each step: Δε = dt·P_damping ≤ 0 up to solver tolerance (1e-12 relative updates)
-    assert!(study.max_relative_increase <= 1e-13, "{study:?}");
-    assert!(study.final_over_initial < 0.9, "{study:?}");
-    assert!(study.max_balance_error < 1e-12, "{study:?}");
-}
-
-/// Item 3: second-order convergence of linear frequencies to closed-form beam theory.
-#[test]
-fn frequencies_converge_at_second_order() {
-    for supports in [Supports::ClampedFree, Supports::PinnedFree, Supports::FreeFree] {
-        for fam in [Family::Axial, Family::BendingE2, Family::Torsion, Family::BendingE3] {
-            let rows = frequency_convergence(supports, fam, &[8, 16, 32]).unwrap();
-            let order = observed_order(&rows);
-            // the staggered scheme with lumped weights is second order; allow ±0.1 for the
-            // pre-asymptotic range at 16–32 elements
-            assert!((order - 2.0).abs() < 0.1, "{supports:?} {fam:?}: order {order}, {rows:?}");
-            // leading error term c (ωh)² with c ≤ ~0.1 for the first mode at h = 1/32
-            assert!(rows[2].relative_error < 5e-3, "{supports:?} {fam:?}: {rows:?}");
-        }
-    }
-}
-
-/// Item 4: the elastica under a dead tip load, PL²/EI = 1, within 0.5%.
-#[test]
-fn dead_tip_load_matches_the_elastica() {
-    let (ux, uz, rot) = dead_tip_load(Components::Planar, 20, 0.01, 8.0).unwrap();
-    let (ex, ez, er) = ELASTICA_TIP_LOAD_1;
-    for (got, want) in [(ux, ex), (uz, ez), (rot, er)] {
-        assert!(((got - want) / want).abs() < 5e-3, "{got} vs {want}");
-    }
-}
-
-/// Item 4: a follower tip moment rolls the cantilever up to the exact circle up to θ = 2π.
-#[test]
-fn follower_moment_rolls_up_to_the_circle() {
-    let rows = roll_up(Components::Planar, 40, 4, 3.0, 0.01).unwrap();
-    assert!((rows[3].theta - 2.0 * std::f64::consts::PI).abs() < 1e-12);
-    for r in &rows {
-        // midpoint chords of an arc: position error ≲ θ² (h/L)²/24 · L ≈ 1e-3 at θ = 2π,
-        // N = 40, plus the settling residue
-        assert!(r.error < 2.5e-3, "{r:?}");
-    }
-}
-
-/// Item 5: positions integrated in time agree with positions rebuilt from strains; the gap
-/// shrinks with the mesh (second order) and with the step.
-#[test]
-fn time_and_space_positions_agree() {
-    let mesh: Vec<f64> = [10, 20, 40]
-        .iter()
-        .map(|&n| time_space_gap(Components::Planar, n, 2.5e-3, 0.5).unwrap())
-        .collect();
-    assert!(mesh[0] < 2e-4, "{mesh:?}");
-    assert!(mesh[0] / mesh[1] > 3.0 && mesh[1] / mesh[2] > 3.0, "{mesh:?}");
-    let step: Vec<f64> = [2e-2, 1e-2, 5e-3]
-        .iter()
-        .map(|&dt| time_space_gap(Components::Planar, 80, dt, 0.5).unwrap())
-        .collect();
-    assert!(step[0] / step[1] > 3.0 && step[1] / step[2] > 3.0, "{step:?}");
-}
-
-/// Item 6: a planar run reproduces the spatial run (out-of-plane directions stay zero).
-#[test]
-fn planar_and_spatial_runs_agree() {
-    let (dx, dr) = planar_vs_spatial(10, 1e-3, 500).unwrap();
-    // same arithmetic up to the order of operations in the sparse solves: round-off level
-    assert!(dx < 1e-10 && dr < 1e-10, "{dx:e} {dr:e}");
-}
-
-/// Cross-check: implicit midpoint converges to RK4 at second order.
-#[test]
-fn midpoint_converges_to_rk4_at_second_order() {
-    let e: Vec<f64> =
-        [1e-3, 5e-4].iter().map(|&dt| midpoint_vs_rk4(10, dt, 1e-4, 0.2).unwrap()).collect();
-    let order = (e[0] / e[1]).log2();
-    assert!((order - 2.0).abs() < 0.1, "{e:?}");
-}
-
-/// Item 7: bad input gets a clear error, never a panic.
+/// Bad input gets a clear error, never a panic.
 #[test]
 fn bad_input_is_rejected_with_errors() {
     let mesh = Mesh::uniform(1.0, 4).unwrap();
@@ -196,7 +97,7 @@ fn bad_input_is_rejected_with_errors() {
 }
 
 /// The paper's 2D section (rigid and massless directions) runs through the DAE path, planar
-/// and spatial, conserving energy.
+/// And spatial, conserving energy.
 #[test]
 fn paper_sections_run_as_daes() {
     for comp in [Components::Planar, Components::Spatial] {
@@ -221,7 +122,7 @@ fn paper_sections_run_as_daes() {
 }
 
 /// Dead forces and moments: per step, `ε⁺ − ε = dt · P_loads` exactly (loads rotated with the
-/// midpoint rotation).
+/// Midpoint rotation).
 #[test]
 fn dead_loads_balance_per_step() {
     let g = Vector6::new(0.0, 0.3, -1.0, 0.0, 0.0, 0.0);
@@ -301,7 +202,7 @@ fn gravity_potential_is_exact() {
 }
 
 /// Prescribed end motion: the root turns at a prescribed rate, the root quaternion follows
-/// exactly, and the energy grows by exactly the boundary work.
+/// Exactly, and the energy grows by exactly the boundary work.
 #[test]
 fn prescribed_end_motion_does_boundary_work() {
     let beam =
@@ -366,7 +267,7 @@ fn end_force_equals_point_load() {
 }
 
 /// Non-uniform meshes: energy is still conserved exactly, and the first bending frequency of a
-/// graded mesh converges to the closed form.
+/// Graded mesh converges to the closed form.
 #[test]
 fn graded_meshes_conserve_energy_and_converge() {
     let mesh = Mesh::graded(1.0, 12, 4.0).unwrap();
@@ -422,8 +323,8 @@ fn run_with(sample: samples::Sample, settings: NewtonSettings, steps: usize) -> 
 }
 
 /// The block-tridiagonal solver (with one Jacobian refresh per step) and the sparse LU (with the factorisation reused) converge to the same steps: the release (stiff shear/rotary mode
-/// flipping every step), planar and spatial. The block path needs 3 Newton iterations per
-/// step where simplified Newton needs 7–9.
+/// Flipping every step), planar and spatial. The block path needs 3 Newton iterations per
+/// Step where simplified Newton needs 7–9.
 #[test]
 fn block_and_sparse_solvers_give_the_same_trajectory() {
     for comp in [Components::Planar, Components::Spatial] {
@@ -445,9 +346,9 @@ fn block_and_sparse_solvers_give_the_same_trajectory() {
 }
 
 /// A DAE section (paper 2D: rigid and massless directions) with a pinned end and dead
-/// loads: planar (no singular in-plane direction) on the block path, spatial (its rigid and
-/// massless out-of-plane directions make Schur blocks singular) switched to the sparse LU;
-/// both match a tightly converged sparse-LU reference.
+/// Loads: planar (no singular in-plane direction) on the block path, spatial (its rigid and
+/// Massless out-of-plane directions make Schur blocks singular) switched to the sparse LU;
+/// Both match a tightly converged sparse-LU reference.
 #[test]
 fn dae_section_with_dead_loads_matches_a_tight_reference() {
     for comp in [Components::Planar, Components::Spatial] {

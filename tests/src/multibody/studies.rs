@@ -1,17 +1,16 @@
-//! Numerical experiments behind the crate's verification figures, shared by the verification cases
-//! (`cargo xtask verify multibody-constraints/`), the benches and the docs tables.
+//! Numerical experiments on structures and the constrained plant behind the
+//! `multibody-constraints/*` verification cases (`cargo xtask verify multibody-constraints/`),
+//! the stress runs and the docs tables.
 
 use std::time::Instant;
 
 use intrinsic_beam::{Amplitude, Beam, Components, LoadFrame, Mesh, PointLoad, Section};
 use nalgebra::{Matrix6, Vector3, Vector6};
 
-use crate::error::{MultibodyError, Result};
-use crate::joint::{End, EndRef, Joint, JointKind, Support};
-use crate::nullspace::null_space;
-use crate::plant::{Plant, PlantSettings};
-use crate::samples;
-use crate::structure::{Placement, Structure, StructureBeam, StructureSettings};
+use multibody_constraints::{
+    null_space, samples, End, EndRef, Joint, JointKind, MultibodyError, Placement, Plant,
+    PlantSettings, Result, Structure, StructureBeam, StructureSettings, Support,
+};
 
 /// `(t, elbow z, tip z)` samples.
 pub type TimeSeries = Vec<(f64, f64, f64)>;
@@ -378,31 +377,4 @@ pub fn null_space_quality(n: usize, joint_angle: f64) -> Result<(f64, f64, usize
         }
     }
     Ok((a, b, ns.basis.ncols()))
-}
-
-/// Tip position of the paper's 2D two-link (damped, ω0 = 1 rad/s about the root) after
-/// `t_end`, with `n` elements per link and step `dt`, and the wall time.
-pub fn paper_2d_tip(n: usize, dt: f64, t_end: f64) -> Result<(Vector3<f64>, f64)> {
-    let structure = samples::paper_2d(Section::paper_2d(), n, 0.0)?;
-    let x = structure.rigid_rotation_state(Vector3::new(0.0, 1.0, 0.0), Vector3::zeros());
-    let mut plant = Plant::new(structure, PlantSettings { dt, ..Default::default() })?;
-    plant.set_state(&x)?;
-    let start = Instant::now();
-    for _ in 0..(t_end / dt).round() as usize {
-        plant.step()?;
-    }
-    Ok((plant.position(1, n), start.elapsed().as_secs_f64()))
-}
-
-/// As [`paper_2d_tip`] for the 3D two-link (ω0 = (0, 1, 1) rad/s).
-pub fn paper_3d_tip(n: usize, dt: f64, t_end: f64) -> Result<(Vector3<f64>, f64)> {
-    let structure = samples::paper_3d(Section::paper_3d(), n, 0.0)?;
-    let x = structure.rigid_rotation_state(Vector3::new(0.0, 1.0, 1.0), Vector3::zeros());
-    let mut plant = Plant::new(structure, PlantSettings { dt, ..Default::default() })?;
-    plant.set_state(&x)?;
-    let start = Instant::now();
-    for _ in 0..(t_end / dt).round() as usize {
-        plant.step()?;
-    }
-    Ok((plant.position(1, n), start.elapsed().as_secs_f64()))
 }

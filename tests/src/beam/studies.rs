@@ -1,22 +1,18 @@
-//! Numerical experiments behind the crate's verification figures, shared by the integration
-//! tests, `cargo xtask verify` cases and benches. Each returns measured numbers; the callers
-//! compare them with tolerances.
+//! Numerical experiments on single beams behind the `intrinsic-beam/*` verification cases and
+//! the beam tests of this crate. Each returns measured numbers; the callers compare them with
+//! tolerances.
 
 use std::f64::consts::PI;
 
 use nalgebra::{Matrix6, Vector3};
 
-use crate::beam::{Beam, StepInput};
-use crate::components::Components;
-use crate::error::{BeamError, Result};
-use crate::kinematics::Kinematics;
-use crate::mesh::Mesh;
-use crate::midpoint::{Counters, ImplicitMidpoint, NewtonSettings};
-use crate::modes::closed_form::{self, Supports};
-use crate::modes::{family, linear_modes, Family};
-use crate::problem::{BeamProblem, EndCondition};
-use crate::rk4::ExplicitRk4;
-use crate::samples::{self, euler_bernoulli_section, Sample};
+use intrinsic_beam::closed_form::{self, Supports};
+use intrinsic_beam::samples::{self, euler_bernoulli_section, Sample};
+use intrinsic_beam::{
+    family, linear_modes, Beam, BeamError, BeamProblem, Components, Counters, EndCondition,
+    ExplicitRk4, Family, ImplicitMidpoint, Kinematics, LinearSolver, Mesh, NewtonSettings, Result,
+    StepInput,
+};
 
 /// Tip position and rotation angle (`2 acos|ξ0|`) of a beam's last node.
 pub fn tip(kinematics: &Kinematics) -> (Vector3<f64>, f64) {
@@ -326,7 +322,7 @@ pub fn block_vs_sparse(
 ) -> Result<SolverStudy> {
     let sample = samples::cantilever_release(components, n_elements)?;
     let reference_settings = NewtonSettings {
-        linear_solver: crate::step_system::LinearSolver::SparseLu,
+        linear_solver: LinearSolver::SparseLu,
         tolerance: 1e-14,
         ..NewtonSettings::default()
     };
@@ -380,14 +376,17 @@ pub fn midpoint_vs_rk4(n_elements: usize, dt: f64, dt_rk4: f64, t_end: f64) -> R
 /// random valid sections (seeded): `[x1ᵀL1(x1)p, x1ᵀL2(x2)e − (L1(x1)x2)ᵀe, discrete energy
 /// balance Σ mid·R − (Δε/dt − P)]`, each relative to the size of its terms.
 pub fn identity_residuals(cases: usize, seed: u64) -> Result<[f64; 3]> {
-    use crate::loads::{LoadFrame, Loads};
-    use crate::operators::{l1, l2};
-    use crate::random::{random_section, random_vec, Lcg};
+    use intrinsic_beam::operators::{l1, l2};
+    use intrinsic_beam::samples::random::{random_section, random_vec, seeded};
+    use intrinsic_beam::{LoadFrame, Loads};
     use nalgebra::Vector6;
-    let mut rng = Lcg::new(seed);
+    use rand::Rng;
+    let mut rng = seeded(seed);
     let mut worst = [0.0f64; 3];
     for case in 0..cases {
-        let v = |rng: &mut Lcg| Vector6::from_fn(|_, _| rng.uniform(-10.0, 10.0));
+        let v = |rng: &mut rand_chacha::ChaCha8Rng| {
+            Vector6::from_fn(|_, _| rng.random_range(-10.0..10.0))
+        };
         let (x1, x2, p) = (v(&mut rng), v(&mut rng), v(&mut rng));
         worst[0] = worst[0].max(x1.dot(&(l1(&x1) * p)).abs() / (x1.norm_squared() * p.norm()));
         let a = x1.dot(&(l2(&x2) * p));
@@ -396,8 +395,9 @@ pub fn identity_residuals(cases: usize, seed: u64) -> Result<[f64; 3]> {
         let comp = if case % 2 == 0 { Components::Planar } else { Components::Spatial };
         let section = random_section(&mut rng, comp, true, case % 3 != 0);
         let n = 1 + case % 6;
-        let beam = Beam::new(section, Mesh::graded(1.0, n, 0.5 + rng.next_f64() * 2.0)?, comp)?;
-        let mut load = Vector6::from_fn(|_, _| rng.uniform(-1.0, 1.0));
+        let beam =
+            Beam::new(section, Mesh::graded(1.0, n, 0.5 + rng.random::<f64>() * 2.0)?, comp)?;
+        let mut load = Vector6::from_fn(|_, _| rng.random_range(-1.0..1.0));
         if comp == Components::Planar {
             for j in [1, 3, 5] {
                 load[j] = 0.0;
@@ -409,7 +409,7 @@ pub fn identity_residuals(cases: usize, seed: u64) -> Result<[f64; 3]> {
         let kin = Kinematics::straight(&beam);
         let old = random_vec(&mut rng, beam.dim());
         let new = random_vec(&mut rng, beam.dim());
-        let dt = 10f64.powf(rng.uniform(-4.0, 0.0));
+        let dt = 10f64.powf(rng.random_range(-4.0..0.0));
         let input = StepInput { time: 0.0, dt, loads: &loads, node_quaternions: &kin.xi };
         let mut res = vec![0.0; beam.n_rows()];
         beam.step_residual(&input, &old, &new, &mut res)?;
