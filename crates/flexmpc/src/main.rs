@@ -510,11 +510,19 @@ fn run(cli: &Cli) -> Result<()> {
             let st = &s.structure;
             let est = modes::estimate(st);
             let fits = est.bytes <= modes::MAX_DENSE_BYTES;
+            let modes_plan = modes::plan(st);
+            let (modes_route, modes_bytes, modes_seconds) = match est.route() {
+                modes::Route::Dense => ("dense", est.bytes, est.seconds),
+                modes::Route::Sparse => ("sparse", est.sparse_bytes, est.sparse_seconds),
+            };
             if cli.json {
                 let v = serde_json::json!({
                     "modal_basis_bytes": est.bytes,
                     "modal_basis_seconds": est.seconds,
                     "modal_basis_fits": fits,
+                    "modes_route": modes_route,
+                    "modes_bytes": modes_bytes,
+                    "modes_fits": modes_plan.is_ok(),
                     "scene": scene,
                     "ok": true,
                     "beams": st.beams().len(),
@@ -545,7 +553,17 @@ fn run(cli: &Cli) -> Result<()> {
                     }
                 );
                 say!(
-                    "modal basis (modes, mpc, sweep, ocp): about {}, {} on one core{}",
+                    "modes: {modes_route} route, about {}, {} on one core{}",
+                    modes::human_bytes(modes_bytes),
+                    modes::human_seconds(modes_seconds),
+                    if modes_plan.is_ok() {
+                        ""
+                    } else {
+                        " — over the cap: modes will refuse this mesh"
+                    }
+                );
+                say!(
+                    "modal basis (mpc, sweep, ocp): about {}, {} on one core{}",
                     modes::human_bytes(est.bytes),
                     modes::human_seconds(est.seconds),
                     if fits {

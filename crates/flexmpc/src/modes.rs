@@ -45,13 +45,14 @@ pub const DENSE_ROUTE_MAX_N1: usize = 1200;
 /// loaded machine).
 const SECONDS_PER_N3: f64 = 6e-10;
 
-/// Bytes per unknown of the saddle-point system (`n1 + n2 + constraint rows`) for its sparse
-/// LU factors, pattern and work vectors, measured (peak resident memory of `flexmpc modes` on
-/// planar two-links of 2 × 1000 to 2 × 5000 elements, less the Krylov basis).
-const SPARSE_BYTES_PER_UNKNOWN: f64 = 2000.0;
+/// Bytes per unknown of the saddle-point system (`n1 + n2 + constraint rows`) for the
+/// structure, its sparse LU factors, pattern, work vectors and report: measured peak resident
+/// memory of `flexmpc modes` on planar two-links of 2 × 2000 to 2 × 50,000 elements is
+/// 500–940 bytes per unknown, Krylov basis included (`docs/performance.md`).
+const SPARSE_BYTES_PER_UNKNOWN: f64 = 1000.0;
 
-/// Seconds per unknown of the saddle-point system and Lanczos step of the sparse route,
-/// measured as [`SPARSE_BYTES_PER_UNKNOWN`].
+/// Seconds per unknown of the saddle-point system and Lanczos step of the sparse route on one
+/// core (2 × 5000 elements: 1.3 s; 2 × 50,000: 23 s with plots, about 100–200 steps in all).
 const SPARSE_SECONDS_PER_UNKNOWN_STEP: f64 = 2e-7;
 
 /// Which computation `modes` runs.
@@ -171,7 +172,11 @@ pub fn check_size(structure: &Structure) -> Result<SolveEstimate> {
 /// The [`estimate`] of `structure` and the route `modes` takes, or an error naming the sparse
 /// estimate and the cap [`MAX_SPARSE_BYTES`] when even the sparse route is above it.
 pub fn plan(structure: &Structure) -> Result<(SolveEstimate, Route)> {
-    let e = estimate(structure);
+    plan_of(estimate(structure), elements(structure))
+}
+
+/// [`plan`] from an estimate and the element count.
+pub fn plan_of(e: SolveEstimate, elements: usize) -> Result<(SolveEstimate, Route)> {
     let route = e.route();
     if route == Route::Sparse && e.sparse_bytes > MAX_SPARSE_BYTES {
         bail!(
@@ -179,7 +184,7 @@ pub fn plan(structure: &Structure) -> Result<(SolveEstimate, Route)> {
              rows) need the sparse eigen route, which would need about {} of memory and {} on \
              one core; the cap is {} (flexmpc::modes::MAX_SPARSE_BYTES): use fewer `elements` \
              per beam (the modes converge with a few dozen per link)",
-            elements(structure),
+            elements,
             e.n1,
             e.constraint_rows,
             human_bytes(e.sparse_bytes),
@@ -421,4 +426,41 @@ pub fn plot(report: &ModeReport, dir: &Path) -> Result<Vec<std::path::PathBuf>> 
         root.present()?;
     }
     Ok(vec![fig4, fig5])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn planar(elements: usize, beams: usize) -> SolveEstimate {
+        let k = 3;
+        let n1 = k * (elements + beams);
+        let n2 = k * elements;
+        let (a, b, r) = (n1 as f64, n2 as f64, 4.0);
+        SolveEstimate {
+            n1,
+            n2,
+            constraint_rows: 4,
+            bytes: 8.0 * (2.0 * a * a + b * b + 2.0 * a * b + 8.0 * (a - r) * (a - r)),
+            seconds: SECONDS_PER_N3 * a * a * a,
+            sparse_bytes: SPARSE_BYTES_PER_UNKNOWN * (a + b + r)
+                + 8.0 * a * SparseSettings::default().max_steps as f64,
+            sparse_seconds: SPARSE_SECONDS_PER_UNKNOWN_STEP * (a + b + r) * 100.0,
+        }
+    }
+
+    /// Shipped meshes stay on the dense route; large ones take the sparse route; a mesh
+    /// beyond even the sparse cap is refused with the estimate and the cap in the message.
+    #[test]
+    fn routes_and_refusal() {
+        assert_eq!(planar(100, 2).route(), Route::Dense);
+        assert_eq!(planar(4000, 2).route(), Route::Sparse);
+        let (e, route) = plan_of(planar(200_000, 2), 200_000).unwrap();
+        assert_eq!(route, Route::Sparse);
+        assert!(e.sparse_bytes < MAX_SPARSE_BYTES && e.bytes > 1e12);
+        let err = plan_of(planar(2_000_000, 20), 2_000_000).unwrap_err().to_string();
+        assert!(err.contains("2000000 elements"), "{err}");
+        assert!(err.contains("the cap is 4.3 GB"), "{err}");
+        assert!(err.contains("MAX_SPARSE_BYTES"), "{err}");
+    }
 }

@@ -276,8 +276,11 @@ pub struct SparseModes {
 /// Shift-inverted operator of one component: one saddle-point solve per application.
 struct ShiftInvert {
     lu: SparseLuSystem,
+    /// The saddle-point matrix itself, for the refinement step.
+    kkt: Csr,
     b1: Csr,
     rhs: Vec<f64>,
+    work: Vec<f64>,
 }
 
 impl Operator for ShiftInvert {
@@ -288,10 +291,17 @@ impl Operator for ShiftInvert {
         let n = self.n();
         self.rhs.iter_mut().for_each(|v| *v = 0.0);
         self.b1.matvec(x, &mut self.rhs[..n]);
-        self.lu.solve(&mut self.rhs).map_err(|e| ModalError::Numerical {
+        let b = self.rhs.clone();
+        let fail = |e: intrinsic_beam::BeamError| ModalError::Numerical {
             stage: "sparse shift-invert solve of the modal saddle-point system".into(),
             reason: format!("{e} (dependent joint or support rows, or a massless mechanism)"),
-        })?;
+        };
+        self.lu.solve(&mut self.rhs).map_err(fail)?;
+        // one step of iterative refinement: r = b − A y, y += A⁻¹ r
+        self.kkt.matvec(&self.rhs, &mut self.work);
+        self.work.iter_mut().zip(&b).for_each(|(w, b)| *w = b - *w);
+        self.lu.solve(&mut self.work).map_err(fail)?;
+        self.rhs.iter_mut().zip(&self.work).for_each(|(y, d)| *y += d);
         y.copy_from_slice(&self.rhs[..n]);
         Ok(())
     }
@@ -404,7 +414,15 @@ fn shift_invert(p: &SparseProblem, c: &Component, sigma: f64) -> Result<ShiftInv
         stage: "sparse LU of the modal saddle-point system".into(),
         reason: e.to_string(),
     })?;
-    Ok(ShiftInvert { lu, b1: Csr::new(m1, m1, &b1), rhs: vec![0.0; n] })
+    let entries: Vec<(usize, usize, f64)> =
+        pattern.iter().zip(&values).map(|(&(r, c), &v)| (r, c, v)).collect();
+    Ok(ShiftInvert {
+        lu,
+        kkt: Csr::new(n, n, &entries),
+        b1: Csr::new(m1, m1, &b1),
+        rhs: vec![0.0; n],
+        work: vec![0.0; n],
+    })
 }
 
 /// A Ritz pair of one component in global coordinates.
@@ -454,7 +472,11 @@ fn solve_component(
     let mut y = vec![0.0; c.s1.len()];
     for (theta, x) in ritz.theta.iter().zip(&ritz.vectors) {
         op.apply(x, &mut y)?;
-        let r: Vec<f64> = y.iter().zip(x).map(|(a, b)| a - theta * b).collect();
+        let mut r: Vec<f64> = y.iter().zip(x).map(|(a, b)| a - theta * b).collect();
+        for (d, bd) in &deflate {
+            let a = lanczos_dot(bd, &r);
+            r.iter_mut().zip(d).for_each(|(x, y)| *x -= a * y);
+        }
         op.inner(&r, &mut bq);
         let residual = lanczos_dot(&r, &bq).max(0.0).sqrt() / theta.abs();
         let mut phi1 = vec![0.0; p.n1];
@@ -606,6 +628,10 @@ pub fn solve_sparse(
                 solve_component(problem, c, &ops, &exact, sigma, nev, settings)?;
             deflated = restricted;
             steps += s;
+            if std::env::var_os("FLEXMPC_SPARSE_DEBUG").is_some() {
+                let worst = pairs.iter().map(|p| p.residual).fold(0.0f64, f64::max);
+                eprintln!("component {ci}: σ = {sigma:.3e}, {s} steps, converged {converged}, worst residual {worst:.2e}");
+            }
             let low = pairs
                 .iter()
                 .map(|p| p.lambda)

@@ -46,6 +46,7 @@ fn compare(s: &Structure, n_modes: usize, what: &str) {
     assert!(gap < 1e-8, "{what}: frequencies differ by {gap:e}\n{dense:?}\n{sparse:?}");
     // rigid shapes: the same exact rotations; elastic ones up to sign (simple eigenvalues)
     let shapes = shape_gap(&dense, &sparse, 0);
+    eprintln!("{what}: frequency gap {gap:.1e}, shape gap {shapes:.1e}");
     assert!(shapes < 1e-5, "{what}: mode shapes differ by {shapes:e}");
 }
 
