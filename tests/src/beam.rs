@@ -3,11 +3,12 @@
 //! Each case runs one of the [`studies`] and compares the measured numbers with
 //! tolerances justified by the method (solver tolerance, second-order discretisation).
 
+pub mod dense_modes;
 pub mod studies;
 
+use dense_modes::Family;
 use intrinsic_beam::closed_form::Supports;
 use intrinsic_beam::samples::ELASTICA_TIP_LOAD_1;
-use intrinsic_beam::Family;
 use intrinsic_beam::{
     Beam, BeamError, BeamProblem, Components, EndCondition, ImplicitMidpoint, Kinematics,
     LoadFrame, Loads, Mesh, NewtonSettings, Section,
@@ -304,8 +305,8 @@ fn midpoint_vs_rk4() -> CaseOutcome {
 /// squared massless test returned `2N − 1` modes from 199 elements and `N²e₁` = +10.5 at 400
 /// (relative error 6.7e-5 instead of 1.66e-6).
 fn euler_bernoulli_dense_modes() -> CaseOutcome {
+    use dense_modes::{family, linear_modes};
     use intrinsic_beam::closed_form::bending;
-    use intrinsic_beam::{family, linear_modes};
     let exact = bending(Supports::ClampedFree, 1.0, 1.0, 1.0, 3);
     // e_j ≈ C_j h² + D_j h⁴: C_j measured on the fine meshes (modal-rom's independent
     // constrained route: −0.26518, −0.2428, 0.6048); |N²e_j − C_j| ≤ K_j/N² + 2e-3 with K_j

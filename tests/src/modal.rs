@@ -202,8 +202,8 @@ fn eb_beam(n: usize, clamped: bool) -> Result<Structure, String> {
 /// `ω1 = 1.8751²` at second order for 10…200 elements, the beam crate's dense route to
 /// round-off, and the free–free beam without spurious (missed massless) modes.
 fn euler_bernoulli() -> CaseOutcome {
+    use crate::beam::dense_modes::{family, linear_modes, Family};
     use intrinsic_beam::closed_form::{bending, Supports};
-    use intrinsic_beam::{family, linear_modes, Family};
     let exact = bending(Supports::ClampedFree, 1.0, 1.0, 1.0, 1)[0];
     let meshes = [10usize, 20, 50, 100, 200];
     let (mut errors, mut rigid, mut not_first, mut vs_dense) = (Vec::new(), 0usize, 0usize, 0f64);

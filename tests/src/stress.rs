@@ -13,9 +13,9 @@ use std::fmt::Display;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::time::Instant;
 
+use crate::beam::dense_modes::{family, linear_modes, Family};
 use crate::multibody::studies::beam_rigid_rotation;
 use intrinsic_beam::closed_form::{self, Supports};
-use intrinsic_beam::{family, linear_modes, Family};
 use intrinsic_beam::{
     Beam, BeamProblem, Components, EndCondition, ImplicitMidpoint, Kinematics, Loads, Mesh,
     NewtonSettings, Section,

@@ -41,8 +41,8 @@
 //!   a block-tridiagonal LU (blocks written directly on `k`-vectors); faer's
 //!   sparse LU ([`SparseLuSystem`], also the constrained plant's solver) for flux damping or singular blocks.
 //! * [`ExplicitRk4`] — explicit RK4 for cross-checks when the problem is an ODE.
-//! * [`linear_modes`] — linear modes of a single beam (second-order reduction, faer dense eigen) and
-//!   closed-form beam frequencies.
+//! * [`closed_form`] — closed-form frequencies of uniform beams, the references of the
+//!   frequency checks (the constrained modes of beams and structures are modal-rom's).
 //! * [`samples`] — canonical problems with provenance and known answers, and seeded random
 //!   sections and states ([`samples::random`]) for property checks.
 //!
@@ -82,6 +82,7 @@
 
 mod beam;
 mod block_tridiagonal;
+pub mod closed_form;
 mod components;
 mod error;
 mod kernels;
@@ -89,7 +90,6 @@ mod kinematics;
 mod loads;
 mod mesh;
 mod midpoint;
-mod modes;
 mod null_space;
 pub mod operators;
 mod problem;
@@ -109,7 +109,6 @@ pub use kinematics::Kinematics;
 pub use loads::{Amplitude, DistributedLoad, LoadFrame, Loads, PointLoad};
 pub use mesh::Mesh;
 pub use midpoint::{Counters, ImplicitMidpoint, NewtonSettings, StepRefresh};
-pub use modes::{closed_form, family, linear_modes, Family, LinearMode};
 pub use null_space::{null_space, NullSpace};
 pub use problem::{BeamProblem, End, EndCondition};
 pub use rk4::ExplicitRk4;

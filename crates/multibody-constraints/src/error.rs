@@ -1,6 +1,38 @@
 //! The error type of the crate: bad topology, bad joint data, failed solves.
 
+use std::fmt;
+
 use thiserror::Error;
+
+/// The item of a structure (or of the caller's input) an error is about; its `Display` is the
+/// label in the error message (``joint `elbow` ``, ``support `root` ``, ``beam `link1` ``,
+/// ``placement of beam `link2` ``, or the caller's own words).
+#[non_exhaustive]
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Owner {
+    /// A joint, by name.
+    Joint(String),
+    /// A support, by name.
+    Support(String),
+    /// A beam, by name.
+    Beam(String),
+    /// The placement of a beam (by the beam's name).
+    Placement(String),
+    /// An entry of the caller's input, named in the caller's words (e.g. a file key).
+    Input(String),
+}
+
+impl fmt::Display for Owner {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Owner::Joint(n) => write!(f, "joint `{n}`"),
+            Owner::Support(n) => write!(f, "support `{n}`"),
+            Owner::Beam(n) => write!(f, "beam `{n}`"),
+            Owner::Placement(n) => write!(f, "placement of beam `{n}`"),
+            Owner::Input(s) => f.write_str(s),
+        }
+    }
+}
 
 /// Everything that can go wrong when building or running a structure.
 #[non_exhaustive]
@@ -13,7 +45,7 @@ pub enum MultibodyError {
     #[error("{owner}: unknown beam `{beam}` (the structure has: {known})")]
     UnknownBeam {
         /// The joint, support or placement that refers to it.
-        owner: String,
+        owner: Owner,
         /// The name given.
         beam: String,
         /// The beams that exist, comma separated.
@@ -23,7 +55,7 @@ pub enum MultibodyError {
     #[error("{owner}: unknown beam end `{end}` (allowed: `start` (s = 0) or `end` (s = L))")]
     UnknownEnd {
         /// The joint or support that refers to it.
-        owner: String,
+        owner: Owner,
         /// The text given.
         end: String,
     },
@@ -35,9 +67,9 @@ pub enum MultibodyError {
         /// `start` or `end`.
         end: String,
         /// First user.
-        first: String,
+        first: Owner,
         /// Second user.
-        second: String,
+        second: Owner,
     },
     /// Two beams, joints or supports share a name.
     #[error("duplicate name `{name}` ({what})")]
@@ -66,16 +98,16 @@ pub enum MultibodyError {
     /// An axis or direction of zero length (or not finite).
     #[error("{owner}: axis {axis:?} has zero length or is not finite")]
     ZeroAxis {
-        /// The joint or support.
-        owner: String,
+        /// The joint, support or placement.
+        owner: Owner,
         /// The axis given.
         axis: [f64; 3],
     },
     /// A joint's axes in a planar structure leave the plane of motion.
     #[error("{owner}: {what} is not compatible with a planar structure (motion in the e1–e3 plane, rotation about e2)")]
     NotPlanar {
-        /// The joint or support.
-        owner: String,
+        /// The joint, support or placement.
+        owner: Owner,
         /// What is wrong.
         what: String,
     },

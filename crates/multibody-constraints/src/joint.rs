@@ -18,7 +18,7 @@
 //! or taken in each end's own frame ([`Frame::EachEnd`], the torsion of the paper's
 //! universal/wheel joint, §5.3: `ω1^a = ω1^b`, `m1^a = m1^b`, bending moments zero).
 
-use crate::error::{MultibodyError, Result};
+use crate::error::{MultibodyError, Owner, Result};
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -50,12 +50,12 @@ impl End {
     }
 
     /// Parses `start`/`0` or `end`/`L`; `owner` names the joint in the error.
-    pub fn parse(owner: &str, text: &str) -> Result<Self> {
+    pub fn parse(owner: &Owner, text: &str) -> Result<Self> {
         match text.trim() {
             "start" | "0" | "s=0" => Ok(End::Start),
             "end" | "L" | "s=L" => Ok(End::End),
             other => {
-                Err(MultibodyError::UnknownEnd { owner: owner.to_string(), end: other.to_string() })
+                Err(MultibodyError::UnknownEnd { owner: owner.clone(), end: other.to_string() })
             }
         }
     }
@@ -205,11 +205,11 @@ impl Axis {
     }
 }
 
-fn unit(owner: &str, a: [f64; 3]) -> Result<Vector3<f64>> {
+fn unit(owner: &Owner, a: [f64; 3]) -> Result<Vector3<f64>> {
     let v = Vector3::from(a);
     let n = v.norm();
     if !n.is_finite() || n < 1e-12 {
-        return Err(MultibodyError::ZeroAxis { owner: owner.to_string(), axis: a });
+        return Err(MultibodyError::ZeroAxis { owner: owner.clone(), axis: a });
     }
     Ok(v / n)
 }
@@ -237,7 +237,7 @@ fn identity_axes(part: Part, frame: Frame, freedoms: [Freedom; 3]) -> [Axis; 3] 
 impl JointKind {
     /// The six axes (three translations, three rotations) of this kind; `owner` names the
     /// joint in errors. `n_ends` bounds `Frame::End(i)`.
-    pub fn axes(&self, owner: &str, n_ends: usize) -> Result<[Axis; 6]> {
+    pub fn axes(&self, owner: &Owner, n_ends: usize) -> Result<[Axis; 6]> {
         use Freedom::{Free, Rigid};
         let check_frame = |f: Frame| -> Result<()> {
             match f {
@@ -298,7 +298,7 @@ impl JointKind {
                     for (i, c) in cols.iter().enumerate() {
                         if !(d[i].norm().is_finite() && d[i].norm() > 1e-12) {
                             return Err(MultibodyError::ZeroAxis {
-                                owner: owner.to_string(),
+                                owner: owner.clone(),
                                 axis: *c,
                             });
                         }
@@ -327,12 +327,12 @@ impl JointKind {
     /// The axes that act in a planar structure (motion in the global e1–e3 plane, rotation
     /// about e2): translation axes in the plane and the rotation axis along e2. An axis that
     /// is neither in nor normal to the plane is an error.
-    pub fn planar_axes(&self, owner: &str, n_ends: usize) -> Result<Vec<Axis>> {
+    pub fn planar_axes(&self, owner: &Owner, n_ends: usize) -> Result<Vec<Axis>> {
         if let JointKind::Hinge { axis, .. } = self {
             let a = unit(owner, *axis)?;
             if (a.y.abs() - 1.0).abs() > 1e-12 {
                 return Err(MultibodyError::NotPlanar {
-                    owner: owner.to_string(),
+                    owner: owner.clone(),
                     what: format!(
                         "hinge axis {axis:?} (a planar hinge turns about e2 = [0, 1, 0])"
                     ),
@@ -346,7 +346,7 @@ impl JointKind {
             let normal = (y - 1.0).abs() < 1e-12;
             if !in_plane && !normal {
                 return Err(MultibodyError::NotPlanar {
-                    owner: owner.to_string(),
+                    owner: owner.clone(),
                     what: format!(
                         "axis {:?} (neither in the e1–e3 plane nor along e2)",
                         ax.direction.as_slice()
@@ -490,7 +490,9 @@ mod tests {
 
     #[test]
     fn zero_axis_is_an_error() {
-        let err = JointKind::hinge_global([0.0, 0.0, 0.0]).axes("root", 1).unwrap_err();
+        let err = JointKind::hinge_global([0.0, 0.0, 0.0])
+            .axes(&Owner::Joint("root".into()), 1)
+            .unwrap_err();
         assert!(matches!(err, MultibodyError::ZeroAxis { .. }), "{err}");
         assert!(err.to_string().contains("root"));
     }
@@ -504,7 +506,7 @@ mod tests {
             rotation_frame: Frame::Global,
             axes: Some([[1.0, 0.0, 0.0], [0.5, 1.0, 0.0], [0.0, 0.0, 1.0]]),
         };
-        let err = kind.axes("slider", 2).unwrap_err();
+        let err = kind.axes(&Owner::Joint("slider".into()), 2).unwrap_err();
         assert!(
             err.to_string().contains("orthonormal") && err.to_string().contains("slider"),
             "{err}"
@@ -513,9 +515,13 @@ mod tests {
 
     #[test]
     fn planar_hinge_off_e2_is_an_error() {
-        let err = JointKind::hinge_global([1.0, 1.0, 0.0]).planar_axes("elbow", 2).unwrap_err();
+        let err = JointKind::hinge_global([1.0, 1.0, 0.0])
+            .planar_axes(&Owner::Joint("elbow".into()), 2)
+            .unwrap_err();
         assert!(matches!(err, MultibodyError::NotPlanar { .. }), "{err}");
-        let ok = JointKind::hinge_global([0.0, 1.0, 0.0]).planar_axes("elbow", 2).unwrap();
+        let ok = JointKind::hinge_global([0.0, 1.0, 0.0])
+            .planar_axes(&Owner::Joint("elbow".into()), 2)
+            .unwrap();
         assert_eq!(ok.len(), 3);
         assert_eq!(ok.iter().filter(|a| a.freedom == Freedom::Free).count(), 1);
     }
@@ -553,7 +559,7 @@ mod tests {
                 }),
             },
         ] {
-            let axes = kind.axes("j", 3).unwrap();
+            let axes = kind.axes(&Owner::Joint("j".into()), 3).unwrap();
             // Build fields satisfying the rows: for each axis, pick a common velocity V and, for
             // rigid axes, forces balancing; for free axes zero forces.
             let mut v = [[Vector3::zeros(); 3]; 2]; // [part][end]

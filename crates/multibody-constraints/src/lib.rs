@@ -63,7 +63,7 @@ mod plant;
 pub mod samples;
 mod structure;
 
-pub use error::{MultibodyError, Result};
+pub use error::{MultibodyError, Owner, Result};
 pub use joint::{
     rows, Axis, End, EndRef, Frame, Freedom, Joint, JointKind, Part, Row, RowKind, Support,
 };

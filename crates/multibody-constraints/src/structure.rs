@@ -13,7 +13,7 @@ use intrinsic_beam::{Beam, Components, Kinematics};
 use nalgebra::{Matrix3, Vector3, Vector4, Vector6};
 use serde::{Deserialize, Serialize};
 
-use crate::error::{MultibodyError, Result};
+use crate::error::{MultibodyError, Owner, Result};
 use crate::joint::{rows, Axis, End, EndRef, Freedom, Joint, JointKind, Part, RowKind, Support};
 
 /// Where a beam's `s = 0` end sits in the reference configuration.
@@ -211,10 +211,10 @@ impl Structure {
         }
         let planar = components == Components::Planar;
         let known = beams.iter().map(|b| b.name.as_str()).collect::<Vec<_>>().join(", ");
-        let resolve = |owner: &str, e: &EndRef| -> Result<(usize, End)> {
+        let resolve = |owner: &Owner, e: &EndRef| -> Result<(usize, End)> {
             index.get(e.beam.as_str()).map(|&i| (i, e.end)).ok_or_else(|| {
                 MultibodyError::UnknownBeam {
-                    owner: owner.to_string(),
+                    owner: owner.clone(),
                     beam: e.beam.clone(),
                     known: known.clone(),
                 }
@@ -232,11 +232,11 @@ impl Structure {
             }
         }
         // Ends used once.
-        let mut used: HashMap<(usize, End), String> = HashMap::new();
+        let mut used: HashMap<(usize, End), Owner> = HashMap::new();
         let mut resolved_joints = Vec::new();
-        let mark = |owner: String,
+        let mark = |owner: Owner,
                     be: (usize, End),
-                    used: &mut HashMap<(usize, End), String>|
+                    used: &mut HashMap<(usize, End), Owner>|
          -> Result<()> {
             if let Some(first) = used.get(&be) {
                 return Err(MultibodyError::EndUsedTwice {
@@ -250,7 +250,7 @@ impl Structure {
             Ok(())
         };
         for j in &joints {
-            let owner = format!("joint `{}`", j.name);
+            let owner = Owner::Joint(j.name.clone());
             if j.ends.len() < 2 {
                 return Err(MultibodyError::TooFewEnds {
                     joint: j.name.clone(),
@@ -269,7 +269,7 @@ impl Structure {
             resolved_joints.push((j.name.clone(), false, ends, axes));
         }
         for s in &supports {
-            let owner = format!("support `{}`", s.name);
+            let owner = Owner::Support(s.name.clone());
             let be = resolve(&owner, &s.end)?;
             mark(owner.clone(), be, &mut used)?;
             let axes = if planar {
@@ -376,7 +376,7 @@ impl Structure {
                         let ax = Vector3::from(*axis);
                         if !(ax.norm().is_finite() && ax.norm() > 1e-12) {
                             return Err(MultibodyError::ZeroAxis {
-                                owner: format!("placement of beam `{}`", b.name),
+                                owner: Owner::Placement(b.name.clone()),
                                 axis: *axis,
                             });
                         }
@@ -391,7 +391,7 @@ impl Structure {
                     Some((xi0, r0)) => {
                         if planar && (xi0[1].abs() > 1e-12 || xi0[3].abs() > 1e-12) {
                             return Err(MultibodyError::NotPlanar {
-                                owner: format!("beam `{}`", b.name),
+                                owner: Owner::Beam(b.name.clone()),
                                 what: "its orientation (not a rotation about e2)".into(),
                             });
                         }
@@ -578,10 +578,11 @@ impl Structure {
         let mut out = vec![RowLabel { owner: String::new(), kind: None }; self.n_constraint_rows];
         for j in &self.joints {
             let owner = if j.ground {
-                format!("support `{}`", j.name)
+                Owner::Support(j.name.clone())
             } else {
-                format!("joint `{}`", j.name)
-            };
+                Owner::Joint(j.name.clone())
+            }
+            .to_string();
             let identity = vec![Matrix3::identity(); j.ends.len()];
             for (i, r) in rows(&j.axes, &j.signs, j.ground, &identity).iter().enumerate() {
                 out[j.first_row + i] = RowLabel { owner: owner.clone(), kind: Some(r.kind) };

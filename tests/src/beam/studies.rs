@@ -6,12 +6,12 @@ use std::f64::consts::PI;
 
 use nalgebra::{Matrix6, Vector3};
 
+use super::dense_modes::{family, linear_modes, Family};
 use intrinsic_beam::closed_form::{self, Supports};
 use intrinsic_beam::samples::{self, euler_bernoulli_section, Sample};
 use intrinsic_beam::{
-    family, linear_modes, Beam, BeamError, BeamProblem, Components, Counters, EndCondition,
-    ExplicitRk4, Family, ImplicitMidpoint, Kinematics, LinearSolver, Mesh, NewtonSettings, Result,
-    StepInput,
+    Beam, BeamError, BeamProblem, Components, Counters, EndCondition, ExplicitRk4,
+    ImplicitMidpoint, Kinematics, LinearSolver, Mesh, NewtonSettings, Result, StepInput,
 };
 
 /// Tip position and rotation angle (`2 acos|ξ0|`) of a beam's last node.

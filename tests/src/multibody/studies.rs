@@ -8,7 +8,7 @@ use intrinsic_beam::{Amplitude, Beam, Components, LoadFrame, Mesh, PointLoad, Se
 use nalgebra::{Matrix6, Vector3, Vector6};
 
 use multibody_constraints::{
-    null_space, samples, End, EndRef, Joint, JointKind, MultibodyError, Placement, Plant,
+    null_space, samples, End, EndRef, Joint, JointKind, MultibodyError, Owner, Placement, Plant,
     PlantSettings, Result, Structure, StructureBeam, StructureSettings, Support,
 };
 
@@ -293,7 +293,7 @@ pub fn topology_errors() -> (usize, usize) {
             ),
             |e| matches!(e, MultibodyError::UnknownBeam { .. }),
         ),
-        (End::parse("elbow", "middle").map(|_| unreachable!()), |e| {
+        (End::parse(&Owner::Joint("elbow".into()), "middle").map(|_| unreachable!()), |e| {
             matches!(e, MultibodyError::UnknownEnd { .. })
         }),
         (

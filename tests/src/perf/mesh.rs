@@ -1,14 +1,14 @@
 //! Study (a), FE mesh against frequency error and time: the clamped–free cantilever
 //! (`L = EI = m = 1`, Euler–Bernoulli section) against the closed-form first bending frequency,
-//! by the beam crate's dense single-beam route and by modal-rom's constrained SVD route; the
+//! by the dense single-beam route (the verification crate's oracle, `beam::dense_modes`) and by modal-rom's constrained SVD route; the
 //! cost of an implicit-midpoint step of the same mesh (slender cantilever released from a
 //! 1 rad arc); and the paper's 2D two-link (first five elastic modes).
 
 use intrinsic_beam::closed_form::{bending, Supports};
 use intrinsic_beam::samples;
 use intrinsic_beam::{
-    family, linear_modes, Beam, BeamProblem, Components, EndCondition, Family, ImplicitMidpoint,
-    Loads, Mesh, NewtonSettings, Section,
+    Beam, BeamProblem, Components, EndCondition, ImplicitMidpoint, Loads, Mesh, NewtonSettings,
+    Section,
 };
 use modal_rom::{BasisSettings, StructureModel};
 use multibody_constraints::{
@@ -16,6 +16,7 @@ use multibody_constraints::{
 };
 
 use super::{timed, Error, Result};
+use crate::beam::dense_modes::{family, linear_modes, Family};
 
 /// Closed-form first bending frequency of the cantilever (rad/s).
 pub fn exact_omega1() -> f64 {
@@ -37,7 +38,7 @@ fn cantilever_structure(n: usize) -> Result<Structure> {
     )?)
 }
 
-/// First bending frequency by the dense single-beam route.
+/// First bending frequency by the dense single-beam route (`beam::dense_modes`).
 pub fn dense_omega1(n: usize) -> Result<f64> {
     let beam =
         Beam::new(samples::euler_bernoulli_section(), Mesh::uniform(1.0, n)?, Components::Planar)?;

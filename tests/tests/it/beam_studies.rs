@@ -1,10 +1,11 @@
 //! The single-beam studies of the verification crate on cheap settings (the
 //! `cargo xtask verify intrinsic-beam/` cases run the same studies, some with finer settings).
 
+use flexmpc_verification::beam::dense_modes::Family;
 use flexmpc_verification::beam::studies::*;
 use intrinsic_beam::closed_form::Supports;
 use intrinsic_beam::samples::ELASTICA_TIP_LOAD_1;
-use intrinsic_beam::{Components, Family};
+use intrinsic_beam::Components;
 
 /// Identities hold to round-off on random data.
 #[test]
@@ -72,7 +73,7 @@ fn follower_moment_rolls_up_to_the_circle() {
 }
 
 /// Positions integrated in time agree with positions rebuilt from strains; the gap
-/// Shrinks with the mesh (second order) and with the step.
+/// shrinks with the mesh (second order) and with the step.
 #[test]
 fn time_and_space_positions_agree() {
     let mesh: Vec<f64> = [10, 20, 40]

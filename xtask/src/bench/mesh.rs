@@ -1,7 +1,7 @@
 //! Study (a): FE mesh against frequency error and time — the tables, plots and notes; the
 //! models and solves are `flexmpc_verification::perf::mesh`. The clamped–free cantilever
 //! (`L = EI = m = 1`, Euler–Bernoulli section) against the closed-form first bending frequency,
-//! by the beam crate's dense single-beam route and by modal-rom's constrained SVD route; the
+//! by the dense single-beam route (the verification crate's oracle) and by modal-rom's constrained SVD route; the
 //! cost of an implicit-midpoint step of the same mesh (slender cantilever released from a
 //! 1 rad arc); and the paper's 2D two-link (first five elastic modes) against a fine mesh.
 
@@ -38,7 +38,7 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
         ],
     );
     let (mut s_dense, mut s_rom, mut s_step) = (
-        Series::line("cantilever ω1 error vs dense eigen solve (beam crate)"),
+        Series::line("cantilever ω1 error vs dense eigen solve (dense oracle)"),
         Series::line("cantilever ω1 error vs constrained eigen solve (modal-rom)"),
         Series::line("cantilever ω1 error vs one implicit-midpoint step"),
     );
@@ -128,7 +128,7 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
         format!(
             "Cantilever `L = EI = m = 1` with the Euler–Bernoulli section (rigid shear, massless \
              rotation), planar, clamped–free; closed form ω1 = {exact:.6} rad/s. Eigen solve \
-             times: the dense single-beam route of `intrinsic-beam` (`modes::linear_modes`) and \
+             times: the dense single-beam route (the verification crate's oracle, `beam::dense_modes`) and \
              modal-rom's constrained SVD route (`StructureModel::new` + `modes`, everything \
              included). Step: one implicit-midpoint step (dt = 1e-3, default Newton settings) of \
              the slender cantilever released from a 1 rad arc with the same mesh. Two-link: \

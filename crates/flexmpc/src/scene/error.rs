@@ -4,7 +4,7 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
-use multibody_constraints::MultibodyError;
+use multibody_constraints::{MultibodyError, Owner as StructureOwner};
 
 use super::spec::SceneSpec;
 
@@ -270,22 +270,18 @@ pub(super) fn entry_of(
     let owner = |label: &str| {
         owners.iter().find(|(l, _, _)| l == label).map(|(_, s, f)| (Some(s.clone()), f.clone()))
     };
+    let of_owner = |o: &StructureOwner| match o {
+        StructureOwner::Joint(_) | StructureOwner::Support(_) => owner(&o.to_string()),
+        StructureOwner::Beam(n) => beam(n, false),
+        StructureOwner::Placement(n) => beam(n, true),
+        _ => None,
+    };
     let found = match e {
         MultibodyError::UnknownBeam { owner: o, .. }
         | MultibodyError::UnknownEnd { owner: o, .. }
         | MultibodyError::ZeroAxis { owner: o, .. }
-        | MultibodyError::NotPlanar { owner: o, .. } => owner(o).or_else(|| {
-            spec.beams.iter().map(|b| &b.get_ref().name).find_map(|n| {
-                if *o == format!("placement of beam `{n}`") {
-                    beam(n, true)
-                } else if *o == format!("beam `{n}`") {
-                    beam(n, false)
-                } else {
-                    None
-                }
-            })
-        }),
-        MultibodyError::EndUsedTwice { second, .. } => owner(second),
+        | MultibodyError::NotPlanar { owner: o, .. } => of_owner(o),
+        MultibodyError::EndUsedTwice { second, .. } => of_owner(second),
         MultibodyError::TooFewEnds { joint, .. } => owner(&format!("joint `{joint}`")),
         MultibodyError::DuplicateName { name, .. } => owner(&format!("joint `{name}`"))
             .or_else(|| owner(&format!("support `{name}`")))

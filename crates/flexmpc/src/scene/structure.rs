@@ -2,7 +2,7 @@
 
 use intrinsic_beam::rotation::axis_angle;
 use intrinsic_beam::{Beam, Components, Mesh, Section};
-use multibody_constraints::{End, EndRef, Frame, Freedom, Joint, JointKind, Support};
+use multibody_constraints::{End, EndRef, Frame, Freedom, Joint, JointKind, Owner, Support};
 use multibody_constraints::{Placement, Structure, StructureBeam, StructureSettings};
 use nalgebra::{Matrix6, Vector3, Vector6};
 use toml::Spanned;
@@ -101,7 +101,7 @@ fn parse_end(
             format!("unknown beam `{b}` (beams: {})", beams.join(", ")),
         );
     }
-    let end = match End::parse(field, e) {
+    let end = match End::parse(&Owner::Input(field.to_string()), e) {
         Ok(end) => end,
         Err(_) => {
             return ctx.err(Some(span), field, format!("unknown end `{e}` (allowed: start, end)"))

@@ -6,7 +6,7 @@ use intrinsic_beam::{Beam, Components, LoadFrame, Mesh};
 use multibody_constraints::null_space;
 use multibody_constraints::samples;
 use multibody_constraints::{End, EndRef, Joint, JointKind, Support};
-use multibody_constraints::{MultibodyError, Plant, PlantSettings};
+use multibody_constraints::{MultibodyError, Owner, Plant, PlantSettings};
 use multibody_constraints::{Placement, Structure, StructureBeam, StructureSettings};
 use nalgebra::{Vector3, Vector6};
 
@@ -257,7 +257,7 @@ fn topology_errors() {
         "{e}"
     );
     // unknown end
-    let e = End::parse("joint `elbow`", "middle").unwrap_err();
+    let e = End::parse(&Owner::Joint("elbow".into()), "middle").unwrap_err();
     assert!(
         matches!(e, MultibodyError::UnknownEnd { .. }) && e.to_string().contains("middle"),
         "{e}"

@@ -1,5 +1,8 @@
-//! Linear (undamped, at rest) modes of a single beam with its end conditions, by the
-//! second-order reduction of theory.md §4, on dense faer matrices (small meshes).
+//! The dense single-beam modes oracle of the verification crate: linear (undamped, at rest)
+//! modes of a single beam with its end conditions, by the second-order reduction of
+//! theory.md §4, on dense faer matrices (small meshes). The library's constrained modes are
+//! modal-rom's (`modal_rom::StructureModel::modes`); this independent route checks them and
+//! the closed-form frequencies (`intrinsic_beam::closed_form`) on single beams.
 //!
 //! From `B Ẋ = A X` with the end conditions eliminated (prescribed-velocity components remove
 //! their node unknown, node row and reaction; force components remove their end value),
@@ -18,9 +21,7 @@
 use faer::linalg::solvers::Solve;
 use faer::{Mat, Side};
 
-use crate::beam::Beam;
-use crate::error::{BeamError, Result};
-use crate::problem::{BeamProblem, End};
+use intrinsic_beam::{null_space, Beam, BeamError, BeamProblem, End, Result};
 
 /// One linear mode: angular frequency and node-velocity shape `φ1` (length `k(N+1)`, node
 /// layout of the beam vector), normalised `Σ w_n φ1ᵀ M φ1 = 1`.
@@ -106,7 +107,7 @@ pub fn linear_modes(problem: &BeamProblem) -> Result<Vec<LinearMode>> {
     let z = if x2r.is_empty() {
         Mat::<f64>::identity(x1.len(), x1.len())
     } else {
-        crate::null_space::null_space(d_r.transpose(), RANK_TOLERANCE)?.basis
+        null_space(d_r.transpose(), RANK_TOLERANCE)?.basis
     };
     // Massless node coordinates (a massless section direction: zero rows of B1). Without
     // them the route below is the original one (bit-identical results for sections with
@@ -380,79 +381,11 @@ pub fn family(beam: &Beam, mode: &LinearMode) -> Family {
     groups.iter().cloned().fold((Family::Axial, -1.0), |acc, g| if g.1 > acc.1 { g } else { acc }).0
 }
 
-/// Closed-form angular frequencies (first `count` non-zero) of a uniform beam.
-pub mod closed_form {
-    use std::f64::consts::PI;
-
-    /// Support kinds for closed-form references.
-    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-    pub enum Supports {
-        /// Clamped at s = 0, free at s = L.
-        ClampedFree,
-        /// Pinned (translations fixed, rotations free) at s = 0, free at s = L.
-        PinnedFree,
-        /// Free at both ends.
-        FreeFree,
-    }
-
-    /// Axial (wave speed `c`) or torsional: fixed–free `(2j−1)πc/2L`, free–free `jπc/L`.
-    pub fn wave(supports: Supports, fixed: bool, c: f64, length: f64, count: usize) -> Vec<f64> {
-        (1..=count)
-            .map(|j| {
-                let j = j as f64;
-                if fixed && supports != Supports::FreeFree {
-                    (2.0 * j - 1.0) * PI * c / (2.0 * length)
-                } else {
-                    j * PI * c / length
-                }
-            })
-            .collect()
-    }
-
-    /// Euler–Bernoulli bending `ω_j = (β_j L)² √(EI/(m L⁴))`, with `β_j L` the roots of
-    /// `cos β cosh β + 1 = 0` (clamped–free), `tan β − tanh β = 0` (pinned–free, non-zero),
-    /// `cos β cosh β − 1 = 0` (free–free, non-zero), found by bisection.
-    pub fn bending(supports: Supports, ei: f64, m: f64, length: f64, count: usize) -> Vec<f64> {
-        let f = |b: f64| match supports {
-            Supports::ClampedFree => b.cos() * b.cosh() + 1.0,
-            // tan β = tanh β  ⇔  sin β cosh β − cos β sinh β = 0 (scaled by e^{−β})
-            Supports::PinnedFree => (b.sin() * b.cosh() - b.cos() * b.sinh()) * (-b).exp(),
-            Supports::FreeFree => (b.cos() * b.cosh() - 1.0) * (-b).exp(),
-        };
-        let f_scaled = |b: f64| match supports {
-            Supports::ClampedFree => f(b) * (-b).exp(),
-            _ => f(b),
-        };
-        let mut roots = Vec::new();
-        // roots lie in ((j − ½)π, (j + ½)π) bracket scans on a fine grid
-        let mut a = 0.5;
-        let step = 0.01;
-        while roots.len() < count {
-            let b = a + step;
-            let (fa, fb) = (f_scaled(a), f_scaled(b));
-            if fa == 0.0 || fa * fb < 0.0 {
-                let (mut lo, mut hi) = (a, b);
-                for _ in 0..200 {
-                    let mid = 0.5 * (lo + hi);
-                    if f_scaled(lo) * f_scaled(mid) <= 0.0 {
-                        hi = mid;
-                    } else {
-                        lo = mid;
-                    }
-                }
-                roots.push(0.5 * (lo + hi));
-            }
-            a = b;
-        }
-        roots.iter().map(|b| b * b * (ei / (m * length.powi(4))).sqrt()).collect()
-    }
-}
-
 #[cfg(test)]
 mod tests {
-    use super::closed_form::*;
     use super::{family, linear_modes, Family};
-    use crate::{samples, Beam, BeamProblem, Components, EndCondition, Loads, Mesh};
+    use intrinsic_beam::closed_form::*;
+    use intrinsic_beam::{samples, Beam, BeamProblem, Components, EndCondition, Loads, Mesh};
 
     fn eb_problem(n: usize, components: Components, left: EndCondition) -> BeamProblem {
         let beam = Beam::new(
@@ -527,16 +460,5 @@ mod tests {
             let p = eb_problem(n, Components::Spatial, EndCondition::Clamped);
             assert_eq!(linear_modes(&p).unwrap().len(), 4 * n, "{n} elements, spatial");
         }
-    }
-
-    #[test]
-    fn bending_roots_match_tables() {
-        let cf = bending(Supports::ClampedFree, 1.0, 1.0, 1.0, 2);
-        assert!((cf[0] - 1.875104068711961f64.powi(2)).abs() < 1e-12);
-        assert!((cf[1] - 4.694091132974175f64.powi(2)).abs() < 1e-11);
-        let pf = bending(Supports::PinnedFree, 1.0, 1.0, 1.0, 1);
-        assert!((pf[0] - 3.926602312047919f64.powi(2)).abs() < 1e-11);
-        let ff = bending(Supports::FreeFree, 1.0, 1.0, 1.0, 1);
-        assert!((ff[0] - 4.730040744862704f64.powi(2)).abs() < 1e-11);
     }
 }
