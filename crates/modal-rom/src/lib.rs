@@ -50,6 +50,119 @@
 //! rom.rhs(&q, &vec![0.0; rom.n_inputs()], &mut qdot)?;
 //! # Ok::<(), modal_rom::ModalError>(())
 //! ```
+//!
+//! # From a structure to a reduced model: [`StructureModel`], [`ModalBasis`], [`ModalRom`]
+//!
+//! The operators of a structure ([`StructureModel::new`]), its constrained modes
+//! ([`StructureModel::modes`]), a selection ([`ModalBasis::select`]) and the reduced model on
+//! it ([`ModalRom::new`]); a rigid rotation of the structure lies in the span of the rigid
+//! modes, so projecting it ([`ModalRom::project_full`]) and rebuilding the fields
+//! ([`ModalRom::reconstruct_full`]) gives it back:
+//!
+//! ```
+//! use intrinsic_beam::Section;
+//! use modal_rom::{BasisSettings, ModalRom, ModeSelection, RomOptions, StructureModel};
+//! use nalgebra::Vector3;
+//!
+//! let structure = multibody_constraints::samples::paper_2d(Section::paper_2d(), 6, 0.0)?;
+//! let model = StructureModel::new(&structure)?;
+//! let basis = model.modes(&BasisSettings::default())?;
+//! assert_eq!(basis.n_rigid(), 2); // root hinge and elbow hinge
+//! let (b1, b2, d) = basis.orthonormality_residuals();
+//! assert!(b1 < 1e-10 && b2 < 1e-10 && d < 1e-8, "{b1} {b2} {d}");
+//! let picked = basis.select(&ModeSelection::Lowest(6))?;
+//! let rom = ModalRom::new(&picked, Some(&model.damping), &[], &RomOptions::default())?;
+//! assert_eq!(rom.n_modes(), 6);
+//!
+//! let x = structure.rigid_rotation_state(Vector3::new(0.0, 0.5, 0.0), Vector3::zeros());
+//! let q = rom.project_full(&x, None)?;
+//! let back = rom.reconstruct_full(&q)?;
+//! let err = x.iter().zip(&back).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+//! assert!(err < 1e-10, "{err}");
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+//!
+//! # Mode tables: [`mode_report`]
+//!
+//! The first modes of a structure with frequencies and labels, as `flexmpc modes` prints them:
+//!
+//! ```
+//! use intrinsic_beam::Section;
+//! use modal_rom::{mode_report, BasisSettings};
+//!
+//! let structure = multibody_constraints::samples::paper_2d(Section::paper_2d(), 6, 0.0)?;
+//! let r = mode_report(&structure, 5, &BasisSettings::default())?;
+//! assert_eq!(r.labels[..2], ["rigid", "rigid"]);
+//! assert!(r.frequencies_rad_s.windows(2).all(|w| w[0] <= w[1]));
+//! assert!(mode_report(&structure, 0, &BasisSettings::default()).is_err());
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+//!
+//! # The eigen solver: [`solve_second_order`]
+//!
+//! The constrained second-order problem (30)–(32) solved directly, here on a structure's own
+//! blocks ([`StructureModel::problem`]); its frequencies are the basis's:
+//!
+//! ```
+//! use intrinsic_beam::Section;
+//! use modal_rom::{solve_second_order, BasisSettings, EigenSettings, StructureModel};
+//!
+//! let structure = multibody_constraints::samples::paper_2d(Section::paper_2d(), 4, 0.0)?;
+//! let model = StructureModel::new(&structure)?;
+//! let raw = solve_second_order(&model.problem, &EigenSettings::default(), None)?;
+//! let basis = model.modes(&BasisSettings::default())?;
+//! assert_eq!(raw.n_rigid, 2);
+//! let last = raw.omega.len() - 1;
+//! assert!((raw.omega[last] - basis.omega()[last]).abs() <= 1e-9 * raw.omega[last]);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+//!
+//! # Export: [`ModalRom::export`], [`ModalRom::read`], [`npy`]
+//!
+//! A model written as JSON metadata plus `.npy` arrays (for NumPy and other tools) reads
+//! back to the same model:
+//!
+//! ```
+//! use modal_rom::{samples, ModalRom, RomOptions};
+//!
+//! let s = samples::paper_2d(4, 0.0, true, &samples::paper_2d_selection(), &RomOptions::default())?;
+//! let dir = std::env::temp_dir().join(format!("modal-rom-doc-{}", std::process::id()));
+//! let meta = s.rom.export(&dir)?;
+//! let back = ModalRom::read(&dir)?;
+//! assert_eq!((back.n_state(), back.n_inputs()), (s.rom.n_state(), s.rom.n_inputs()));
+//! assert_eq!(meta.n_state, s.rom.n_state());
+//! let sigma = modal_rom::npy::read(&dir.join("sigma.npy"))?;
+//! assert_eq!(sigma.shape, [s.rom.n_modes(), s.rom.n_modes()]);
+//! std::fs::remove_dir_all(&dir)?;
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+//!
+//! # The exact-joints model: [`ExactJointsRom`], [`exact_joints::paper_reduction`]
+//!
+//! On the paper's constrained modes as link fields, the exact-joints model (theory.md §10)
+//! starts where the paper's model does and conserves its energy `½|p|² + ½|p2|²` without
+//! damping and inputs (the right-hand side does no work):
+//!
+//! ```
+//! use modal_rom::{exact_joints, samples, RomOptions};
+//!
+//! let s = samples::paper_2d(4, 0.0, false, &samples::paper_2d_selection(), &RomOptions::default())?;
+//! let picked = s.basis.select(&samples::paper_2d_selection())?;
+//! let rom = exact_joints::paper_reduction(&s.structure, &s.model, &picked, None, &[])?;
+//! let mut x = rom.reference_state();
+//! for (i, v) in x[..rom.n_p()].iter_mut().enumerate() {
+//!     *v = 0.1 * (i as f64 + 1.0).cos();
+//! }
+//! let mut f = vec![0.0; rom.n_state()];
+//! rom.rhs(&x, &[], &mut f)?;
+//! assert!(rom.energy(&x) > 0.0);
+//! // dε/dt = p·ṗ + p2·ṗ2 = 0
+//! let n = rom.n_p() + rom.n_p2();
+//! let work: f64 = x[..n].iter().zip(&f[..n]).map(|(a, b)| a * b).sum();
+//! assert!(f[..n].iter().any(|v| v.abs() > 1e-3), "the state moves");
+//! assert!(work.abs() < 1e-12, "{work}");
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 mod basis;
 mod blocks;
