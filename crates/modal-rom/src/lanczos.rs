@@ -5,16 +5,21 @@
 //! With `V_m = [v_0 … v_{m−1}]` `B`-orthonormal, `S V_m = V_m T_m + β_m v_m e_mᵀ` with `T_m`
 //! tridiagonal (`α_j = ⟨v_j, S v_j⟩`, `β_j = ‖S v_j − α_j v_j − β_{j−1} v_{j−1}‖`). Each new
 //! vector is orthogonalised against all previous ones (classical Gram–Schmidt, twice), and
-//! against the given deflation vectors, so `V_m` stays orthonormal to round-off. A Ritz pair
-//! `(θ_i, V_m s_i)` of `T_m s_i = θ_i s_i` has residual `‖S x_i − θ_i x_i‖_B = |β_m s_{m−1,i}|`;
-//! it counts as converged when that is at most `tol · |θ_i|`. For a `B`-self-adjoint `S` an
-//! eigenvalue of `S` then lies within `tol · |θ_i|` of `θ_i`.
+//! against the given deflation vectors, so `V_m` stays orthonormal to round-off; the Ritz pairs
+//! are those of the whole projected matrix `H_m = V_mᵀ B S V_m` (`T_m` up to round-off),
+//! assembled from the reorthogonalisation coefficients. A Ritz pair `(θ_i, V_m s_i)` has
+//! residual `‖S x_i − θ_i x_i‖_B ≤ Σ_l |b_l s_{l,i}|` over the remainders `b_l` of `S v_l` left
+//! outside the basis (`β_m` of the last step, and those dropped at a restart); it counts as
+//! converged when that is at most `tol · |θ_i|`. For a `B`-self-adjoint `S` an eigenvalue of
+//! `S` then lies within `tol · |θ_i|` of `θ_i`.
 //!
 //! The start vector is a fixed pseudo-random sequence (same bits every run), mapped once by
 //! `S` so that it lies in the range of `S` (where `B` is definite: the massless directions of a
 //! singular `B` are those `S` eliminates). On a breakdown (`β_m` at round-off: an invariant
-//! subspace) the iteration continues from the next vector of the sequence; when that vector
-//! has nothing left outside the subspace, the space is exhausted and every Ritz pair is exact.
+//! subspace), and once after the first convergence (one start vector sees one copy of a
+//! repeated eigenvalue only), the iteration continues from the next vector of the sequence,
+//! orthogonalised against the basis; when that vector has nothing left outside the basis, the
+//! space is exhausted and every Ritz pair is exact.
 
 use crate::error::{ModalError, Result};
 use faer::{Mat, Side};
@@ -87,23 +92,14 @@ fn b_norm(op: &dyn Operator, w: &[f64], bw: &mut [f64]) -> f64 {
     dot(w, bw).max(0.0).sqrt()
 }
 
-/// Eigen decomposition of the tridiagonal `T` (`alpha` diagonal, `beta` off-diagonal):
-/// eigenvalues decreasing, with the matching eigenvectors as columns.
-fn tridiagonal_eigen(alpha: &[f64], beta: &[f64]) -> Result<(Vec<f64>, Mat<f64>)> {
-    let m = alpha.len();
-    let t = Mat::from_fn(m, m, |i, j| {
-        if i == j {
-            alpha[i]
-        } else if i == j + 1 {
-            beta[j]
-        } else if j == i + 1 {
-            beta[i]
-        } else {
-            0.0
-        }
-    });
+/// Eigen decomposition of the projected matrix `H = Vᵀ B S V` (symmetric; `hcols[l]` holds
+/// `⟨v_i, S v_l⟩` for `i ≤ l`): eigenvalues decreasing, with the matching eigenvectors as
+/// columns.
+fn projected_eigen(hcols: &[Vec<f64>]) -> Result<(Vec<f64>, Mat<f64>)> {
+    let m = hcols.len();
+    let t = Mat::from_fn(m, m, |i, j| if i <= j { hcols[j][i] } else { hcols[i][j] });
     let eig = t.self_adjoint_eigen(Side::Lower).map_err(|e| ModalError::Numerical {
-        stage: "eigen of the Lanczos tridiagonal matrix".into(),
+        stage: "eigen of the projected Lanczos matrix".into(),
         reason: format!("{e:?}"),
     })?;
     let s = eig.S().column_vector();
@@ -113,9 +109,20 @@ fn tridiagonal_eigen(alpha: &[f64], beta: &[f64]) -> Result<(Vec<f64>, Mat<f64>)
     Ok((order.iter().map(|&i| s[i]).collect(), Mat::from_fn(m, m, |r, c| u[(r, order[c])])))
 }
 
+/// Residual bounds `Σ_l |b_l s_{l,i}|` of the first `k` Ritz vectors, over the remainders `b_l`
+/// of `S v_l` left outside the basis (the last step's and those dropped at a restart).
+fn estimates(s: &Mat<f64>, lost: &[(usize, f64)], k: usize) -> Vec<f64> {
+    (0..k).map(|i| lost.iter().map(|&(l, b)| (b * s[(l, i)]).abs()).sum()).collect()
+}
+
 /// The `nev` largest eigenpairs of `op` in the `B`-orthogonal complement of `deflate`
 /// (`(q, Bq)` pairs, `B`-orthonormal), by at most `max_steps` Lanczos steps (see the module
 /// docs). Fewer than `nev` pairs come back when the space has fewer dimensions.
+///
+/// The Ritz pairs come from the whole projected matrix `Vᵀ B S V` (the coefficients of the
+/// full reorthogonalisation), so the iteration may restart from a new vector of the start
+/// sequence: it does so on a breakdown and once after the first convergence, so that a second
+/// copy of a repeated eigenvalue (invisible from one start vector) is found too.
 pub(crate) fn largest(
     op: &mut dyn Operator,
     deflate: &[(Vec<f64>, Vec<f64>)],
@@ -126,7 +133,9 @@ pub(crate) fn largest(
     let n = op.n();
     let mut bw = vec![0.0; n];
     let mut v: Vec<Vec<f64>> = Vec::new();
-    let (mut alpha, mut beta) = (Vec::<f64>::new(), Vec::<f64>::new());
+    let mut hcols: Vec<Vec<f64>> = Vec::new();
+    // remainders of S v_l dropped at restarts: (l, norm)
+    let mut lost: Vec<(usize, f64)> = Vec::new();
     let mut seed = 0u64;
     // A new start direction from the fixed sequence, in the range of S and orthogonal to what
     // is there; `None` when nothing is left (the space is exhausted).
@@ -155,50 +164,58 @@ pub(crate) fn largest(
     v.push(first);
     let mut w = vec![0.0; n];
     let mut exhausted = false;
-    let mut last_beta;
+    let mut restarted = false;
+    let mut last: f64;
     loop {
         let j = v.len() - 1;
         op.apply(&v[j], &mut w)?;
         let h = orthogonalise(op, &mut w, deflate, &v, &mut bw);
-        alpha.push(h[j]);
+        let scale = h[j].abs().max(hcols.iter().fold(0.0f64, |a, c| a.max(c[c.len() - 1].abs())));
+        hcols.push(h);
         let b = b_norm(op, &w, &mut bw);
-        let scale = alpha.iter().fold(0.0f64, |a, x| a.max(x.abs()));
-        last_beta = b;
+        last = b;
         let breakdown = b <= 1e-13 * scale;
         let m = v.len();
-        let check = breakdown || m >= max_steps || (m >= nev && (m - nev) % 5 == 0);
-        if check {
-            let (theta, s) = tridiagonal_eigen(&alpha, &beta)?;
-            let beta_m = if breakdown { 0.0 } else { b };
+        let mut restart = breakdown;
+        if breakdown || m >= max_steps || (m >= nev && (m - nev) % 5 == 0) {
+            let (theta, s) = projected_eigen(&hcols)?;
             let k = nev.min(m);
-            let done = (0..k).all(|i| (beta_m * s[(m - 1, i)]).abs() <= tol * theta[i].abs());
-            if (done && k == nev) || m >= max_steps {
+            let mut bounds = lost.clone();
+            bounds.push((m - 1, if breakdown { 0.0 } else { b }));
+            let est = estimates(&s, &bounds, k);
+            let done = (0..k).all(|i| est[i] <= tol * theta[i].abs());
+            if m >= max_steps || (done && k == nev && restarted) {
                 break;
             }
+            if done && k == nev {
+                restarted = true;
+                restart = true;
+            }
         }
-        if breakdown {
+        if restart {
             match fresh(op, &v, &mut bw)? {
                 Some(x) => {
-                    beta.push(0.0);
+                    lost.push((m - 1, if breakdown { 0.0 } else { b }));
                     v.push(x);
                 }
                 None => {
                     exhausted = true;
-                    last_beta = 0.0;
+                    last = 0.0;
                     break;
                 }
             }
         } else {
-            beta.push(b);
             w.iter_mut().for_each(|x| *x /= b);
             v.push(std::mem::replace(&mut w, vec![0.0; n]));
         }
     }
     let m = v.len();
-    let (theta, s) = tridiagonal_eigen(&alpha, &beta)?;
+    let (theta, s) = projected_eigen(&hcols)?;
     let k = nev.min(m);
+    let mut bounds = lost;
+    bounds.push((m - 1, last));
+    let est = estimates(&s, &bounds, k);
     let mut vectors = Vec::with_capacity(k);
-    let mut estimates = Vec::with_capacity(k);
     for i in 0..k {
         let mut x = vec![0.0; n];
         for (j, vj) in v.iter().enumerate() {
@@ -206,8 +223,7 @@ pub(crate) fn largest(
             x.iter_mut().zip(vj).for_each(|(a, b)| *a += c * b);
         }
         vectors.push(x);
-        estimates.push((last_beta * s[(m - 1, i)]).abs() / theta[i].abs().max(f64::MIN_POSITIVE));
     }
-    let converged = exhausted || estimates.iter().all(|&e| e <= tol);
+    let converged = exhausted || (0..k).all(|i| est[i] <= tol * theta[i].abs());
     Ok(RitzPairs { theta: theta[..k].to_vec(), vectors, steps: m, converged })
 }

@@ -432,6 +432,15 @@ struct Pair {
     residual: f64,
 }
 
+/// What [`solve_component`] returns: the pairs, Lanczos steps, whether they converged, and
+/// the exact rigid fields restricted to the component (deflated, global coordinates).
+struct ComponentSolution {
+    pairs: Vec<Pair>,
+    steps: usize,
+    converged: bool,
+    restricted: Vec<Vec<f64>>,
+}
+
 /// Solves component `c` at shift `σ`: up to `nev` pairs, with their global `φ1`, Rayleigh
 /// quotient `ω²` and true residual.
 fn solve_component(
@@ -442,7 +451,7 @@ fn solve_component(
     sigma: f64,
     nev: usize,
     settings: &SparseSettings,
-) -> Result<(Vec<Pair>, usize, bool, Vec<Vec<f64>>)> {
+) -> Result<ComponentSolution> {
     let mut op = shift_invert(p, c, sigma)?;
     // the exact rigid fields restricted to the component, B1-orthonormalised
     let mut deflate: Vec<(Vec<f64>, Vec<f64>)> = Vec::new();
@@ -492,7 +501,7 @@ fn solve_component(
             v
         })
         .collect();
-    Ok((pairs, ritz.steps, ritz.converged, restricted))
+    Ok(ComponentSolution { pairs, steps: ritz.steps, converged: ritz.converged, restricted })
 }
 
 fn lanczos_dot(a: &[f64], b: &[f64]) -> f64 {
@@ -624,7 +633,7 @@ pub fn solve_sparse(
         let mut result = None;
         let mut deflated = Vec::new();
         for _pass in 0..3 {
-            let (pairs, s, converged, restricted) =
+            let ComponentSolution { pairs, steps: s, converged, restricted } =
                 solve_component(problem, c, &ops, &exact, sigma, nev, settings)?;
             deflated = restricted;
             steps += s;
@@ -638,7 +647,7 @@ pub fn solve_sparse(
                 .filter(|&l| l > rigid_threshold)
                 .fold(f64::INFINITY, f64::min);
             let crowded = low.is_finite() && low < 10.0 * sigma.abs();
-            let bad = pairs.iter().any(|p| !(p.residual <= settings.tolerance));
+            let bad = pairs.iter().any(|p| p.residual.is_nan() || p.residual > settings.tolerance);
             result = Some((pairs, converged && !bad));
             if !(crowded || !converged || bad) || !low.is_finite() {
                 break;

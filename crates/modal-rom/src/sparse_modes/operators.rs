@@ -83,7 +83,7 @@ fn cholesky(a: &[f64], r: usize) -> Option<Vec<f64>> {
         for p in 0..j {
             d -= l[j * r + p] * l[j * r + p];
         }
-        if !(d > 0.0) {
+        if d.is_nan() || d <= 0.0 {
             return None;
         }
         let d = d.sqrt();
