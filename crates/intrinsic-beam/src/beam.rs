@@ -126,6 +126,16 @@ thread_local! {
 
 impl Beam {
     /// Builds a beam; validates the section (and its planarity for [`Components::Planar`]).
+    ///
+    /// ```
+    /// use intrinsic_beam::{Beam, Components, Mesh, Section};
+    ///
+    /// let beam = Beam::new(Section::paper_2d(), Mesh::uniform(1.0, 4)?, Components::Planar)?;
+    /// // k = 3 planar components, k(2N + 3) unknowns, k(2N + 1) rows
+    /// assert_eq!(beam.dim(), 3 * (2 * 4 + 3));
+    /// assert_eq!(beam.n_rows(), 3 * (2 * 4 + 1));
+    /// # Ok::<(), intrinsic_beam::BeamError>(())
+    /// ```
     pub fn new(section: Section, mesh: Mesh, components: Components) -> Result<Self> {
         section.validate()?;
         components.check_section(&section)?;

@@ -32,6 +32,14 @@ pub fn wave(supports: Supports, fixed: bool, c: f64, length: f64, count: usize) 
 /// Euler–Bernoulli bending `ω_j = (β_j L)² √(EI/(m L⁴))`, with `β_j L` the roots of
 /// `cos β cosh β + 1 = 0` (clamped–free), `tan β − tanh β = 0` (pinned–free, non-zero),
 /// `cos β cosh β − 1 = 0` (free–free, non-zero), found by bisection.
+///
+/// ```
+/// use intrinsic_beam::closed_form::{bending, Supports};
+///
+/// // clamped–free: (β1 L)² with β1 L = 1.8751
+/// let w = bending(Supports::ClampedFree, 1.0, 1.0, 1.0, 2);
+/// assert!((w[0] - 1.875104068711961f64.powi(2)).abs() < 1e-12);
+/// ```
 pub fn bending(supports: Supports, ei: f64, m: f64, length: f64, count: usize) -> Vec<f64> {
     let f = |b: f64| match supports {
         Supports::ClampedFree => b.cos() * b.cosh() + 1.0,

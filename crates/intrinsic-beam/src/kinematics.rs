@@ -31,6 +31,16 @@ impl Kinematics {
     }
 
     /// A straight beam along global e1 from the origin (identity orientation, `κ0` applied).
+    ///
+    /// ```
+    /// use intrinsic_beam::{Beam, Components, Kinematics, Mesh, Section};
+    ///
+    /// let beam = Beam::new(Section::paper_2d(), Mesh::uniform(1.0, 4)?, Components::Planar)?;
+    /// let kin = Kinematics::straight(&beam);
+    /// assert_eq!(kin.r.len(), 5); // node positions along e1
+    /// assert!((kin.r[4].x - 1.0).abs() < 1e-15);
+    /// # Ok::<(), intrinsic_beam::BeamError>(())
+    /// ```
     pub fn straight(beam: &Beam) -> Self {
         Self::reference(beam, Vector4::new(1.0, 0.0, 0.0, 0.0), Vector3::zeros())
             .expect("the zero state has the right size")

@@ -125,6 +125,17 @@ pub struct Loads {
 
 impl Loads {
     /// No loads.
+    ///
+    /// ```
+    /// use intrinsic_beam::{LoadFrame, Loads};
+    /// use nalgebra::Vector6;
+    ///
+    /// // a dead tip force along −e3 at node 4, and a follower distributed moment about e2
+    /// let loads = Loads::none()
+    ///     .with_point(4, LoadFrame::Dead, Vector6::new(0.0, 0.0, -1.0, 0.0, 0.0, 0.0))
+    ///     .with_distributed(LoadFrame::Follower, Vector6::new(0.0, 0.0, 0.0, 0.0, 0.1, 0.0));
+    /// assert_eq!(loads.point.len(), 1);
+    /// ```
     pub fn none() -> Self {
         Self::default()
     }

@@ -13,6 +13,15 @@ pub struct Mesh {
 
 impl Mesh {
     /// A uniform mesh of `n_elements` elements on `[0, length]`.
+    ///
+    /// ```
+    /// use intrinsic_beam::Mesh;
+    ///
+    /// let mesh = Mesh::uniform(2.0, 4)?;
+    /// assert_eq!(mesh.n_elements(), 4);
+    /// assert!(Mesh::uniform(1.0, 0).is_err());
+    /// # Ok::<(), intrinsic_beam::BeamError>(())
+    /// ```
     pub fn uniform(length: f64, n_elements: usize) -> Result<Self> {
         if !crate::error::positive_finite(length) {
             return Err(BeamError::NonPositiveLength {

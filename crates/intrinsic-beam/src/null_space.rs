@@ -29,6 +29,18 @@ pub struct NullSpace {
 }
 
 /// `Z` for a dense constraint matrix `c` (`rows × n`) with relative rank tolerance `tol`.
+///
+/// ```
+/// use faer::mat;
+/// use intrinsic_beam::null_space;
+///
+/// // one constraint x0 = x1 on three unknowns: a two-dimensional null space
+/// let c = mat![[1.0, -1.0, 0.0]];
+/// let ns = null_space(c.as_ref(), 1e-12)?;
+/// assert_eq!((ns.rank, ns.basis.ncols()), (1, 2));
+/// assert!(ns.residual < 1e-15);
+/// # Ok::<(), intrinsic_beam::BeamError>(())
+/// ```
 pub fn null_space(c: MatRef<'_, f64>, tol: f64) -> Result<NullSpace> {
     let (rows, n) = (c.nrows(), c.ncols());
     let touched: Vec<usize> = (0..n).filter(|&j| (0..rows).any(|i| c[(i, j)] != 0.0)).collect();

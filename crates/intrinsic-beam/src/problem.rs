@@ -91,6 +91,15 @@ pub struct BeamProblem {
 
 impl BeamProblem {
     /// Builds and validates (loads on existing nodes, planar data for planar beams).
+    ///
+    /// ```
+    /// use intrinsic_beam::{Beam, BeamProblem, Components, EndCondition, Loads, Mesh, Section};
+    ///
+    /// let beam = Beam::new(Section::paper_2d(), Mesh::uniform(1.0, 4)?, Components::Planar)?;
+    /// let cantilever = BeamProblem::new(beam, EndCondition::Clamped, EndCondition::Free, Loads::none())?;
+    /// assert_eq!(cantilever.beam.n_elements(), 4);
+    /// # Ok::<(), intrinsic_beam::BeamError>(())
+    /// ```
     pub fn new(beam: Beam, left: EndCondition, right: EndCondition, loads: Loads) -> Result<Self> {
         let p = Self { beam, left, right, loads };
         p.validate()?;

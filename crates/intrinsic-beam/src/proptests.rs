@@ -11,7 +11,7 @@ use crate::kinematics::Kinematics;
 use crate::loads::{LoadFrame, Loads};
 use crate::mesh::Mesh;
 use crate::operators::{e_matrix, l1, l2};
-use crate::samples::random::{random_section, random_vec, seeded};
+use crate::samples::random::{random_load, random_section, random_vec, seeded};
 use rand::Rng;
 
 fn config() -> Config {
@@ -62,8 +62,7 @@ proptest! {
         let mut rng = seeded(seed);
         let section = random_section(&mut rng, comp, true, seed % 3 != 0);
         let beam = Beam::new(section, Mesh::graded(0.7 + rng.random::<f64>(), n, grading).unwrap(), comp).unwrap();
-        let mut load = Vector6::from_fn(|_, _| rng.random_range(-1.0..1.0));
-        if planar { for j in [1, 3, 5] { load[j] = 0.0; } }
+        let load = random_load(&mut rng, comp);
         let loads = Loads::none().with_point(n, LoadFrame::Dead, load).with_distributed(LoadFrame::Follower, load * 0.5);
         let kin = Kinematics::straight(&beam);
         let old = random_vec(&mut rng, beam.dim());

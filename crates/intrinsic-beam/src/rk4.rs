@@ -31,6 +31,18 @@ pub struct ExplicitRk4 {
 impl ExplicitRk4 {
     /// Starts at `time = 0`. Errors with [`BeamError::NotAnOde`] if the section has a rigid or
     /// massless active direction.
+    ///
+    /// ```
+    /// use intrinsic_beam::samples::{cantilever_swing_with, soft_section};
+    /// use intrinsic_beam::{Components, ExplicitRk4};
+    ///
+    /// // an ODE sample (inertia and compliance in every direction), 4 elements
+    /// let s = cantilever_swing_with(soft_section(), Components::Planar, 4)?;
+    /// let mut rk = ExplicitRk4::new(s.problem, s.state, s.kinematics)?;
+    /// rk.step(1e-4)?;
+    /// assert!(rk.state().iter().all(|v| v.is_finite()));
+    /// # Ok::<(), intrinsic_beam::BeamError>(())
+    /// ```
     pub fn new(problem: BeamProblem, state: Vec<f64>, kinematics: Kinematics) -> Result<Self> {
         problem.validate()?;
         let beam = &problem.beam;

@@ -45,6 +45,16 @@ impl Section {
     /// A section from diagonal mass and *stiffness* entries: `stiffness[i] = f64::INFINITY`
     /// states a rigid direction (compliance 0), `mass[i] = 0` a massless one. No curvature,
     /// no damping. Validated.
+    ///
+    /// ```
+    /// use intrinsic_beam::Section;
+    ///
+    /// // m = 1, EI = 1 in bending about e2; a zero stiffness would be an error
+    /// let s = Section::from_diagonals([1.0, 1.0, 1.0, 2e-4, 1e-4, 1e-4], [1e4, 1e4, 1e4, 0.5, 1.0, 1.0])?;
+    /// assert!(Section::from_diagonals([1.0; 6], [0.0; 6]).is_err());
+    /// # let _ = s;
+    /// # Ok::<(), intrinsic_beam::BeamError>(())
+    /// ```
     pub fn from_diagonals(mass: [f64; 6], stiffness: [f64; 6]) -> Result<Self> {
         let mut m = Matrix6::zeros();
         let mut c = Matrix6::zeros();

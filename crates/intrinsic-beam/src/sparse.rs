@@ -36,6 +36,18 @@ impl std::fmt::Debug for SparseLuSystem {
 
 impl SparseLuSystem {
     /// Builds the structure from `(row, col)` entries (duplicates are summed).
+    ///
+    /// ```
+    /// use intrinsic_beam::SparseLuSystem;
+    ///
+    /// // [[2, 1], [0, 4]] x = [4, 8]: the pattern once, then values in pattern order
+    /// let mut lu = SparseLuSystem::new(2, &[(0, 0), (0, 1), (1, 1)])?;
+    /// lu.factorize(&[2.0, 1.0, 4.0])?;
+    /// let mut x = vec![4.0, 8.0];
+    /// lu.solve(&mut x)?;
+    /// assert!((x[0] - 1.0).abs() < 1e-15 && (x[1] - 2.0).abs() < 1e-15);
+    /// # Ok::<(), intrinsic_beam::BeamError>(())
+    /// ```
     pub fn new(n: usize, pattern: &[(usize, usize)]) -> Result<Self> {
         Self::with_threshold(n, pattern, SupernodalThreshold::AUTO)
     }

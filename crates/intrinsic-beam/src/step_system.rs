@@ -495,11 +495,11 @@ mod tests {
     use crate::loads::{Amplitude, LoadFrame, Loads, PointLoad};
     use crate::mesh::Mesh;
     use crate::problem::EndCondition;
-    use crate::rotation::quaternion_step;
     use crate::samples;
-    use crate::samples::random::{random_section, random_vec, seeded};
-    use nalgebra::{DMatrix, DVector, Vector3, Vector6};
-    use rand::Rng;
+    use crate::samples::random::{
+        random_load, random_rotations, random_section, random_vec, seeded,
+    };
+    use nalgebra::{DMatrix, DVector, Vector6};
 
     /// A random curved beam with `D0` (no flux damping), dead and follower loads, rotated
     /// kinematics and the given end conditions; random old/new states.
@@ -514,35 +514,18 @@ mod tests {
         section.d1 = Matrix6::zeros();
         section.d2 = Matrix6::zeros();
         let beam = Beam::new(section, Mesh::graded(1.3, 6, 2.0).unwrap(), components).unwrap();
-        let planar = components == Components::Planar;
-        let pick = |rng: &mut rand_chacha::ChaCha8Rng| {
-            let mut v = Vector6::from_fn(|_, _| rng.random_range(-1.0..1.0));
-            if planar {
-                for j in [1, 3, 5] {
-                    v[j] = 0.0;
-                }
-            }
-            v
-        };
         let mut loads = Loads::none();
         for (node, frame) in [(6, LoadFrame::Dead), (2, LoadFrame::Follower), (0, LoadFrame::Dead)]
         {
             loads.point.push(PointLoad {
                 node,
                 frame,
-                value: pick(&mut rng),
+                value: random_load(&mut rng, components),
                 amplitude: Amplitude::Constant,
             });
         }
         let mut kin = Kinematics::straight(&beam);
-        for xi in kin.xi.iter_mut() {
-            let axis = if planar {
-                Vector3::new(0.0, 1.0, 0.0)
-            } else {
-                Vector3::from_fn(|_, _| rng.random_range(-1.0..1.0))
-            };
-            *xi = quaternion_step(xi, &axis, rng.random_range(-1.0..1.0));
-        }
+        random_rotations(&mut rng, &mut kin, components);
         let old = random_vec(&mut rng, beam.dim());
         let new = random_vec(&mut rng, beam.dim());
         (BeamProblem::new(beam, left, right, loads).unwrap(), kin, old, new)

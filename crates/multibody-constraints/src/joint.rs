@@ -138,6 +138,17 @@ pub enum JointKind {
 
 impl JointKind {
     /// A hinge about a global axis (typical for supports).
+    ///
+    /// ```
+    /// use multibody_constraints::{JointKind, Owner};
+    ///
+    /// // a hinge about e2: translations and two rotations rigid, rotation about e2 free
+    /// let hinge = JointKind::hinge_global([0.0, 1.0, 0.0]);
+    /// let axes = hinge.axes(&Owner::Joint("elbow".into()), 2)?;
+    /// assert_eq!(axes.len(), 6);
+    /// assert!(JointKind::hinge_global([0.0; 3]).axes(&Owner::Joint("bad".into()), 2).is_err());
+    /// # Ok::<(), multibody_constraints::MultibodyError>(())
+    /// ```
     pub fn hinge_global(axis: [f64; 3]) -> Self {
         JointKind::Hinge { axis, frame: Frame::Global }
     }

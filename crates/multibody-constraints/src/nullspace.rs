@@ -15,6 +15,19 @@ pub const RANK_TOLERANCE: f64 = 1e-10;
 
 /// `Z` for a constraint matrix. Errors if `G` has dependent rows (redundant constraints),
 /// naming the rows' owners.
+///
+/// ```
+/// use intrinsic_beam::Section;
+/// use multibody_constraints::{null_space, samples};
+///
+/// // the paper's 2D two-link: Z spans the motions the joints allow, G Z = 0
+/// let structure = samples::paper_2d(Section::paper_2d(), 4, 0.0)?;
+/// let g = structure.constraint_matrix();
+/// let z = null_space(&g)?;
+/// assert_eq!(z.basis.nrows(), structure.dim());
+/// assert!(z.residual < 1e-12);
+/// # Ok::<(), multibody_constraints::MultibodyError>(())
+/// ```
 pub fn null_space(g: &ConstraintMatrix) -> Result<NullSpace> {
     let ns = intrinsic_beam::null_space(g.to_dense().as_ref(), RANK_TOLERANCE)?;
     if ns.rank < g.rows {

@@ -140,6 +140,18 @@ pub struct Plant {
 impl Plant {
     /// A plant at rest in the reference configuration. Checks the settings and the
     /// constraints' rank (redundant or conflicting constraints are an error naming them).
+    ///
+    /// ```
+    /// use intrinsic_beam::Section;
+    /// use multibody_constraints::{samples, Plant, PlantSettings};
+    ///
+    /// // the paper's 2D two-link, 4 elements per link, released at rest: it stays at rest
+    /// let structure = samples::paper_2d(Section::paper_2d(), 4, 0.0)?;
+    /// let mut plant = Plant::new(structure, PlantSettings::default())?;
+    /// plant.step()?;
+    /// assert!(plant.energy().abs() < 1e-20);
+    /// # Ok::<(), multibody_constraints::MultibodyError>(())
+    /// ```
     pub fn new(structure: Structure, settings: PlantSettings) -> Result<Self> {
         settings.validate()?;
         let dim = structure.dim();

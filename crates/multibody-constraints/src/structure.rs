@@ -171,6 +171,38 @@ impl Structure {
     /// configuration, axes non-zero (and planar where needed), beams connected (unless
     /// allowed). Redundant constraints are found by [`crate::Plant::new`]
     /// (its rank check).
+    ///
+    /// ```
+    /// use intrinsic_beam::{Beam, Components, Mesh, Section};
+    /// use multibody_constraints::{
+    ///     End, EndRef, Joint, JointKind, Placement, Structure, StructureBeam, StructureSettings,
+    ///     Support,
+    /// };
+    ///
+    /// // two links of 4 elements: hinged to the ground at the root, hinged at the elbow (axis e2)
+    /// let link = || Beam::new(Section::paper_2d(), Mesh::uniform(0.5, 4)?, Components::Planar);
+    /// let hinge = JointKind::hinge_global([0.0, 1.0, 0.0]);
+    /// let structure = Structure::new(
+    ///     vec![
+    ///         StructureBeam::new("link1", link()?, Placement::origin()),
+    ///         StructureBeam::new(
+    ///             "link2",
+    ///             link()?,
+    ///             Placement::Attached { joint: "elbow".into(), axis: [0.0, 1.0, 0.0], angle: 0.0 },
+    ///         ),
+    ///     ],
+    ///     vec![Joint {
+    ///         name: "elbow".into(),
+    ///         ends: vec![EndRef::new("link1", End::End), EndRef::new("link2", End::Start)],
+    ///         kind: hinge.clone(),
+    ///     }],
+    ///     vec![Support { name: "root".into(), end: EndRef::new("link1", End::Start), kind: hinge }],
+    ///     StructureSettings::default(),
+    /// )?;
+    /// assert_eq!(structure.beams().len(), 2);
+    /// assert!((structure.reference()[1].r[4].x - 1.0).abs() < 1e-12); // the tip at x = 1
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
     pub fn new(
         beams: Vec<StructureBeam>,
         joints: Vec<Joint>,

@@ -3,7 +3,7 @@
 use super::*;
 use crate::kinematics::Kinematics;
 use crate::loads::{Amplitude, DistributedLoad, PointLoad};
-use crate::samples::random::{random_section, random_vec, seeded};
+use crate::samples::random::{random_load, random_rotations, random_section, random_vec, seeded};
 use crate::section::Section;
 use nalgebra::{DMatrix, Vector3};
 use rand::Rng;
@@ -18,50 +18,29 @@ fn setup(
     let section = random_section(&mut rng, components, damping, seed % 2 == 1);
     let mesh = Mesh::graded(1.3, 5, 2.0).unwrap();
     let beam = Beam::new(section, mesh, components).unwrap();
-    let planar = components == Components::Planar;
-    let pick = |rng: &mut rand_chacha::ChaCha8Rng| {
-        let mut v = Vector6::from_fn(|_, _| rng.random_range(-1.0..1.0));
-        if planar {
-            for j in [1, 3, 5] {
-                v[j] = 0.0;
-            }
-        }
-        v
-    };
     let loads = Loads {
         point: vec![
             PointLoad {
                 node: 5,
                 frame: LoadFrame::Dead,
-                value: pick(&mut rng),
+                value: random_load(&mut rng, components),
                 amplitude: Amplitude::Constant,
             },
             PointLoad {
                 node: 2,
                 frame: LoadFrame::Follower,
-                value: pick(&mut rng),
+                value: random_load(&mut rng, components),
                 amplitude: Amplitude::Ramp { duration: 1.0 },
             },
         ],
         distributed: vec![DistributedLoad {
             frame: LoadFrame::Dead,
-            value: pick(&mut rng),
+            value: random_load(&mut rng, components),
             amplitude: Amplitude::Constant,
         }],
     };
     let mut kin = Kinematics::straight(&beam);
-    for xi in kin.xi.iter_mut() {
-        let axis = if planar {
-            Vector3::new(0.0, 1.0, 0.0)
-        } else {
-            Vector3::new(
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..1.0),
-            )
-        };
-        *xi = quaternion_step(xi, &axis, rng.random_range(-1.0..1.0));
-    }
+    random_rotations(&mut rng, &mut kin, components);
     let old = random_vec(&mut rng, beam.dim());
     let new = random_vec(&mut rng, beam.dim());
     (beam, loads, kin, old, new)

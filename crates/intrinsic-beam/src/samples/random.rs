@@ -5,11 +5,13 @@
 //! alone, on every platform and in every release of the crate, so a check that draws from it
 //! sees the same numbers on every run. The functions take any [`rand::Rng`].
 
-use nalgebra::{Matrix6, Vector3};
+use nalgebra::{Matrix6, Vector3, Vector6};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::components::Components;
+use crate::components::{Components, OUT_OF_PLANE_INDICES};
+use crate::kinematics::Kinematics;
+use crate::rotation::quaternion_step;
 use crate::section::Section;
 
 /// The workspace's seeded generator: ChaCha8 from a 64-bit seed.
@@ -25,6 +27,31 @@ pub fn seeded(seed: u64) -> ChaCha8Rng {
 /// A random vector of length `n` with entries uniform in `[−1, 1)`.
 pub fn random_vec(rng: &mut impl Rng, n: usize) -> Vec<f64> {
     (0..n).map(|_| rng.random_range(-1.0..1.0)).collect()
+}
+
+/// A random load (or end value) for `components`: six entries uniform in `[−1, 1)`, the
+/// out-of-plane ones then zeroed if planar.
+pub fn random_load(rng: &mut impl Rng, components: Components) -> Vector6<f64> {
+    let mut v = Vector6::from_fn(|_, _| rng.random_range(-1.0..1.0));
+    if components == Components::Planar {
+        for j in OUT_OF_PLANE_INDICES {
+            v[j] = 0.0;
+        }
+    }
+    v
+}
+
+/// Turns every node quaternion of `kinematics` by an angle uniform in `[−1, 1)` rad about an
+/// axis with entries uniform in `[−1, 1)` (about e2 if planar), so that dead loads and end
+/// rotations see a non-trivial configuration.
+pub fn random_rotations(rng: &mut impl Rng, kinematics: &mut Kinematics, components: Components) {
+    for xi in kinematics.xi.iter_mut() {
+        let axis = match components {
+            Components::Planar => Vector3::new(0.0, 1.0, 0.0),
+            Components::Spatial => Vector3::from_fn(|_, _| rng.random_range(-1.0..1.0)),
+        };
+        *xi = quaternion_step(xi, &axis, rng.random_range(-1.0..1.0));
+    }
 }
 
 fn random_spd(rng: &mut impl Rng, components: Components, shift: f64) -> Matrix6<f64> {
