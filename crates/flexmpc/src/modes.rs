@@ -47,13 +47,18 @@ const SECONDS_PER_N3: f64 = 6e-10;
 
 /// Bytes per unknown of the saddle-point system (`n1 + n2 + constraint rows`) for the
 /// structure, its sparse LU factors, pattern, work vectors and report: measured peak resident
-/// memory of `flexmpc modes` on planar two-links of 2 × 2000 to 2 × 50,000 elements is
-/// 500–940 bytes per unknown, Krylov basis included (`docs/performance.md`).
+/// memory of `flexmpc modes` on planar two-links of 2 × 5000 and 2 × 50,000 elements is
+/// 1.0–1.1 KB per unknown, Krylov basis included (`docs/performance.md`); the estimate adds
+/// the Krylov basis at its largest size, so it is an upper bound.
 const SPARSE_BYTES_PER_UNKNOWN: f64 = 1000.0;
 
 /// Seconds per unknown of the saddle-point system and Lanczos step of the sparse route on one
-/// core (2 × 5000 elements: 1.3 s; 2 × 50,000: 23 s with plots, about 100–200 steps in all).
-const SPARSE_SECONDS_PER_UNKNOWN_STEP: f64 = 2e-7;
+/// core (2 × 5000 elements: 0.65 s CPU; 2 × 50,000: 12 s CPU with plots and two shifts, about
+/// 280 steps in all).
+const SPARSE_SECONDS_PER_UNKNOWN_STEP: f64 = 7e-8;
+
+/// Lanczos steps in all (components and shifts) the time estimate assumes.
+const SPARSE_TYPICAL_STEPS: f64 = 300.0;
 
 /// Which computation `modes` runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -83,8 +88,8 @@ pub struct SolveEstimate {
     /// (`SPARSE_BYTES_PER_UNKNOWN` per unknown) and the Krylov basis (`n1 × max_steps`
     /// doubles, its largest size).
     pub sparse_bytes: f64,
-    /// Expected wall time (s) of the sparse route on one core, for a typical 100 Lanczos
-    /// steps per shift.
+    /// Expected time (s) of the sparse route on one core, for 300 Lanczos steps in all
+    /// (two components, two shifts each).
     pub sparse_seconds: f64,
 }
 
@@ -107,7 +112,7 @@ pub fn estimate(structure: &Structure) -> SolveEstimate {
         bytes,
         seconds: SECONDS_PER_N3 * a * a * a,
         sparse_bytes: SPARSE_BYTES_PER_UNKNOWN * unknowns + 8.0 * a * steps,
-        sparse_seconds: SPARSE_SECONDS_PER_UNKNOWN_STEP * unknowns * 100.0,
+        sparse_seconds: SPARSE_SECONDS_PER_UNKNOWN_STEP * unknowns * SPARSE_TYPICAL_STEPS,
     }
 }
 
@@ -445,7 +450,7 @@ mod tests {
             seconds: SECONDS_PER_N3 * a * a * a,
             sparse_bytes: SPARSE_BYTES_PER_UNKNOWN * (a + b + r)
                 + 8.0 * a * SparseSettings::default().max_steps as f64,
-            sparse_seconds: SPARSE_SECONDS_PER_UNKNOWN_STEP * (a + b + r) * 100.0,
+            sparse_seconds: SPARSE_SECONDS_PER_UNKNOWN_STEP * (a + b + r) * SPARSE_TYPICAL_STEPS,
         }
     }
 

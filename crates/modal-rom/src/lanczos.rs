@@ -17,7 +17,7 @@
 //! `S` so that it lies in the range of `S` (where `B` is definite: the massless directions of a
 //! singular `B` are those `S` eliminates). On a breakdown (`β_m` at round-off: an invariant
 //! subspace), and once after the first convergence (one start vector sees one copy of a
-//! repeated eigenvalue only), the iteration continues from the next vector of the sequence,
+//! repeated eigenvalue only; at least `nev` more steps follow), the iteration continues from the next vector of the sequence,
 //! orthogonalised against the basis; when that vector has nothing left outside the basis, the
 //! space is exhausted and every Ritz pair is exact.
 
@@ -165,6 +165,7 @@ pub(crate) fn largest(
     let mut w = vec![0.0; n];
     let mut exhausted = false;
     let mut restarted = false;
+    let mut restart_at = 0;
     let mut last: f64;
     loop {
         let j = v.len() - 1;
@@ -184,11 +185,12 @@ pub(crate) fn largest(
             bounds.push((m - 1, if breakdown { 0.0 } else { b }));
             let est = estimates(&s, &bounds, k);
             let done = (0..k).all(|i| est[i] <= tol * theta[i].abs());
-            if m >= max_steps || (done && k == nev && restarted) {
+            if m >= max_steps || (done && k == nev && restarted && m >= restart_at + nev) {
                 break;
             }
-            if done && k == nev {
+            if done && k == nev && !restarted {
                 restarted = true;
+                restart_at = m;
                 restart = true;
             }
         }
