@@ -402,33 +402,35 @@ impl AmbientOps {
         }
     }
 
-    /// Dense Jacobian of `(f1, f2)` with respect to `(q1, q2)` (`(na + nb)²`).
-    pub fn jacobian(&self, q1: &[f64], q2: &[f64]) -> Mat<f64> {
+    /// Dense Jacobian of `(f1, f2)` with respect to `(q1, q2)` into `j` (`(na + nb)²`,
+    /// column-major).
+    pub fn jacobian_into(&self, q1: &[f64], q2: &[f64], j: &mut [f64]) {
         let (na, nb) = (q1.len(), q2.len());
-        let mut j = Mat::<f64>::zeros(na + nb, na + nb);
+        let n = na + nb;
+        let j = &mut j[..n * n];
+        j.fill(0.0);
         for c in 0..na {
-            for r in 0..na {
-                j[(r, c)] = self.sigma[(r, c)];
-            }
+            j[c * n..c * n + na].copy_from_slice(self.sigma.col_as_slice(c));
         }
         for c in 0..nb {
-            for r in 0..na {
-                j[(r, na + c)] = self.w[(r, c)];
-                j[(na + c, r)] = -self.w[(r, c)];
+            let w = self.w.col_as_slice(c);
+            j[(na + c) * n..(na + c) * n + na].copy_from_slice(w);
+            for (r, wr) in w.iter().enumerate() {
+                j[r * n + na + c] = -wr;
             }
         }
         for &(i, jj, l, v) in &self.gamma1.entries {
             let (i, jj, l) = (i as usize, jj as usize, l as usize);
-            j[(i, jj)] -= v * q1[l];
-            j[(i, l)] -= v * q1[jj];
+            j[jj * n + i] -= v * q1[l];
+            j[l * n + i] -= v * q1[jj];
         }
         for &(i, jj, l, v) in &self.gamma2.entries {
             let (i, jj, l) = (i as usize, jj as usize, l as usize);
-            j[(i, na + jj)] -= v * q2[l];
-            j[(i, na + l)] -= v * q2[jj];
-            j[(na + jj, i)] += v * q2[l];
-            j[(na + jj, na + l)] += v * q1[i];
+            let (a, b) = (v * q2[l], v * q2[jj]);
+            j[(na + jj) * n + i] -= a;
+            j[(na + l) * n + i] -= b;
+            j[i * n + na + jj] += a;
+            j[(na + l) * n + na + jj] += v * q1[i];
         }
-        j
     }
 }
