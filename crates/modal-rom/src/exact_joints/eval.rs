@@ -95,6 +95,7 @@ pub(crate) struct Workspace {
     pub(super) phitmp: Vec<f64>,
     pub(super) qj: Vec<f64>,
     pub(super) dkp: Vec<f64>,
+    pub(super) ambient_tmp: Vec<f64>,
 }
 
 thread_local! {
@@ -200,6 +201,7 @@ impl Workspace {
             phitmp: zeros(2 * r * rmax),
             qj: zeros(rmax * r),
             dkp: zeros(m),
+            ambient_tmp: zeros(rom.ops.scratch_len()),
         }
     }
 }
@@ -474,7 +476,8 @@ impl ExactJointsRom {
         } else {
             gemv(&mut ws.q2, false, self.z2_flat(), nb, p2, 1.0);
         }
-        self.ops.rhs(&ws.q1, &ws.q2, u, &mut ws.f1, &mut ws.f2);
+        let jf = if jac.is_some() { Some(&mut ws.jf[..]) } else { None };
+        self.ops.eval(&ws.q1, &ws.q2, u, &mut ws.f1, &mut ws.f2, jf, &mut ws.ambient_tmp);
         for (t, tr) in self.tracked.iter().enumerate() {
             gemv(&mut ws.eq[t], false, &ws.tz[t], tr.rows.nrows(), p, 1.0);
         }

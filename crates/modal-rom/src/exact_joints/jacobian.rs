@@ -42,7 +42,6 @@ impl ExactJointsRom {
         let p = &x[..m];
         jx.fill(0.0);
         ju.fill(0.0);
-        self.ops.jacobian_into(&ws.q1, &ws.q2, &mut ws.jf);
         let nf = na + nb;
         let jf = view(&ws.jf, nf, nf);
         let z = view(&ws.z, na, m);
