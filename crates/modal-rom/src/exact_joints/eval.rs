@@ -25,10 +25,9 @@ pub(crate) struct Workspace {
     /// Per joint: `C_j` and `∂C_j/∂ξ_c` (`r_j × 2k`).
     pub(super) c: Vec<Vec<f64>>,
     pub(super) dc: Vec<[Vec<f64>; 4]>,
-    /// Per joint: `Ċ_j`, `Ċ'_j` (`r_j × 2k`), second derivative scratch.
+    /// Per joint: `Ċ_j` and its change `Ċ'_j` along one joint-quaternion column (`r_j × 2k`).
     pub(super) cdot: Vec<Vec<f64>>,
     pub(super) cdot2: Vec<Vec<f64>>,
-    pub(super) c2: Vec<f64>,
     /// Per tracked block: `T Aᵀ` (`t × r`), `T Z` (`t × m`).
     pub(super) ta: Vec<Vec<f64>>,
     pub(super) tz: Vec<Vec<f64>>,
@@ -140,7 +139,6 @@ impl Workspace {
                 .collect(),
             cdot: per(&|rj, kk| rj * kk),
             cdot2: per(&|rj, kk| rj * kk),
-            c2: zeros(rmax * kk),
             ta: rom.tracked.iter().map(|t| zeros(t.rows.nrows() * r)).collect(),
             tz: rom.tracked.iter().map(|t| zeros(t.rows.nrows() * m)).collect(),
             gram: zeros(r * r),

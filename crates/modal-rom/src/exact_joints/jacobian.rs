@@ -267,8 +267,7 @@ impl ExactJointsRom {
                         for d in 0..4 {
                             let s = ws.xi_dot[j][d];
                             if s != 0.0 {
-                                let c2 = &mut ws.c2[..rjj * kk];
-                                jr.second(c, d, c2);
+                                let c2 = &jr.c2[4 * c + d];
                                 cd.iter_mut().zip(c2.iter()).for_each(|(a, b)| *a += s * b);
                             }
                         }
