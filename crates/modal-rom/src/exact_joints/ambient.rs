@@ -273,6 +273,9 @@ pub(crate) struct AmbientOps {
     pub w: Mat<f64>,
     pub sigma: Mat<f64>,
     links: Vec<LinkTensors>,
+    /// `Σ` and `W` couple no two links (the FE operators are per beam): the Jacobian of
+    /// `(f1, f2)` is block-diagonal by link.
+    block_diagonal: bool,
     pub b_u: Mat<f64>,
 }
 
@@ -373,7 +376,17 @@ impl AmbientOps {
                 }
             }
         }
-        Ok(AmbientOps { w, sigma, links, b_u })
+        let link_of =
+            |cols: &[(usize, usize)], c: usize| cols.iter().position(|r| c >= r.0 && c < r.1);
+        let block_diagonal = (0..na).all(|j| {
+            (0..na).all(|i| {
+                sigma[(i, j)] == 0.0 || link_of(&basis.cols1, i) == link_of(&basis.cols1, j)
+            })
+        }) && (0..w.ncols()).all(|j| {
+            (0..na)
+                .all(|i| w[(i, j)] == 0.0 || link_of(&basis.cols1, i) == link_of(&basis.cols2, j))
+        });
+        Ok(AmbientOps { w, sigma, links, block_diagonal, b_u })
     }
 
     /// `(f1, f2)` at ambient coordinates `(q1, q2)` and input `u`, and with `jac` the dense
@@ -482,6 +495,14 @@ impl AmbientOps {
                 }
             }
         }
+    }
+
+    /// `((first velocity column, count), (first force column, count))` per link when the
+    /// Jacobian of `(f1, f2)` is block-diagonal by link.
+    pub fn link_blocks(
+        &self,
+    ) -> Option<impl Iterator<Item = ((usize, usize), (usize, usize))> + '_> {
+        self.block_diagonal.then(|| self.links.iter().map(|l| (l.c1, l.c2)))
     }
 
     /// Scratch length [`AmbientOps::eval`] needs.

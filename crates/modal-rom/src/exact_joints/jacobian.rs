@@ -45,19 +45,67 @@ impl ExactJointsRom {
         let nf = na + nb;
         let jf = view(&ws.jf, nf, nf);
         let z = view(&ws.z, na, m);
-        // ZᵀJ11Z
-        gemm(view_mut(&mut ws.t11, m, na), false, z.transpose(), jf.submatrix(0, 0, na, na), 1.0);
-        gemm(view_mut(jx, n, n).submatrix_mut(0, 0, m, m), false, view(&ws.t11, m, na), z, 1.0);
-        // Z2ᵀJ21Z, ZᵀJ12Z2, Z2ᵀJ22Z2
+        // ZᵀJ11Z, Z2ᵀJ21Z, ZᵀJ12Z2, Z2ᵀJ22Z2 (link by link when J is block-diagonal by link)
         let j21 = jf.submatrix(na, 0, nb, na);
-        if self.z2_identity {
-            view_mut(&mut ws.u21, nb, na).copy_from(j21);
-        } else {
-            gemm(view_mut(&mut ws.u21, m2, na), false, self.z2.transpose(), j21, 1.0);
-        }
-        gemm(view_mut(jx, n, n).submatrix_mut(m, 0, m2, m), false, view(&ws.u21, m2, na), z, 1.0);
-        gemm(view_mut(&mut ws.t12, m, nb), false, z.transpose(), jf.submatrix(0, na, na, nb), 1.0);
         let j22 = jf.submatrix(na, na, nb, nb);
+        match self.ops.link_blocks() {
+            Some(blocks) if self.z2_identity => {
+                for ((o1, k1), (o2, k2)) in blocks {
+                    let zb = z.subrows(o1, k1);
+                    gemm(
+                        view_mut(&mut ws.t11, m, na).subcols_mut(o1, k1),
+                        false,
+                        zb.transpose(),
+                        jf.submatrix(o1, o1, k1, k1),
+                        1.0,
+                    );
+                    gemm(
+                        view_mut(&mut ws.t12, m, nb).subcols_mut(o2, k2),
+                        false,
+                        zb.transpose(),
+                        jf.submatrix(o1, na + o2, k1, k2),
+                        1.0,
+                    );
+                    gemm(
+                        view_mut(jx, n, n).submatrix_mut(m + o2, 0, k2, m),
+                        false,
+                        jf.submatrix(na + o2, o1, k2, k1),
+                        zb,
+                        1.0,
+                    );
+                }
+                view_mut(&mut ws.u21, nb, na).copy_from(j21);
+            }
+            _ => {
+                gemm(
+                    view_mut(&mut ws.t11, m, na),
+                    false,
+                    z.transpose(),
+                    jf.submatrix(0, 0, na, na),
+                    1.0,
+                );
+                gemm(
+                    view_mut(&mut ws.t12, m, nb),
+                    false,
+                    z.transpose(),
+                    jf.submatrix(0, na, na, nb),
+                    1.0,
+                );
+                if self.z2_identity {
+                    view_mut(&mut ws.u21, nb, na).copy_from(j21);
+                } else {
+                    gemm(view_mut(&mut ws.u21, m2, na), false, self.z2.transpose(), j21, 1.0);
+                }
+                gemm(
+                    view_mut(jx, n, n).submatrix_mut(m, 0, m2, m),
+                    false,
+                    view(&ws.u21, m2, na),
+                    z,
+                    1.0,
+                );
+            }
+        }
+        gemm(view_mut(jx, n, n).submatrix_mut(0, 0, m, m), false, view(&ws.t11, m, na), z, 1.0);
         if self.z2_identity {
             view_mut(jx, n, n).submatrix_mut(0, m, m, m2).copy_from(view(&ws.t12, m, nb));
             view_mut(jx, n, n).submatrix_mut(m, m, m2, m2).copy_from(j22);
