@@ -474,8 +474,6 @@ impl AmbientOps {
                     let d = dot(q1b, col);
                     f2[o2 + jj] += ql * d;
                     if let Some(jm) = jac.as_deref_mut() {
-                        let c = na + o2 + jj;
-                        axpy(&mut jm[c * n + o1..c * n + o1 + m], -ql, col);
                         axpy(&mut tt[jj * m..(jj + 1) * m], ql, col);
                         jm[(na + o2 + l) * n + na + o2 + jj] += d;
                     }
@@ -487,10 +485,13 @@ impl AmbientOps {
                 }
             }
             if let Some(jm) = jac.as_deref_mut() {
-                // J[na + j, i] += Σ_l Γ2^l_ij q2_l
+                // t_j = Σ_l Γ2^l_{·j} q2_l: J[·, na + j] −= t_j, J[na + j, ·] += t_jᵀ
                 for jj in 0..m2 {
-                    for i in 0..m {
-                        jm[(o1 + i) * n + na + o2 + jj] += tt[jj * m + i];
+                    let t = &tt[jj * m..(jj + 1) * m];
+                    let c = na + o2 + jj;
+                    axpy(&mut jm[c * n + o1..c * n + o1 + m], -1.0, t);
+                    for (i, ti) in t.iter().enumerate() {
+                        jm[(o1 + i) * n + c] += ti;
                     }
                 }
             }
