@@ -414,7 +414,7 @@ impl ExactJointsRom {
                     view(&ws.big, r, r),
                     -1.0,
                 );
-                // ∂B = V_c + Q W − B Λ_cᵀ
+                // ∂B = V_c + Q W − B Λ_cᵀ (the last term enters ∂W_J as −W_J Λ_cᵀ below)
                 ws.db.fill(0.0);
                 for k in 0..m {
                     ws.db[k * r + o..k * r + o + rjj].copy_from_slice(&vc[k * rjj..(k + 1) * rjj]);
@@ -426,7 +426,6 @@ impl ExactJointsRom {
                     view(&ws.w, r, m),
                     1.0,
                 );
-                right_phi_t(&ws.b, r, vc, wjj, rjj, m, -1.0, &mut ws.db, &mut ws.phitmp);
                 // ∂W on the joint rows
                 gemm(
                     view_mut(&mut ws.dw, rj, m),
@@ -442,6 +441,8 @@ impl ExactJointsRom {
                     view(&ws.db, r, m),
                     1.0,
                 );
+                // − G_J B Λ_cᵀ = − W_J Λ_cᵀ
+                right_phi_t(&ws.wj, rj, vc, wjj, rjj, m, -1.0, &mut ws.dw, &mut ws.phitmp);
                 // − ∂(K p)
                 let colp = &mut ws.colp;
                 let t = &mut ws.dkp;
