@@ -17,10 +17,10 @@
 //! forces (theory.md §10.3). `q1ᵀf1 + q2ᵀf2 = q1ᵀΣq1 + q1ᵀB_u u` for every `(q1, q2)`.
 
 use crate::error::{invalid, shape, ModalError, Result};
+use crate::exact_joints::frame::{gemm, gemv, gemv_t, view, view_mut};
 use crate::layout::Layout;
 use crate::rom::Input;
 use crate::structure::StructureModel;
-use crate::tensor::SparseTensor3;
 use faer::linalg::solvers::Solve;
 use faer::{Mat, MatRef, Side};
 use intrinsic_beam::operators::{l1_times, l2_times};
@@ -255,13 +255,30 @@ impl LinkBasis {
     }
 }
 
+/// `Γ1`, `Γ2` of one link, dense (the link's fields couple only among themselves), each in two
+/// orders so that every contraction is one matrix–vector product: `g1_lj[i + m(j + m l)] =
+/// g1_jl[i + m(l + m j)] = Γ1^l_ij`, `g2_lj[i + m(j + m2 l)] = g2_jl[i + m(l + m2 j)] = Γ2^l_ij`.
+#[derive(Clone, Debug)]
+pub(crate) struct LinkTensors {
+    /// First column and count of the link's velocity fields.
+    c1: (usize, usize),
+    /// First column and count of the link's force fields.
+    c2: (usize, usize),
+    g1_lj: Vec<f64>,
+    g1_jl: Vec<f64>,
+    g2_lj: Vec<f64>,
+    g2_jl: Vec<f64>,
+}
+
 /// The Galerkin operators on a [`LinkBasis`] (module docs).
 #[derive(Clone, Debug)]
 pub(crate) struct AmbientOps {
     pub w: Mat<f64>,
     pub sigma: Mat<f64>,
-    pub gamma1: SparseTensor3,
-    pub gamma2: SparseTensor3,
+    links: Vec<LinkTensors>,
+    /// `Σ` and `W` couple no two links (the FE operators are per beam): the Jacobian of
+    /// `(f1, f2)` is block-diagonal by link.
+    block_diagonal: bool,
     pub b_u: Mat<f64>,
 }
 
@@ -270,7 +287,7 @@ impl AmbientOps {
         let layout = &basis.layout;
         let comps = layout.components;
         let k = comps.k();
-        let (na, nb, n1) = (basis.n1(), basis.n2(), layout.n1());
+        let (na, n1) = (basis.n1(), layout.n1());
         let phi1 = &basis.phi1;
         let phi2 = &basis.phi2;
         let w = phi1.transpose() * &basis.d * phi2;
@@ -290,8 +307,7 @@ impl AmbientOps {
             let vals: Vec<f64> = (0..k).map(|c| mat[(i0 + c, j)]).collect();
             comps.embed(&vals)
         };
-        let mut e1 = Vec::new();
-        let mut e2 = Vec::new();
+        let mut links = Vec::new();
         for (b, beam) in layout.beams.iter().enumerate() {
             let c1 = basis.cols1[b];
             let c2 = basis.cols2[b];
@@ -328,29 +344,30 @@ impl AmbientOps {
                     }
                 }
             }
+            // re-layout (l, i, j) → both orders of the docs of `LinkTensors`
+            let (mut g1_lj, mut g1_jl) = (vec![0.0; m * m * m], vec![0.0; m * m * m]);
             for l in 0..m {
                 for i in 0..m {
                     for j in 0..m {
                         let v = g1[(l * m + i) * m + j];
-                        if v != 0.0 {
-                            e1.push(((c1.0 + i) as u32, (c1.0 + j) as u32, (c1.0 + l) as u32, v));
-                        }
+                        g1_lj[i + m * (j + m * l)] = v;
+                        g1_jl[i + m * (l + m * j)] = v;
                     }
                 }
             }
+            let (mut g2_lj, mut g2_jl) = (vec![0.0; m * m2 * m2], vec![0.0; m * m2 * m2]);
             for l in 0..m2 {
                 for i in 0..m {
                     for j in 0..m2 {
                         let v = g2[(l * m + i) * m2 + j];
-                        if v != 0.0 {
-                            e2.push(((c1.0 + i) as u32, (c2.0 + j) as u32, (c2.0 + l) as u32, v));
-                        }
+                        g2_lj[i + m * (j + m2 * l)] = v;
+                        g2_jl[i + m * (l + m2 * j)] = v;
                     }
                 }
             }
+            links.push(LinkTensors { c1: (c1.0, m), c2: (c2.0, m2), g1_lj, g1_jl, g2_lj, g2_jl });
         }
-        let gamma1 = SparseTensor3 { dims: (na, na, na), entries: e1 };
-        let gamma2 = SparseTensor3 { dims: (na, nb, nb), entries: e2 };
+
         let mut b_u = Mat::<f64>::zeros(na, inputs.len());
         for (c, input) in inputs.iter().enumerate() {
             for &(idx, wgt) in &input.entries {
@@ -366,69 +383,137 @@ impl AmbientOps {
                 }
             }
         }
-        Ok(AmbientOps { w, sigma, gamma1, gamma2, b_u })
+        let link_of =
+            |cols: &[(usize, usize)], c: usize| cols.iter().position(|r| c >= r.0 && c < r.1);
+        let block_diagonal = (0..na).all(|j| {
+            (0..na).all(|i| {
+                sigma[(i, j)] == 0.0 || link_of(&basis.cols1, i) == link_of(&basis.cols1, j)
+            })
+        }) && (0..w.ncols()).all(|j| {
+            (0..na)
+                .all(|i| w[(i, j)] == 0.0 || link_of(&basis.cols1, i) == link_of(&basis.cols2, j))
+        });
+        Ok(AmbientOps { w, sigma, links, block_diagonal, b_u })
     }
 
-    /// `(f1, f2)` at ambient coordinates `(q1, q2)` and input `u`.
-    pub fn rhs(&self, q1: &[f64], q2: &[f64], u: &[f64], f1: &mut [f64], f2: &mut [f64]) {
+    /// `(f1, f2)` at ambient coordinates `(q1, q2)` and input `u`, and with `jac` the dense
+    /// Jacobian of `(f1, f2)` with respect to `(q1, q2)` (`(na + nb)²`, column-major). `tmp`:
+    /// scratch of `max_link (m + m · m2)`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn eval(
+        &self,
+        q1: &[f64],
+        q2: &[f64],
+        u: &[f64],
+        f1: &mut [f64],
+        f2: &mut [f64],
+        mut jac: Option<&mut [f64]>,
+        tmp: &mut [f64],
+    ) {
         let (na, nb) = (q1.len(), q2.len());
-        for i in 0..na {
-            let mut acc = 0.0;
-            for j in 0..na {
-                acc += self.sigma[(i, j)] * q1[j];
-            }
-            for j in 0..nb {
-                acc += self.w[(i, j)] * q2[j];
-            }
-            for (c, uc) in u.iter().enumerate() {
-                acc += self.b_u[(i, c)] * uc;
-            }
-            f1[i] = acc;
+        let n = na + nb;
+        f1.fill(0.0);
+        f2.fill(0.0);
+        for j in 0..na {
+            let c = self.sigma.col_as_slice(j);
+            let s = q1[j];
+            f1.iter_mut().zip(c).for_each(|(f, a)| *f += s * a);
         }
         for j in 0..nb {
-            let mut acc = 0.0;
-            for i in 0..na {
-                acc -= self.w[(i, j)] * q1[i];
+            let c = self.w.col_as_slice(j);
+            let s = q2[j];
+            f1.iter_mut().zip(c).for_each(|(f, a)| *f += s * a);
+            f2[j] = -c.iter().zip(q1).map(|(a, q)| a * q).sum::<f64>();
+        }
+        for (k, &uk) in u.iter().enumerate() {
+            let c = self.b_u.col_as_slice(k);
+            f1.iter_mut().zip(c).for_each(|(f, a)| *f += uk * a);
+        }
+        if let Some(j) = jac.as_deref_mut() {
+            let j = &mut j[..n * n];
+            j.fill(0.0);
+            for c in 0..na {
+                j[c * n..c * n + na].copy_from_slice(self.sigma.col_as_slice(c));
             }
-            f2[j] = acc;
+            for c in 0..nb {
+                let w = self.w.col_as_slice(c);
+                j[(na + c) * n..(na + c) * n + na].copy_from_slice(w);
+                for (r, wr) in w.iter().enumerate() {
+                    j[r * n + na + c] = -wr;
+                }
+            }
         }
-        for &(i, j, l, v) in &self.gamma1.entries {
-            f1[i as usize] -= v * q1[j as usize] * q1[l as usize];
-        }
-        for &(i, j, l, v) in &self.gamma2.entries {
-            let (i, j, l) = (i as usize, j as usize, l as usize);
-            f1[i] -= v * q2[j] * q2[l];
-            f2[j] += v * q1[i] * q2[l];
+        let mv = |out: &mut [f64], g: &[f64], rows: usize, x: &[f64]| {
+            gemm(view_mut(out, rows, 1), false, view(g, rows, x.len()), view(x, x.len(), 1), 1.0);
+        };
+        for lt in &self.links {
+            let ((o1, m), (o2, m2)) = (lt.c1, lt.c2);
+            let (u1, rest) = tmp[..2 * m * m + 2 * m * m2 + m2 * m2].split_at_mut(m * m);
+            let (j1, rest) = rest.split_at_mut(m * m);
+            let (t2, rest) = rest.split_at_mut(m * m2);
+            let (s2, k22) = rest.split_at_mut(m * m2);
+            let q1b = &q1[o1..o1 + m];
+            let q2b = &q2[o2..o2 + m2];
+            // Γ1: U[i, l] = Σ_j Γ1^l_ij q_j, f1 −= U q, J[·, l] −= U[·, l]
+            mv(u1, &lt.g1_jl, m * m, q1b);
+            gemv(&mut f1[o1..o1 + m], true, u1, m, q1b, -1.0);
+            // Γ2: T[i, j] = Σ_l Γ2^l_ij q2_l, S[i, l] = Σ_j Γ2^l_ij q2_j; f1 −= S q2, f2 += Tᵀ q1
+            mv(t2, &lt.g2_lj, m * m2, q2b);
+            mv(s2, &lt.g2_jl, m * m2, q2b);
+            gemv(&mut f1[o1..o1 + m], true, s2, m, q2b, -1.0);
+            gemv_t(&mut f2[o2..o2 + m2], true, t2, m, q1b, 1.0);
+            let Some(jm) = jac.as_deref_mut() else { continue };
+            // Γ1: Jc[i, j] = Σ_l Γ1^l_ij q_l; J[·, j] −= Jc[·, j] + U[·, j]
+            mv(j1, &lt.g1_lj, m * m, q1b);
+            // Γ2: K22[j, l] = Σ_i Γ2^l_ij q1_i
+            gemm(
+                view_mut(k22, m2 * m2, 1),
+                false,
+                view(&lt.g2_lj, m, m2 * m2).transpose(),
+                view(q1b, m, 1),
+                1.0,
+            );
+            for c in 0..m {
+                let col = &mut jm[(o1 + c) * n + o1..(o1 + c) * n + o1 + m];
+                col.iter_mut()
+                    .zip(&j1[c * m..(c + 1) * m])
+                    .zip(&u1[c * m..(c + 1) * m])
+                    .for_each(|((x, a), b)| *x -= a + b);
+            }
+            for c in 0..m2 {
+                let cc = na + o2 + c;
+                let col = &mut jm[cc * n + o1..cc * n + o1 + m];
+                col.iter_mut()
+                    .zip(&t2[c * m..(c + 1) * m])
+                    .zip(&s2[c * m..(c + 1) * m])
+                    .for_each(|((x, a), b)| *x -= a + b);
+                for (i, t) in t2[c * m..(c + 1) * m].iter().enumerate() {
+                    jm[(o1 + i) * n + cc] += t;
+                }
+                for (j, k) in k22[c * m2..(c + 1) * m2].iter().enumerate() {
+                    jm[cc * n + na + o2 + j] += k;
+                }
+            }
         }
     }
 
-    /// Dense Jacobian of `(f1, f2)` with respect to `(q1, q2)` (`(na + nb)²`).
-    pub fn jacobian(&self, q1: &[f64], q2: &[f64]) -> Mat<f64> {
-        let (na, nb) = (q1.len(), q2.len());
-        let mut j = Mat::<f64>::zeros(na + nb, na + nb);
-        for c in 0..na {
-            for r in 0..na {
-                j[(r, c)] = self.sigma[(r, c)];
-            }
-        }
-        for c in 0..nb {
-            for r in 0..na {
-                j[(r, na + c)] = self.w[(r, c)];
-                j[(na + c, r)] = -self.w[(r, c)];
-            }
-        }
-        for &(i, jj, l, v) in &self.gamma1.entries {
-            let (i, jj, l) = (i as usize, jj as usize, l as usize);
-            j[(i, jj)] -= v * q1[l];
-            j[(i, l)] -= v * q1[jj];
-        }
-        for &(i, jj, l, v) in &self.gamma2.entries {
-            let (i, jj, l) = (i as usize, jj as usize, l as usize);
-            j[(i, na + jj)] -= v * q2[l];
-            j[(i, na + l)] -= v * q2[jj];
-            j[(na + jj, i)] += v * q2[l];
-            j[(na + jj, na + l)] += v * q1[i];
-        }
-        j
+    /// `((first velocity column, count), (first force column, count))` per link when the
+    /// Jacobian of `(f1, f2)` is block-diagonal by link.
+    pub fn link_blocks(
+        &self,
+    ) -> Option<impl Iterator<Item = ((usize, usize), (usize, usize))> + '_> {
+        self.block_diagonal.then(|| self.links.iter().map(|l| (l.c1, l.c2)))
+    }
+
+    /// Scratch length [`AmbientOps::eval`] needs.
+    pub fn scratch_len(&self) -> usize {
+        self.links
+            .iter()
+            .map(|l| {
+                let (m, m2) = (l.c1.1, l.c2.1);
+                2 * m * m + 2 * m * m2 + m2 * m2
+            })
+            .max()
+            .unwrap_or(0)
     }
 }
