@@ -111,6 +111,34 @@ fn settings(variant: &str, p: &Problem) -> Result<SqpSettings> {
             qp_form: ocp_transcription::QpForm::CondensedDense,
             ..SqpSettings::converge(base.integrator.clone())
         },
+        "projected" => SqpSettings {
+            hessian: ocp_transcription::HessianApproximation::ExactProjected,
+            ..SqpSettings::converge(base.integrator.clone())
+        },
+        "projected-filter" => SqpSettings {
+            hessian: ocp_transcription::HessianApproximation::ExactProjected,
+            globalisation: Globalisation::filter(),
+            ..SqpSettings::converge(base.integrator.clone())
+        },
+        "projected-full" => SqpSettings {
+            hessian: ocp_transcription::HessianApproximation::ExactProjected,
+            globalisation: Globalisation::FullStep,
+            ..SqpSettings::converge(base.integrator.clone())
+        },
+        v if v.starts_with("hybrid-") => {
+            let (glob, tol) = match v.strip_prefix("hybrid-filter-") {
+                Some(t) => (Globalisation::filter(), t),
+                None => (Globalisation::merit_soc(), &v["hybrid-".len()..]),
+            };
+            let switch_kkt: f64 = tol.parse().with_context(|| format!("variant {v}"))?;
+            SqpSettings {
+                hessian: ocp_transcription::HessianApproximation::GaussNewtonThenExact {
+                    switch_kkt,
+                },
+                globalisation: glob,
+                ..SqpSettings::converge(base.integrator.clone())
+            }
+        }
         v => bail!("unknown variant `{v}`"),
     })
 }

@@ -1,6 +1,9 @@
 //! The SQP loop.
 
-use super::{status_of, Globalisation, IterationLog, SqpMode, SqpSolver, SqpStats, SqpStatus};
+use super::{
+    status_of, Globalisation, HessianApproximation, IterationLog, SqpMode, SqpSolver, SqpStats,
+    SqpStatus,
+};
 use crate::dynamics::Dynamics;
 use crate::error::{check_dim, invalid, Result};
 use crate::la::{all_finite, norm_inf};
@@ -26,6 +29,8 @@ impl<D: Dynamics> SqpSolver<D> {
             self.merit_nu = 0.0;
         }
         self.log.clear();
+        self.exact_phase = false;
+        self.inertia_delta = 0.0;
         self.x0.copy_from_slice(x0);
         let rti = self.settings.mode == SqpMode::RealTimeIteration;
         let max_it = if rti { 1 } else { self.settings.max_iterations };
@@ -48,6 +53,11 @@ impl<D: Dynamics> SqpSolver<D> {
             if !kkt.is_finite() {
                 status = SqpStatus::NonFiniteDynamics;
                 break;
+            }
+            if let HessianApproximation::GaussNewtonThenExact { switch_kkt } = self.settings.hessian
+            {
+                // from the next linearisation on
+                self.exact_phase |= kkt <= switch_kkt;
             }
             if !rti && kkt <= self.settings.kkt_tolerance {
                 status = SqpStatus::Solved;
@@ -76,7 +86,21 @@ impl<D: Dynamics> SqpSolver<D> {
                     step_norm = step_norm.max(norm_inf(self.step.du[k].as_slice()));
                 }
             }
-            let Some(t) = self.step_length(it == 0) else {
+            let mut t = self.step_length(it == 0);
+            if self.exact_phase && t != Some(1.0) {
+                t = match self.levenberg_marquardt_retries(it == 0, t) {
+                    Ok(t) => t,
+                    Err(QpFailure::Infeasible) => {
+                        status = SqpStatus::QpInfeasible;
+                        break;
+                    }
+                    Err(QpFailure::Failed) => {
+                        status = SqpStatus::QpFailed;
+                        break;
+                    }
+                };
+            }
+            let Some(t) = t else {
                 status = SqpStatus::LineSearchFailed;
                 self.log.push(IterationLog {
                     iteration: it,

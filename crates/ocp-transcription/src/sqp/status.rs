@@ -48,6 +48,10 @@ pub struct SqpStats {
     pub integrator_calls: usize,
     /// Hessian regularisations (exact Hessian only).
     pub regularisations: usize,
+    /// Iterations of [`HessianApproximation::GaussNewtonThenExact`](crate::HessianApproximation::GaussNewtonThenExact)
+    /// after the switch whose exact reduced Hessian was indefinite, so the QP took the
+    /// Gauss–Newton Hessian.
+    pub gauss_newton_fallbacks: usize,
     /// Second-order corrections accepted by the line search.
     pub second_order_corrections: usize,
     /// QPs solved again with a Levenberg–Marquardt term after a failure
@@ -80,6 +84,7 @@ impl Default for SqpStats {
             qp_iterations: 0,
             integrator_calls: 0,
             regularisations: 0,
+            gauss_newton_fallbacks: 0,
             second_order_corrections: 0,
             qp_recoveries: 0,
             kkt: f64::NAN,
