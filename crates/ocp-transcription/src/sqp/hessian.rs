@@ -105,8 +105,7 @@ impl<D: Dynamics> SqpSolver<D> {
     /// long steps along directions of almost zero curvature. Returns `false` when 30 shifts
     /// fail (the blocks are left shifted; the caller falls back to Gauss–Newton).
     pub(super) fn inertia_correction(&mut self) -> bool {
-        self.applied_delta = 0.0;
-        if self.boxqp_is_pd() {
+        if self.free_part_is_pd() {
             return true;
         }
         let mut c = 0.0_f64;
@@ -126,7 +125,7 @@ impl<D: Dynamics> SqpSolver<D> {
             let t = std::time::Instant::now();
             self.cond.condense(&self.lin);
             self.stats.time_condensing += t.elapsed().as_secs_f64();
-            if self.boxqp_is_pd() {
+            if self.free_part_is_pd() {
                 self.inertia_delta = delta;
                 self.applied_delta = delta;
                 return true;
@@ -146,9 +145,10 @@ impl<D: Dynamics> SqpSolver<D> {
         1e-4 * (1.0 + c)
     }
 
-    /// Step length of an exact-Hessian iteration whose QP step was not accepted in full
-    /// (`t` from the line search, `< 1` or failed): the step is a poor model of the problem
-    /// along its direction, so instead of a short step along it the shift is raised,
+    /// Step length of an exact-Hessian iteration whose QP step was not accepted in full, or of
+    /// a Gauss–Newton iteration whose line search failed (`t` from the line search): the step
+    /// is a poor model of the problem along its direction, so instead of a short step along it
+    /// the shift is raised,
     /// `δ ← max(10δ, δ₀)`, and the QP solved again (a Levenberg–Marquardt step, which turns
     /// towards the steepest descent of the Lagrangian as `δ` grows), up to eight times, until
     /// the full step is accepted; the last line-search result otherwise. The shift is
@@ -172,6 +172,30 @@ impl<D: Dynamics> SqpSolver<D> {
             t = self.step_length(first);
         }
         Ok(t)
+    }
+
+    /// Whether the condensed Hessian is positive definite on the controls that are not at a
+    /// bound at the iterate (the curvature along an active bound does not enter the
+    /// second-order condition; at a solution with active bounds the full condensed Hessian
+    /// may be indefinite while the step is a Newton step).
+    fn free_part_is_pd(&mut self) -> bool {
+        let m = self.cond.hc.nrows();
+        let mut h = self.cond.hc.clone();
+        for k in 0..self.n {
+            for i in 0..self.nu {
+                let (u, lo, hi) = (self.u[k][i], self.ocp.u_min[i], self.ocp.u_max[i]);
+                let tol = 1e-10 * (1.0 + u.abs());
+                if u - lo <= tol || hi - u <= tol {
+                    let j = k * self.nu + i;
+                    for r in 0..m {
+                        h[(r, j)] = 0.0;
+                        h[(j, r)] = 0.0;
+                    }
+                    h[(j, j)] = 1.0;
+                }
+            }
+        }
+        h.cholesky().is_some()
     }
 
     /// Adds `d` to the diagonals of every `Q_k` and `R_k`.

@@ -10,8 +10,9 @@ mod step;
 
 pub use settings::{
     Globalisation, HessianApproximation, SqpMode, SqpSettings, AUTO_SPARSE_CONDITION,
-    PROJECTION_FLOOR,
+    CONVERGE_SWITCH_KKT, PROJECTION_FLOOR,
 };
+pub use solve::Start;
 pub use status::{IterationLog, SqpStats, SqpStatus};
 
 use crate::dynamics::Dynamics;
@@ -348,6 +349,36 @@ impl<D: Dynamics> SqpSolver<D> {
                 self.u[k].as_slice(),
                 tail[0].as_mut_slice(),
             )?;
+        }
+        Ok(())
+    }
+
+    /// Cold start by rolling out the current controls: `s_0 = x0`, `s_{k+1} = Φ(s_k, u_k)`,
+    /// multipliers zero (a start with zero defects, e.g. when the nodes of a plan from another
+    /// model are outside the domain where this model's integration stays finite). `Err` with
+    /// the integrator's error when the rollout itself is not finite.
+    pub fn initialize_by_rollout(&mut self, x0: &[f64]) -> Result<()> {
+        check_dim("x0", self.nx, x0.len())?;
+        self.s[0].copy_from_slice(x0);
+        for k in 0..self.n {
+            let (head, tail) = self.s.split_at_mut(k + 1);
+            let c = self.integrators[0].choose_substeps(
+                &self.model,
+                head[k].as_slice(),
+                self.u[k].as_slice(),
+                None,
+            );
+            self.integrators[0].set_substeps(c)?;
+            self.counts[k] = c;
+            self.integrators[0].integrate(
+                &self.model,
+                head[k].as_slice(),
+                self.u[k].as_slice(),
+                tail[0].as_mut_slice(),
+            )?;
+        }
+        for l in &mut self.lam {
+            l.fill(0.0);
         }
         Ok(())
     }

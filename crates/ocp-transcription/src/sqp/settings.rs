@@ -41,6 +41,10 @@ pub enum HessianApproximation {
     },
 }
 
+/// KKT residual at which [`SqpSettings::converge`] switches from the Gauss–Newton to the
+/// exact Hessian.
+pub const CONVERGE_SWITCH_KKT: f64 = 1e-2;
+
 /// Relative eigenvalue floor of [`HessianApproximation::ExactProjected`]: the stage blocks'
 /// eigenvalues are clipped to at least `PROJECTION_FLOOR · max(1, max |λᵢ|)`.
 pub const PROJECTION_FLOOR: f64 = 1e-4;
@@ -207,11 +211,14 @@ impl Default for SqpSettings {
 
 impl SqpSettings {
     /// A full SQP to the KKT tolerance 1e-8 (at most 60 iterations) with the
-    /// [second-order-corrected merit line search](Globalisation::merit_soc) and `integrator`:
-    /// the settings that solve one problem to convergence, whatever a real-time loop uses.
+    /// [second-order-corrected merit line search](Globalisation::merit_soc), QP recovery, the
+    /// Hessian [`HessianApproximation::GaussNewtonThenExact`] switching at
+    /// [`CONVERGE_SWITCH_KKT`] and `integrator`: the settings that solve one problem to
+    /// convergence, whatever a real-time loop uses.
     pub fn converge(integrator: IntegratorSettings) -> Self {
         Self {
             mode: SqpMode::Sqp,
+            hessian: HessianApproximation::GaussNewtonThenExact { switch_kkt: CONVERGE_SWITCH_KKT },
             globalisation: Globalisation::merit_soc(),
             max_iterations: 60,
             kkt_tolerance: 1e-8,
@@ -219,6 +226,13 @@ impl SqpSettings {
             integrator,
             ..Self::default()
         }
+    }
+
+    /// [`SqpSettings::converge`] with the [filter line search](Globalisation::filter) instead of
+    /// the merit: the second start of `flexmpc ocp --converge` (each converges on paper
+    /// problems where the other does not, measured in `docs/ocp-transcription.md`).
+    pub fn converge_filter(integrator: IntegratorSettings) -> Self {
+        Self { globalisation: Globalisation::filter(), ..Self::converge(integrator) }
     }
 
     /// Checks every field's range.

@@ -99,6 +99,21 @@ impl Default for SqpStats {
     }
 }
 
+impl SqpStats {
+    /// Whether this solve's result is preferable to `other`'s for the same problem: a
+    /// [`SqpStatus::Solved`] result over any other; among two solved, the lower cost (two local
+    /// minima); among two unsolved, the lower KKT residual (NaN last).
+    pub fn better_than(&self, other: &SqpStats) -> bool {
+        let (a, b) = (self.status == SqpStatus::Solved, other.status == SqpStatus::Solved);
+        match (a, b) {
+            (true, false) => true,
+            (false, true) => false,
+            (true, true) => self.cost < other.cost,
+            (false, false) => self.kkt < other.kkt || (other.kkt.is_nan() && !self.kkt.is_nan()),
+        }
+    }
+}
+
 /// One line of the iteration log.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct IterationLog {

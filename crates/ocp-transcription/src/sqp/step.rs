@@ -51,8 +51,8 @@ impl<D: Dynamics> SqpSolver<D> {
                 self.cond.condense(&self.lin);
                 self.stats.time_condensing += t.elapsed().as_secs_f64();
                 self.stats.gauss_newton_fallbacks += 1;
+                exact = false;
             }
-            exact = false;
         }
         let t = Instant::now();
         let mut iters = 0;
