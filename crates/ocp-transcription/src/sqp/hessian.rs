@@ -95,7 +95,8 @@ impl<D: Dynamics> SqpSolver<D> {
 impl<D: Dynamics> SqpSolver<D> {
     /// Inertia correction of the exact Hessian in the full space (the rule of IPOPT,
     /// Wächter & Biegler 2006, §3.1, Algorithm IC): when the condensed Hessian `H_c` is not
-    /// positive definite, `δI` is added to every block `Q_k`, `R_k` and `H_c` is formed again,
+    /// positive definite on the controls not at a bound ([`Self::free_part_is_pd`]), `δI` is
+    /// added to every block `Q_k`, `R_k` and `H_c` is formed again,
     /// with `δ = max(δ_min, δ_last/3)` first (`δ = δ₀ = 1e-4·(1 + c)` when no shift was
     /// needed before in this solve, `c` the largest diagonal entry of the cost Hessian), then
     /// `δ ← 8δ` (`100δ` without a previous shift) until a Cholesky factorisation succeeds.

@@ -1,7 +1,7 @@
 //! Integration tests of `ocp-transcription` (one binary).
 
 mod adaptive;
-mod explore;
 mod globalisation;
+mod hessian;
 mod integrators;
 mod sqp;
