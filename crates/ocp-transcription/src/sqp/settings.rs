@@ -258,7 +258,7 @@ impl SqpSettings {
             return Err(invalid("qp_max_iterations", self.qp_max_iterations, "must be at least 1"));
         }
         if let HessianApproximation::GaussNewtonThenExact { switch_kkt } = self.hessian {
-            if !(switch_kkt > 0.0) {
+            if switch_kkt.is_nan() || switch_kkt <= 0.0 {
                 return Err(invalid("hessian.switch_kkt", switch_kkt, "must be positive"));
             }
         }

@@ -43,16 +43,15 @@ impl<D: Dynamics> SqpSolver<D> {
         let mut exact = self.exact_now() && self.lq.is_none();
         if exact
             && matches!(self.settings.hessian, HessianApproximation::GaussNewtonThenExact { .. })
+            && !self.inertia_correction()
         {
-            if !self.inertia_correction() {
-                // no shift made the reduced Hessian definite: take the Gauss–Newton step
-                self.gauss_newton_blocks();
-                let t = Instant::now();
-                self.cond.condense(&self.lin);
-                self.stats.time_condensing += t.elapsed().as_secs_f64();
-                self.stats.gauss_newton_fallbacks += 1;
-                exact = false;
-            }
+            // no shift made the reduced Hessian definite: take the Gauss–Newton step
+            self.gauss_newton_blocks();
+            let t = Instant::now();
+            self.cond.condense(&self.lin);
+            self.stats.time_condensing += t.elapsed().as_secs_f64();
+            self.stats.gauss_newton_fallbacks += 1;
+            exact = false;
         }
         let t = Instant::now();
         let mut iters = 0;
