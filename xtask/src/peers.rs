@@ -88,6 +88,11 @@ fn settings(variant: &str, p: &Problem) -> Result<SqpSettings> {
             ..base
         },
         "converge" => SqpSettings::converge(base.integrator.clone()),
+        "converge-filter" => SqpSettings::converge_filter(base.integrator.clone()),
+        "gn-converge" => SqpSettings {
+            hessian: ocp_transcription::HessianApproximation::GaussNewton,
+            ..SqpSettings::converge(base.integrator.clone())
+        },
         "soc200" => {
             SqpSettings { max_iterations: 200, ..SqpSettings::converge(base.integrator.clone()) }
         }
@@ -111,6 +116,34 @@ fn settings(variant: &str, p: &Problem) -> Result<SqpSettings> {
             qp_form: ocp_transcription::QpForm::CondensedDense,
             ..SqpSettings::converge(base.integrator.clone())
         },
+        "projected" => SqpSettings {
+            hessian: ocp_transcription::HessianApproximation::ExactProjected,
+            ..SqpSettings::converge(base.integrator.clone())
+        },
+        "projected-filter" => SqpSettings {
+            hessian: ocp_transcription::HessianApproximation::ExactProjected,
+            globalisation: Globalisation::filter(),
+            ..SqpSettings::converge(base.integrator.clone())
+        },
+        "projected-full" => SqpSettings {
+            hessian: ocp_transcription::HessianApproximation::ExactProjected,
+            globalisation: Globalisation::FullStep,
+            ..SqpSettings::converge(base.integrator.clone())
+        },
+        v if v.starts_with("hybrid-") => {
+            let (glob, tol) = match v.strip_prefix("hybrid-filter-") {
+                Some(t) => (Globalisation::filter(), t),
+                None => (Globalisation::merit_soc(), &v["hybrid-".len()..]),
+            };
+            let switch_kkt: f64 = tol.parse().with_context(|| format!("variant {v}"))?;
+            SqpSettings {
+                hessian: ocp_transcription::HessianApproximation::GaussNewtonThenExact {
+                    switch_kkt,
+                },
+                globalisation: glob,
+                ..SqpSettings::converge(base.integrator.clone())
+            }
+        }
         v => bail!("unknown variant `{v}`"),
     })
 }
@@ -135,7 +168,7 @@ pub fn solve(p: &Problem, settings: SqpSettings) -> Result<(SqpStats, f64, Vec<f
         d.copy_from(s);
     }
     let c0 = cpu_now();
-    let st = nmpc.solve(&p.x0)?;
+    let (st, _) = nmpc.solve_with_fallback_starts(&p.x0)?;
     let cpu = cpu_now() - c0;
     if std::env::var_os("PEERS_LOG").is_some() {
         for l in nmpc.log() {

@@ -318,8 +318,12 @@ pub fn run_sweep(
 /// same problem.
 ///
 /// With `converge` (NMPC), the problem is solved to convergence from the linear MPC plan by a
-/// full SQP ([`ocp_transcription::SqpSettings::converge`]: KKT tolerance 1e-8, no fallback),
-/// whatever the scene's real-time settings; `optimum` says whether the status is `Solved`.
+/// full SQP twice, with [`ocp_transcription::SqpSettings::converge`] (merit line search) and
+/// [`ocp_transcription::SqpSettings::converge_filter`] (KKT tolerance 1e-8, Gauss–Newton then
+/// exact Hessian), whatever the scene's real-time settings, and the better result
+/// ([`ocp_transcription::SqpStats::better_than`]) is reported (`line_search`); when the
+/// nonlinear model is not finite at the plan's nodes, the plan's controls rolled out from the
+/// initial state are the start. `optimum` says whether the status is `Solved`.
 /// Without it the scene's controller takes its first sample; a real-time iteration is
 /// reported as such (`real_time_iteration`): `cost` is that of the returned plan (after the
 /// step), and the KKT residual, only known at the point before the step, is
@@ -373,7 +377,7 @@ pub fn first_sample(
         "export": export,
     });
     let fields = if converge && control.controller.kind == ControllerKind::Nmpc {
-        use ocp_transcription::{Globalisation, SqpMode, SqpSettings, SqpSolver, SqpStatus};
+        use ocp_transcription::{Globalisation, SqpMode, SqpSettings, SqpSolver, SqpStatus, Start};
         let integrator = control.controller.integrator.clone();
         let lq = SqpSettings {
             mode: SqpMode::LinearQuadratic,
@@ -384,14 +388,29 @@ pub fn first_sample(
         };
         let mut lmpc = SqpSolver::new(model.clone(), ocp.clone(), lq)?;
         lmpc.solve(&problem.x0)?;
-        let mut nmpc = SqpSolver::new(model, ocp, SqpSettings::converge(integrator))?;
-        for (d, s) in nmpc.states_mut().iter_mut().zip(lmpc.states()) {
-            d.copy_from(s);
+        // the merit and the filter line search from the same start; the better result is kept
+        type Attempt =
+            (SqpSolver<mpc::RomDynamics>, ocp_transcription::SqpStats, &'static str, Start);
+        let mut best: Option<Attempt> = None;
+        let mut time = 0.0;
+        for (name, settings) in [
+            ("merit", SqpSettings::converge(integrator.clone())),
+            ("filter", SqpSettings::converge_filter(integrator.clone())),
+        ] {
+            let mut nmpc = SqpSolver::new(model.clone(), ocp.clone(), settings)?;
+            for (d, s) in nmpc.states_mut().iter_mut().zip(lmpc.states()) {
+                d.copy_from(s);
+            }
+            for (d, s) in nmpc.controls_mut().iter_mut().zip(lmpc.controls()) {
+                d.copy_from(s);
+            }
+            let (st, start) = nmpc.solve_with_fallback_starts(&problem.x0)?;
+            time += st.time_total;
+            if best.as_ref().is_none_or(|(_, b, _, _)| st.better_than(b)) {
+                best = Some((nmpc, st, name, start));
+            }
         }
-        for (d, s) in nmpc.controls_mut().iter_mut().zip(lmpc.controls()) {
-            d.copy_from(s);
-        }
-        let st = nmpc.solve(&problem.x0)?;
+        let (nmpc, st, line_search, start) = best.context("no converge attempt ran")?;
         serde_json::json!({
             "mode": "converge",
             "optimum": st.status == SqpStatus::Solved,
@@ -401,8 +420,10 @@ pub fn first_sample(
             "constraint_violation": st.constraint_violation,
             "status": format!("{:?}", st.status),
             "strategy": "sqp",
+            "line_search": line_search,
+            "start": format!("{start:?}"),
             "iterations": st.iterations,
-            "solve_time_s": st.time_total,
+            "solve_time_s": time,
             "controls": rows(nmpc.controls()),
         })
     } else {

@@ -86,5 +86,5 @@ pub use qp::QpForm;
 pub use quadratic::QuadraticTerms;
 pub use sqp::{
     Globalisation, HessianApproximation, IterationLog, SqpMode, SqpSettings, SqpSolver, SqpStats,
-    SqpStatus, AUTO_SPARSE_CONDITION,
+    SqpStatus, Start, AUTO_SPARSE_CONDITION, CONVERGE_SWITCH_KKT, PROJECTION_FLOOR,
 };

@@ -39,7 +39,7 @@ impl<D: Dynamics> SqpSolver<D> {
     /// Linearises at the current iterate: `Φ`, `A`, `B`, defects, Hessian blocks, gradients, bounds.
     pub(super) fn linearise(&mut self, with_hessian: bool, fresh_counts: bool) -> Result<()> {
         let n = self.n;
-        let exact = with_hessian && self.settings.hessian == HessianApproximation::Exact;
+        let exact = with_hessian && self.exact_now();
         let t0 = Instant::now();
         if self.lq.is_none() {
             self.choose_counts(fresh_counts);
@@ -167,6 +167,9 @@ impl<D: Dynamics> SqpSolver<D> {
                 self.lin.d[k].copy_from(&self.phi[k]);
                 self.lin.d[k] -= &self.s[k + 1];
             }
+        }
+        if exact_blocks && self.settings.hessian == HessianApproximation::ExactProjected {
+            self.project_stage_blocks();
         }
         self.lin.g0.copy_from(&self.x0);
         self.lin.g0 -= &self.s[0];

@@ -1,6 +1,7 @@
 //! The multiple-shooting SQP solver: settings, status, counters, warm start and shift.
 
 mod filter;
+mod hessian;
 mod linearise;
 mod settings;
 mod solve;
@@ -9,7 +10,9 @@ mod step;
 
 pub use settings::{
     Globalisation, HessianApproximation, SqpMode, SqpSettings, AUTO_SPARSE_CONDITION,
+    CONVERGE_SWITCH_KKT, PROJECTION_FLOOR,
 };
+pub use solve::Start;
 pub use status::{IterationLog, SqpStats, SqpStatus};
 
 use crate::dynamics::Dynamics;
@@ -63,6 +66,13 @@ pub struct SqpSolver<D: Dynamics> {
     log: Vec<IterationLog>,
     stats: SqpStats,
     merit_nu: f64,
+    /// [`HessianApproximation::GaussNewtonThenExact`]: the switch to the exact Hessian was made
+    /// in this solve.
+    exact_phase: bool,
+    /// Last inertia-correction shift `δ` of this solve (0: none yet).
+    inertia_delta: f64,
+    /// Shift `δ` on the Hessian blocks of the current linearisation.
+    applied_delta: f64,
     /// `Φ(s_k + tΔs_k, u_k + tΔu_k)` of the last line-search trial.
     trial_phi: Vec<DVector<f64>>,
     /// Defects and step saved around a second-order correction.
@@ -111,13 +121,14 @@ impl<D: Dynamics> SqpSolver<D> {
         if nu == 0 {
             return Err(invalid("nu", nu, "the model must have at least one control"));
         }
-        let exact = settings.hessian == HessianApproximation::Exact;
+        let exact = settings.hessian.is_exact();
         if exact && !model.has_second_order() {
             return Err(OcpError::Unsupported {
                 what: "exact Hessian with a model without weighted_hessian",
             });
         }
         if exact
+            && settings.hessian != HessianApproximation::ExactProjected
             && settings.qp_form == QpForm::SparseClarabel
             && settings.mode != SqpMode::LinearQuadratic
         {
@@ -165,6 +176,9 @@ impl<D: Dynamics> SqpSolver<D> {
             log: Vec::with_capacity(settings.max_iterations + 1),
             stats: SqpStats::default(),
             merit_nu: 0.0,
+            exact_phase: false,
+            inertia_delta: 0.0,
+            applied_delta: 0.0,
             trial_phi: vec![DVector::zeros(nx); n],
             d_saved: vec![DVector::zeros(nx); n],
             step_saved: Step::new(n, nx, nu),
@@ -339,6 +353,36 @@ impl<D: Dynamics> SqpSolver<D> {
         Ok(())
     }
 
+    /// Cold start by rolling out the current controls: `s_0 = x0`, `s_{k+1} = Φ(s_k, u_k)`,
+    /// multipliers zero (a start with zero defects, e.g. when the nodes of a plan from another
+    /// model are outside the domain where this model's integration stays finite). `Err` with
+    /// the integrator's error when the rollout itself is not finite.
+    pub fn initialize_by_rollout(&mut self, x0: &[f64]) -> Result<()> {
+        check_dim("x0", self.nx, x0.len())?;
+        self.s[0].copy_from_slice(x0);
+        for k in 0..self.n {
+            let (head, tail) = self.s.split_at_mut(k + 1);
+            let c = self.integrators[0].choose_substeps(
+                &self.model,
+                head[k].as_slice(),
+                self.u[k].as_slice(),
+                None,
+            );
+            self.integrators[0].set_substeps(c)?;
+            self.counts[k] = c;
+            self.integrators[0].integrate(
+                &self.model,
+                head[k].as_slice(),
+                self.u[k].as_slice(),
+                tail[0].as_mut_slice(),
+            )?;
+        }
+        for l in &mut self.lam {
+            l.fill(0.0);
+        }
+        Ok(())
+    }
+
     /// Shifts the iterate by `m` whole intervals (warm start for the next sample when the
     /// sampling time equals `m Δt`); the tail repeats the last node/control.
     pub fn shift(&mut self, m: usize) {
@@ -386,6 +430,20 @@ impl<D: Dynamics> SqpSolver<D> {
         std::mem::swap(&mut self.lam, &mut self.shift_l);
         std::mem::swap(&mut self.u, &mut self.shift_u);
         Ok(())
+    }
+
+    /// Whether the next linearisation forms the exact Hessian `∇²(ℓ + λᵀΦ)`.
+    fn exact_now(&self) -> bool {
+        match self.settings.hessian {
+            HessianApproximation::GaussNewton => false,
+            HessianApproximation::GaussNewtonThenExact { .. } => self.exact_phase,
+            _ => true,
+        }
+    }
+
+    /// Whether the stage blocks of the next QP may be indefinite (exact, not projected).
+    fn indefinite_blocks_now(&self) -> bool {
+        self.exact_now() && self.settings.hessian != HessianApproximation::ExactProjected
     }
 
     /// Substep count of each interval in the last linearisation (all equal unless

@@ -10,7 +10,7 @@ use crate::qp::QpForm;
 pub const AUTO_SPARSE_CONDITION: f64 = 1e10;
 
 /// Hessian of the QP subproblems.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 #[non_exhaustive]
 pub enum HessianApproximation {
     /// Gauss–Newton: the cost Hessian (exact for the quadratic cost (34), no integrator work).
@@ -20,6 +20,41 @@ pub enum HessianApproximation {
     /// integrator and a condensed QP form).
     /// Indefinite condensed Hessians are regularised by `δI` until a Cholesky succeeds.
     Exact,
+    /// Exact Hessian of the Lagrangian with every stage block projected onto the positive
+    /// definite matrices before the QP (acados' `PROJECT`): the block
+    /// `H_k = ∇²_{(s,u)}(ℓ_k + λ_{k+1}ᵀΦ_k)` is eigen-decomposed, `H_k = VΛVᵀ`, and replaced by
+    /// `V max(Λ, ε_k) Vᵀ` with `ε_k = PROJECTION_FLOOR · max(1, max|Λ|)` (see
+    /// [`PROJECTION_FLOOR`]). The QP is then convex in every form (the sparse form too), the
+    /// step a descent direction of the merit, and near a solution with positive definite blocks
+    /// the projection is inactive (superlinear convergence). Needs what [`Self::Exact`] needs
+    /// except the condensed form.
+    ExactProjected,
+    /// Gauss–Newton until the KKT residual of an iterate is at most `switch_kkt`, then
+    /// [`Self::Exact`] for the rest of the solve. Gauss–Newton steps are descent directions of
+    /// the merit far from a solution (its Hessian is positive definite) and lead into the basin
+    /// of the lower minimum on the paper problems; near the solution Gauss–Newton converges
+    /// only linearly (it omits `λᵀ∇²Φ`), and the merit line search can stall on its steps,
+    /// while the exact Hessian converges superlinearly. Needs what [`Self::Exact`] needs.
+    GaussNewtonThenExact {
+        /// KKT residual (max norm) at or below which the exact Hessian is used, in `(0, ∞)`.
+        switch_kkt: f64,
+    },
+}
+
+/// KKT residual at which [`SqpSettings::converge`] switches from the Gauss–Newton to the
+/// exact Hessian.
+pub const CONVERGE_SWITCH_KKT: f64 = 1e-2;
+
+/// Relative eigenvalue floor of [`HessianApproximation::ExactProjected`]: the stage blocks'
+/// eigenvalues are clipped to at least `PROJECTION_FLOOR · max(1, max |λᵢ|)`.
+pub const PROJECTION_FLOOR: f64 = 1e-4;
+
+impl HessianApproximation {
+    /// Whether the Hessian includes (or may switch to) the dynamics' curvature `λᵀ∇²Φ`
+    /// (integrator adjoint sweeps).
+    pub fn is_exact(self) -> bool {
+        !matches!(self, HessianApproximation::GaussNewton)
+    }
 }
 
 /// Globalisation of the SQP step `w ← w + t Δw`.
@@ -176,11 +211,14 @@ impl Default for SqpSettings {
 
 impl SqpSettings {
     /// A full SQP to the KKT tolerance 1e-8 (at most 60 iterations) with the
-    /// [second-order-corrected merit line search](Globalisation::merit_soc) and `integrator`:
-    /// the settings that solve one problem to convergence, whatever a real-time loop uses.
+    /// [second-order-corrected merit line search](Globalisation::merit_soc), QP recovery, the
+    /// Hessian [`HessianApproximation::GaussNewtonThenExact`] switching at
+    /// [`CONVERGE_SWITCH_KKT`] and `integrator`: the settings that solve one problem to
+    /// convergence, whatever a real-time loop uses.
     pub fn converge(integrator: IntegratorSettings) -> Self {
         Self {
             mode: SqpMode::Sqp,
+            hessian: HessianApproximation::GaussNewtonThenExact { switch_kkt: CONVERGE_SWITCH_KKT },
             globalisation: Globalisation::merit_soc(),
             max_iterations: 60,
             kkt_tolerance: 1e-8,
@@ -188,6 +226,13 @@ impl SqpSettings {
             integrator,
             ..Self::default()
         }
+    }
+
+    /// [`SqpSettings::converge`] with the [filter line search](Globalisation::filter) instead of
+    /// the merit: the second start of `flexmpc ocp --converge` (each converges on paper
+    /// problems where the other does not, measured in `docs/ocp-transcription.md`).
+    pub fn converge_filter(integrator: IntegratorSettings) -> Self {
+        Self { globalisation: Globalisation::filter(), ..Self::converge(integrator) }
     }
 
     /// Checks every field's range.
@@ -211,6 +256,11 @@ impl SqpSettings {
         }
         if self.qp_max_iterations == 0 {
             return Err(invalid("qp_max_iterations", self.qp_max_iterations, "must be at least 1"));
+        }
+        if let HessianApproximation::GaussNewtonThenExact { switch_kkt } = self.hessian {
+            if switch_kkt.is_nan() || switch_kkt <= 0.0 {
+                return Err(invalid("hessian.switch_kkt", switch_kkt, "must be positive"));
+            }
         }
         match self.globalisation {
             Globalisation::FullStep => {}

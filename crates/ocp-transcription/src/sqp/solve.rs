@@ -1,13 +1,58 @@
 //! The SQP loop.
 
-use super::{status_of, Globalisation, IterationLog, SqpMode, SqpSolver, SqpStats, SqpStatus};
+use super::{
+    status_of, Globalisation, HessianApproximation, IterationLog, SqpMode, SqpSolver, SqpStats,
+    SqpStatus,
+};
 use crate::dynamics::Dynamics;
 use crate::error::{check_dim, invalid, Result};
 use crate::la::{all_finite, norm_inf};
 use crate::qp::QpFailure;
 use std::time::Instant;
 
+/// The start a [`SqpSolver::solve_with_fallback_starts`] ended up using.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum Start {
+    /// The iterate as given.
+    Given,
+    /// The given controls rolled out from `x0` ([`SqpSolver::initialize_by_rollout`]).
+    RolledOutControls,
+    /// The reference control (clamped into the bounds) rolled out from `x0`.
+    RolledOutReference,
+}
+
 impl<D: Dynamics> SqpSolver<D> {
+    /// [`SqpSolver::solve`] from the current iterate; when the dynamics are not finite there
+    /// (status [`SqpStatus::NonFiniteDynamics`] before any iteration, e.g. nodes of a linear
+    /// model's plan where the nonlinear model's integration overflows), from the current
+    /// controls rolled out from `x0`, and when that rollout is not finite either, from the
+    /// reference control rolled out. Returns the last solve's counters and the start used
+    /// (the first start's status when no rollout is finite).
+    pub fn solve_with_fallback_starts(&mut self, x0: &[f64]) -> Result<(SqpStats, Start)> {
+        let st = self.solve(x0)?;
+        if !(st.iterations == 0 && st.status == SqpStatus::NonFiniteDynamics) {
+            return Ok((st, Start::Given));
+        }
+        let elapsed = st.time_total;
+        let with_time = |mut s: SqpStats| {
+            s.time_total += elapsed;
+            s
+        };
+        if self.initialize_by_rollout(x0).is_ok() {
+            let s = self.solve(x0)?;
+            return Ok((with_time(s), Start::RolledOutControls));
+        }
+        let u = self.ocp.u_ref.clone();
+        self.initialize_constant(x0, u.as_slice())?;
+        if self.initialize_by_rollout(x0).is_ok() {
+            let s = self.solve(x0)?;
+            return Ok((with_time(s), Start::RolledOutReference));
+        }
+        self.stats = st;
+        Ok((st, Start::Given))
+    }
+
     /// Runs the SQP from the current iterate for the initial state `x0`.
     ///
     /// Returns the counters (also kept in [`SqpSolver::stats`]); `Err` only for a wrong
@@ -26,6 +71,8 @@ impl<D: Dynamics> SqpSolver<D> {
             self.merit_nu = 0.0;
         }
         self.log.clear();
+        self.exact_phase = false;
+        self.inertia_delta = 0.0;
         self.x0.copy_from_slice(x0);
         let rti = self.settings.mode == SqpMode::RealTimeIteration;
         let max_it = if rti { 1 } else { self.settings.max_iterations };
@@ -36,6 +83,7 @@ impl<D: Dynamics> SqpSolver<D> {
                 status = status_of(&e);
                 break;
             }
+            self.applied_delta = 0.0;
             let (kkt, viol) = self.kkt();
             let s = std::mem::take(&mut self.s);
             let u = std::mem::take(&mut self.u);
@@ -48,6 +96,11 @@ impl<D: Dynamics> SqpSolver<D> {
             if !kkt.is_finite() {
                 status = SqpStatus::NonFiniteDynamics;
                 break;
+            }
+            if let HessianApproximation::GaussNewtonThenExact { switch_kkt } = self.settings.hessian
+            {
+                // from the next linearisation on
+                self.exact_phase |= kkt <= switch_kkt;
             }
             if !rti && kkt <= self.settings.kkt_tolerance {
                 status = SqpStatus::Solved;
@@ -76,7 +129,23 @@ impl<D: Dynamics> SqpSolver<D> {
                     step_norm = step_norm.max(norm_inf(self.step.du[k].as_slice()));
                 }
             }
-            let Some(t) = self.step_length(it == 0) else {
+            let mut t = self.step_length(it == 0);
+            let hybrid =
+                matches!(self.settings.hessian, HessianApproximation::GaussNewtonThenExact { .. });
+            if hybrid && ((self.exact_phase && t != Some(1.0)) || t.is_none()) {
+                t = match self.levenberg_marquardt_retries(it == 0, t) {
+                    Ok(t) => t,
+                    Err(QpFailure::Infeasible) => {
+                        status = SqpStatus::QpInfeasible;
+                        break;
+                    }
+                    Err(QpFailure::Failed) => {
+                        status = SqpStatus::QpFailed;
+                        break;
+                    }
+                };
+            }
+            let Some(t) = t else {
                 status = SqpStatus::LineSearchFailed;
                 self.log.push(IterationLog {
                     iteration: it,

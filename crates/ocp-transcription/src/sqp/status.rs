@@ -48,6 +48,10 @@ pub struct SqpStats {
     pub integrator_calls: usize,
     /// Hessian regularisations (exact Hessian only).
     pub regularisations: usize,
+    /// Iterations of [`HessianApproximation::GaussNewtonThenExact`](crate::HessianApproximation::GaussNewtonThenExact)
+    /// after the switch whose exact reduced Hessian was indefinite, so the QP took the
+    /// Gauss–Newton Hessian.
+    pub gauss_newton_fallbacks: usize,
     /// Second-order corrections accepted by the line search.
     pub second_order_corrections: usize,
     /// QPs solved again with a Levenberg–Marquardt term after a failure
@@ -80,6 +84,7 @@ impl Default for SqpStats {
             qp_iterations: 0,
             integrator_calls: 0,
             regularisations: 0,
+            gauss_newton_fallbacks: 0,
             second_order_corrections: 0,
             qp_recoveries: 0,
             kkt: f64::NAN,
@@ -90,6 +95,21 @@ impl Default for SqpStats {
             time_qp: 0.0,
             time_total: 0.0,
             mean_substeps: f64::NAN,
+        }
+    }
+}
+
+impl SqpStats {
+    /// Whether this solve's result is preferable to `other`'s for the same problem: a
+    /// [`SqpStatus::Solved`] result over any other; among two solved, the lower cost (two local
+    /// minima); among two unsolved, the lower KKT residual (NaN last).
+    pub fn better_than(&self, other: &SqpStats) -> bool {
+        let (a, b) = (self.status == SqpStatus::Solved, other.status == SqpStatus::Solved);
+        match (a, b) {
+            (true, false) => true,
+            (false, true) => false,
+            (true, true) => self.cost < other.cost,
+            (false, false) => self.kkt < other.kkt || (other.kkt.is_nan() && !self.kkt.is_nan()),
         }
     }
 }

@@ -25,9 +25,7 @@ impl<D: Dynamics> SqpSolver<D> {
             self.stats.time_condensing += t.elapsed().as_secs_f64();
             // Auto: an ill-conditioned condensed Hessian (unstable dynamics over the horizon)
             // loses digits in any condensed solve; the multiple-shooting QP does not
-            if self.settings.qp_form == QpForm::Auto
-                && self.settings.hessian == HessianApproximation::GaussNewton
-            {
+            if self.settings.qp_form == QpForm::Auto && !self.indefinite_blocks_now() {
                 let t = Instant::now();
                 let cond = self.boxqp.condition_estimate(&self.cond.hc);
                 self.stats.time_qp += t.elapsed().as_secs_f64();
@@ -42,8 +40,20 @@ impl<D: Dynamics> SqpSolver<D> {
             self.stats.time_qp += t.elapsed().as_secs_f64();
             return r;
         }
+        let mut exact = self.exact_now() && self.lq.is_none();
+        if exact
+            && matches!(self.settings.hessian, HessianApproximation::GaussNewtonThenExact { .. })
+            && !self.inertia_correction()
+        {
+            // no shift made the reduced Hessian definite: take the Gauss–Newton step
+            self.gauss_newton_blocks();
+            let t = Instant::now();
+            self.cond.condense(&self.lin);
+            self.stats.time_condensing += t.elapsed().as_secs_f64();
+            self.stats.gauss_newton_fallbacks += 1;
+            exact = false;
+        }
         let t = Instant::now();
-        let exact = self.settings.hessian == HessianApproximation::Exact && self.lq.is_none();
         let mut iters = 0;
         let mut delta = 0.0;
         let diag_scale =

@@ -2,5 +2,6 @@
 
 mod adaptive;
 mod globalisation;
+mod hessian;
 mod integrators;
 mod sqp;
