@@ -957,5 +957,8 @@ impl Beam {
     }
 }
 
+mod balance;
+pub use balance::EnergyBalance;
+
 #[cfg(test)]
 mod tests;

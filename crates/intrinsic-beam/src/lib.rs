@@ -102,7 +102,7 @@ mod section;
 mod sparse;
 mod step_system;
 
-pub use beam::{Beam, LinearOperators, StepInput, StepPower};
+pub use beam::{Beam, EnergyBalance, LinearOperators, StepInput, StepPower};
 pub use components::{Components, OUT_OF_PLANE_INDICES, PLANAR_INDICES, SPATIAL_INDICES};
 pub use error::{BeamError, Result};
 pub use kinematics::Kinematics;

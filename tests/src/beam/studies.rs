@@ -377,7 +377,7 @@ pub fn midpoint_vs_rk4(n_elements: usize, dt: f64, dt_rk4: f64, t_end: f64) -> R
 /// balance Σ mid·R − (Δε/dt − P)]`, each relative to the size of its terms.
 pub fn identity_residuals(cases: usize, seed: u64) -> Result<[f64; 3]> {
     use intrinsic_beam::operators::{l1, l2};
-    use intrinsic_beam::samples::random::{random_section, random_vec, seeded};
+    use intrinsic_beam::samples::random::{random_load, random_section, random_vec, seeded};
     use intrinsic_beam::{LoadFrame, Loads};
     use nalgebra::Vector6;
     use rand::Rng;
@@ -397,12 +397,7 @@ pub fn identity_residuals(cases: usize, seed: u64) -> Result<[f64; 3]> {
         let n = 1 + case % 6;
         let beam =
             Beam::new(section, Mesh::graded(1.0, n, 0.5 + rng.random::<f64>() * 2.0)?, comp)?;
-        let mut load = Vector6::from_fn(|_, _| rng.random_range(-1.0..1.0));
-        if comp == Components::Planar {
-            for j in [1, 3, 5] {
-                load[j] = 0.0;
-            }
-        }
+        let load = random_load(&mut rng, comp);
         let loads = Loads::none()
             .with_point(n, LoadFrame::Dead, load)
             .with_distributed(LoadFrame::Follower, load);
@@ -411,15 +406,8 @@ pub fn identity_residuals(cases: usize, seed: u64) -> Result<[f64; 3]> {
         let new = random_vec(&mut rng, beam.dim());
         let dt = 10f64.powf(rng.random_range(-4.0..0.0));
         let input = StepInput { time: 0.0, dt, loads: &loads, node_quaternions: &kin.xi };
-        let mut res = vec![0.0; beam.n_rows()];
-        beam.step_residual(&input, &old, &new, &mut res)?;
-        let mut mid = vec![0.0; beam.dim()];
-        beam.midpoint(&old, &new, &mut mid)?;
-        let lhs: f64 = res.iter().zip(&mid).map(|(r, m)| r * m).sum();
-        let scale: f64 = res.iter().zip(&mid).map(|(r, m)| (r * m).abs()).sum();
-        let pw = beam.step_power(&input, &old, &new)?;
-        let de = (beam.energy(&new)? - beam.energy(&old)?) / dt;
-        worst[2] = worst[2].max((lhs - (de - pw.boundary - pw.loads - pw.damping)).abs() / scale);
+        let b = beam.energy_balance(&input, &old, &new)?;
+        worst[2] = worst[2].max(b.defect() / b.terms);
     }
     Ok(worst)
 }

@@ -55,16 +55,9 @@ fn residual_energy_identity_holds_for_any_states() {
     {
         let (beam, loads, kin, old, new) = setup(seed, comp, true);
         let input = StepInput { time: 0.3, dt: 0.01, loads: &loads, node_quaternions: &kin.xi };
-        let mut res = vec![0.0; beam.n_rows()];
-        beam.step_residual(&input, &old, &new, &mut res).unwrap();
-        let mut mid = vec![0.0; beam.dim()];
-        beam.midpoint(&old, &new, &mut mid).unwrap();
-        let lhs: f64 = res.iter().zip(&mid).map(|(r, m)| r * m).sum();
-        let p = beam.step_power(&input, &old, &new).unwrap();
-        let de = (beam.energy(&new).unwrap() - beam.energy(&old).unwrap()) / input.dt;
-        let rhs = de - p.boundary - p.loads - p.damping;
+        let b = beam.energy_balance(&input, &old, &new).unwrap();
         // terms are O(100) (1/dt × O(1) energies): round-off level is ~1e-12
-        assert!((lhs - rhs).abs() < 1e-10 * (1.0 + de.abs()), "{lhs} vs {rhs}");
+        assert!(b.defect() < 1e-10 * (1.0 + b.energy_rate.abs()), "{} vs {}", b.work, b.rate());
     }
 }
 
