@@ -1,7 +1,8 @@
 //! `cargo xtask bench`: run time against error for the four studies — (a) FE mesh
 //! against frequency error, (b) ROM mode count against trajectory error, (c) time step against
 //! error per integrator, (d) closed-loop cost against solve time per controller — written as
-//! markdown, CSV, JSON and SVG plots to `target/bench/` (`--publish`: also to `docs/perf/`).
+//! markdown, CSV, JSON and SVG plots to `target/bench/` (`--publish`: also to `docs/perf/`);
+//! and (e) `modes-scaling`, the time and memory of the modal basis against the mesh.
 //!
 //! Every timing is the median of repeated runs (`Instant`) on one thread (the rayon pool is
 //! built with one thread); each table header records the command, the machine, the load
@@ -26,7 +27,8 @@ use std::time::Instant;
 pub(crate) const USAGE: &str = "\
 usage: cargo xtask bench [--quick] [--publish] [WHICH ...]
 
-  WHICH      any of: mesh (a), modes (b), timestep (c), control (d); default: all four
+  WHICH      any of: mesh (a), modes (b), timestep (c), control (d), modes-scaling (e: time
+             and memory of the modal basis against the mesh); default: all five
   --quick    a coarse subset (under 1 minute on 2 loaded cores); the full run takes about 5
              minutes there
   --publish  also copy the tables (markdown) and plots (SVG) to docs/perf/
@@ -37,11 +39,12 @@ table records the load average and the CPU/wall ratio of the run.";
 
 /// The studies, in report order: (short name, letter, runner).
 type Runner = fn(&mut Ctx) -> Result<Study>;
-const STUDIES: [(&str, &str, Runner); 4] = [
+const STUDIES: [(&str, &str, Runner); 5] = [
     ("mesh", "a", mesh::run),
     ("modes", "b", modes::run),
     ("timestep", "c", timestep::run),
     ("control", "d", control::run),
+    ("modes-scaling", "e", modes::run_scaling),
 ];
 
 /// What every study needs: the tier, the command line, the machine and progress reporting.
@@ -153,7 +156,9 @@ pub fn main(args: &[String]) -> Result<()> {
             s if s.starts_with("--") => bail!("unknown option `{s}`\n{USAGE}"),
             s => match STUDIES.iter().find(|(n, l, _)| s == *n || s == *l) {
                 Some((n, _, _)) => which.push(n),
-                None => bail!("unknown study `{s}` (mesh, modes, timestep, control)\n{USAGE}"),
+                None => bail!(
+                    "unknown study `{s}` (mesh, modes, timestep, control, modes-scaling)\n{USAGE}"
+                ),
             },
         }
     }

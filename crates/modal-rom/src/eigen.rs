@@ -38,7 +38,7 @@
 
 use crate::error::{invalid, shape, ModalError, Result};
 use crate::layout::Layout;
-use crate::sparse_modes::SparseProblem;
+use crate::sparse_problem::SparseProblem;
 use faer::{Mat, MatRef, Side};
 
 /// Settings of the constrained eigen solver.
@@ -177,6 +177,25 @@ impl SecondOrderProblem {
     /// `n2`, the length of `X2`.
     pub fn n2(&self) -> usize {
         self.b2.nrows()
+    }
+}
+
+impl SparseProblem {
+    /// The dense problem (entries summed in order), checked by [`SecondOrderProblem::new`].
+    pub fn to_dense(&self) -> Result<SecondOrderProblem> {
+        let dense = |r: usize, c: usize, e: &[(usize, usize, f64)]| {
+            let mut m = Mat::<f64>::zeros(r, c);
+            for &(i, j, v) in e {
+                m[(i, j)] += v;
+            }
+            m
+        };
+        SecondOrderProblem::new(
+            dense(self.n1, self.n1, &self.b1),
+            dense(self.n2, self.n2, &self.b2),
+            dense(self.n1, self.n2, &self.d),
+            dense(self.g_rows, self.n1, &self.g1),
+        )
     }
 }
 

@@ -180,6 +180,7 @@ mod rigid;
 mod rom;
 pub mod samples;
 mod sparse_modes;
+mod sparse_problem;
 mod structure;
 mod tensor;
 
@@ -194,9 +195,8 @@ pub use projection::Fields;
 pub use report::{mode_report, report_of, BeamShape, ModeReport, ModeShape};
 pub use rigid::{chain_rotations, rigid_rotation_fields, RigidRotation};
 pub use rom::{Input, ModalRom, QuaternionModel, RomOptions};
-pub use sparse_modes::{
-    solve_sparse, sparse_mode_report, SparseModes, SparseProblem, SparseSettings,
-};
+pub use sparse_modes::{solve_sparse, sparse_mode_report, SparseModes, SparseSettings};
+pub use sparse_problem::SparseProblem;
 pub use structure::StructureModel;
 pub use tensor::SparseTensor3;
 

@@ -48,14 +48,12 @@
 
 use crate::basis::{classify, BasisSettings};
 use crate::blocks::BlockDiag;
-use crate::eigen::{
-    admissible_rigid_fields, canonical_rigid_basis_of, sign_of_largest, SecondOrderProblem,
-    UnionFind,
-};
+use crate::eigen::{admissible_rigid_fields, canonical_rigid_basis_of, sign_of_largest, UnionFind};
 use crate::error::{invalid, ModalError, Result};
 use crate::lanczos::{self, Operator};
-use crate::layout::{FullIndex, Layout};
+use crate::layout::Layout;
 use crate::report::{report_from_parts, ModeReport};
+use crate::sparse_problem::SparseProblem;
 use crate::structure::{layout_of, rigid_candidates_of};
 use faer::{Mat, MatRef};
 use intrinsic_beam::SparseLuSystem;
@@ -100,145 +98,7 @@ impl SparseSettings {
     }
 }
 
-/// The second-order problem of theory.md §4 as `(row, col, value)` entries in assembly order
-/// (duplicates summed when used): `B1` (n1 × n1), `B2` (n2 × n2), `D` (n1 × n2), `G1`
-/// (`g_rows` × n1).
-#[derive(Clone, Debug, PartialEq)]
-pub struct SparseProblem {
-    /// Length of `X1`.
-    pub n1: usize,
-    /// Length of `X2`.
-    pub n2: usize,
-    /// Entries of `B1`.
-    pub b1: Vec<(usize, usize, f64)>,
-    /// Entries of `B2`.
-    pub b2: Vec<(usize, usize, f64)>,
-    /// Entries of `D`.
-    pub d: Vec<(usize, usize, f64)>,
-    /// Rows of `G1`.
-    pub g_rows: usize,
-    /// Entries of `G1`.
-    pub g1: Vec<(usize, usize, f64)>,
-}
-
 impl SparseProblem {
-    /// Splits the full FE operators (ordering of theory.md §2) into `B1`, `B2`, `D`, `G1`; see
-    /// [`SecondOrderProblem::from_full_entries`] for the rules and checks.
-    pub fn from_full_entries(
-        layout: &Layout,
-        b: impl IntoIterator<Item = (usize, usize, f64)>,
-        a: impl IntoIterator<Item = (usize, usize, f64)>,
-        g_rows: usize,
-        g: impl IntoIterator<Item = (usize, usize, f64)>,
-    ) -> Result<Self> {
-        let (n1, n2, nf) = (layout.n1(), layout.n2(), layout.n_full());
-        let cls = |i: usize, what: &str| -> Result<FullIndex> {
-            match layout.classify_full(i) {
-                FullIndex::OutOfRange => {
-                    Err(invalid(what, i, format!("index past the FE vector length {nf}")))
-                }
-                c => Ok(c),
-            }
-        };
-        let (mut b1, mut b2, mut d, mut dt) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-        for (i, j, v) in b {
-            match (cls(i, "B row")?, cls(j, "B column")?) {
-                (FullIndex::X1(p), FullIndex::X1(q)) => b1.push((p, q, v)),
-                (FullIndex::X2(p), FullIndex::X2(q)) => b2.push((p, q, v)),
-                _ if v == 0.0 => {}
-                _ => {
-                    return Err(invalid(
-                        format!("B[({i}, {j})]"),
-                        v,
-                        "B must be block diagonal (nodes, elements, zero on end values)",
-                    ))
-                }
-            }
-        }
-        for (i, j, v) in a {
-            match (cls(i, "A row")?, cls(j, "A column")?) {
-                (FullIndex::X1(p), FullIndex::X2(q)) => d.push((p, q, v)),
-                (FullIndex::X2(p), FullIndex::X1(q)) => dt.push((q, p, v)),
-                _ => {}
-            }
-        }
-        // A skew: D + (element block)ᵀ = 0 entry by entry, to 1e-12 of max |D|.
-        let ds = Csr::new(n1, n2, &d);
-        let dts = Csr::new(n1, n2, &dt);
-        let scale = ds.max_abs().max(f64::MIN_POSITIVE);
-        for p in 0..n1 {
-            let (a, b) = (ds.row(p), dts.row(p));
-            let mut cols: Vec<usize> = a.iter().chain(&b).map(|e| e.0).collect();
-            cols.sort_unstable();
-            cols.dedup();
-            for q in cols {
-                let find = |r: &[(usize, f64)]| r.iter().find(|e| e.0 == q).map_or(0.0, |e| e.1);
-                let (x, y) = (find(&a), find(&b));
-                if (x + y).abs() > 1e-12 * scale {
-                    return Err(invalid(
-                        format!("A (node {p}, element {q})"),
-                        x,
-                        format!("A must be skew: the element-row entry is {y}"),
-                    ));
-                }
-            }
-        }
-        let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); g_rows];
-        let mut kinds = vec![(false, false); g_rows];
-        for (i, j, v) in g {
-            if i >= g_rows {
-                return Err(invalid("G row", i, format!("G has {g_rows} rows")));
-            }
-            if v == 0.0 {
-                continue;
-            }
-            match cls(j, "G column")? {
-                FullIndex::X1(q) => {
-                    rows[i].push((q, v));
-                    kinds[i].0 = true;
-                }
-                FullIndex::End => kinds[i].1 = true,
-                _ => {
-                    return Err(invalid(
-                        format!("G[({i}, {j})]"),
-                        v,
-                        "constraint rows on element values are not supported",
-                    ))
-                }
-            }
-        }
-        let kept: Vec<usize> = (0..g_rows).filter(|&r| kinds[r].0).collect();
-        if let Some(&r) = kept.iter().find(|&&r| kinds[r].1) {
-            return Err(invalid(
-                format!("G row {r}"),
-                "mixed",
-                "a row mixes node velocities and end values",
-            ));
-        }
-        let mut g1 = Vec::new();
-        for (new, &r) in kept.iter().enumerate() {
-            g1.extend(rows[r].iter().map(|&(q, v)| (new, q, v)));
-        }
-        Ok(SparseProblem { n1, n2, b1, b2, d, g_rows: kept.len(), g1 })
-    }
-
-    /// The dense problem (entries summed in order), checked by [`SecondOrderProblem::new`].
-    pub fn to_dense(&self) -> Result<SecondOrderProblem> {
-        let dense = |r: usize, c: usize, e: &[(usize, usize, f64)]| {
-            let mut m = Mat::<f64>::zeros(r, c);
-            for &(i, j, v) in e {
-                m[(i, j)] += v;
-            }
-            m
-        };
-        SecondOrderProblem::new(
-            dense(self.n1, self.n1, &self.b1),
-            dense(self.n2, self.n2, &self.b2),
-            dense(self.n1, self.n2, &self.d),
-            dense(self.g_rows, self.n1, &self.g1),
-        )
-    }
-
     /// The problem of a structure at its reference configuration, with its layout and the
     /// rigid rotations that fix the rigid-mode basis (as [`crate::StructureModel`], without
     /// any dense matrix).

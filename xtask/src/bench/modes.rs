@@ -304,3 +304,73 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
     study.notes = notes;
     Ok(study)
 }
+
+/// Peak resident memory of this process so far (MB), from `VmHWM` in `/proc/self/status`
+/// (NaN where it cannot be read).
+fn peak_resident_mb() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .and_then(|l| l.split_whitespace().nth(1))
+                .and_then(|kb| kb.parse::<f64>().ok())
+        })
+        .map_or(f64::NAN, |kb| kb * 1024.0 / 1e6)
+}
+
+/// Study `modes-scaling`: time and peak memory of the modal basis that `flexmpc modes`
+/// computes (its dense or sparse route, `flexmpc::modes::report`) against the mesh, on the
+/// paper's 2D two-link at 0° with its 20 lowest modes.
+pub(crate) fn run_scaling(ctx: &mut Ctx) -> Result<Study> {
+    let meshes: &[usize] =
+        if ctx.quick { &[100, 300, 1000, 2000] } else { &[100, 300, 1000, 2000, 5000] };
+    ctx.plan(meshes.len() as u64);
+    let mut table = Table::new(
+        "scaling",
+        "Paper 2D two-link at 0°: the 20 lowest modes against elements per link",
+        &[
+            ("elements per link", Fmt::Int),
+            ("node unknowns n1", Fmt::Int),
+            ("route", Fmt::Text),
+            ("modes (s)", Fmt::Fix(3)),
+            ("peak resident memory so far (MB)", Fmt::Fix(0)),
+            ("first elastic ω (rad/s)", Fmt::Fix(6)),
+        ],
+    );
+    for &n in meshes {
+        ctx.progress(&format!("modes-scaling, 2 × {n} elements"));
+        let structure = multibody_constraints::samples::paper_2d(Section::paper_2d(), n, 0.0)?;
+        let est = flexmpc::modes::estimate(&structure);
+        let route = match est.route() {
+            flexmpc::modes::Route::Dense => "dense",
+            flexmpc::modes::Route::Sparse => "sparse",
+        };
+        let (report, seconds) = timed(3, 5.0, || flexmpc::modes::report(&structure, 20))?;
+        let first = report.frequencies_rad_s.get(report.n_rigid).copied().unwrap_or(f64::NAN);
+        table.push(vec![
+            n.into(),
+            est.n1.into(),
+            route.into(),
+            seconds.into(),
+            peak_resident_mb().into(),
+            first.into(),
+        ]);
+        ctx.tick();
+    }
+    let mut study = Study::new(
+        "modes-scaling",
+        "Modal basis: time and memory against mesh size",
+        "The paper's 2D two-link (paper section, 0°), its 20 lowest constrained modes by the \
+         route `flexmpc modes` takes (dense up to 1,200 node unknowns, sparse shift-invert \
+         Lanczos above), in process, without the plots.",
+    );
+    study.tables.push(table);
+    study.notes.push(
+        "Peak memory is the process high-water mark after each size (sizes ascending, so it \
+         bounds each size's peak from above; earlier studies of the same run count too). \
+         docs/performance.md has the same curve for the whole command under /usr/bin/time."
+            .into(),
+    );
+    Ok(study)
+}

@@ -3,77 +3,7 @@
 
 use crate::blocks::BlockDiag;
 use crate::error::{ModalError, Result};
-
-/// A sparse matrix in compressed rows (duplicates summed in entry order).
-#[derive(Clone, Debug)]
-pub(crate) struct Csr {
-    nrows: usize,
-    ncols: usize,
-    ptr: Vec<usize>,
-    idx: Vec<usize>,
-    val: Vec<f64>,
-}
-
-impl Csr {
-    /// From `(row, col, value)` entries, all inside `nrows × ncols`.
-    pub(crate) fn new(nrows: usize, ncols: usize, entries: &[(usize, usize, f64)]) -> Self {
-        let mut order: Vec<usize> = (0..entries.len()).collect();
-        order.sort_by_key(|&e| (entries[e].0, entries[e].1)); // stable: entry order on ties
-        let mut ptr = vec![0usize; nrows + 1];
-        let (mut idx, mut val): (Vec<usize>, Vec<f64>) = (Vec::new(), Vec::new());
-        let mut last = (usize::MAX, usize::MAX);
-        for e in order {
-            let (r, c, v) = entries[e];
-            if (r, c) == last {
-                *val.last_mut().expect("an entry before") += v;
-            } else {
-                idx.push(c);
-                val.push(0.0 + v);
-                ptr[r + 1] += 1;
-                last = (r, c);
-            }
-        }
-        for r in 0..nrows {
-            ptr[r + 1] += ptr[r];
-        }
-        Csr { nrows, ncols, ptr, idx, val }
-    }
-
-    pub(crate) fn nrows(&self) -> usize {
-        self.nrows
-    }
-
-    pub(crate) fn ncols(&self) -> usize {
-        self.ncols
-    }
-
-    /// Row `r` as `(col, value)` pairs.
-    pub(crate) fn row(&self, r: usize) -> Vec<(usize, f64)> {
-        (self.ptr[r]..self.ptr[r + 1]).map(|p| (self.idx[p], self.val[p])).collect()
-    }
-
-    /// Largest `|entry|`.
-    pub(crate) fn max_abs(&self) -> f64 {
-        self.val.iter().fold(0.0f64, |a, v| a.max(v.abs()))
-    }
-
-    /// `y = A x`.
-    pub(crate) fn matvec(&self, x: &[f64], y: &mut [f64]) {
-        for r in 0..self.nrows {
-            y[r] = (self.ptr[r]..self.ptr[r + 1]).map(|p| self.val[p] * x[self.idx[p]]).sum();
-        }
-    }
-
-    /// `y = Aᵀ x`.
-    pub(crate) fn tmatvec(&self, x: &[f64], y: &mut [f64]) {
-        y.iter_mut().for_each(|v| *v = 0.0);
-        for r in 0..self.nrows {
-            for p in self.ptr[r]..self.ptr[r + 1] {
-                y[self.idx[p]] += self.val[p] * x[r];
-            }
-        }
-    }
-}
+pub(crate) use crate::sparse_problem::Csr;
 
 /// Dense lower Cholesky factor of the `r × r` row-major `a`, or `None` if not positive definite.
 fn cholesky(a: &[f64], r: usize) -> Option<Vec<f64>> {
