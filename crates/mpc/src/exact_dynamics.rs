@@ -195,6 +195,47 @@ impl ExactDynamics {
     }
 }
 
+impl ExactDynamics {
+    /// The reference schedule of the scenario's joint commands ([`crate::reference`]) on the
+    /// reference state of `weights`: a command on a two-end joint sets that joint's
+    /// relative-rotation state `ξ_j`, one on the root support the root quaternion `ξ_root`.
+    pub fn reference_schedule(
+        &self,
+        setup: &crate::Setup,
+        weights: &Weights,
+    ) -> Result<crate::ReferenceSchedule> {
+        let rom = &self.rom;
+        let names = rom.joint_names();
+        let mut slots = Vec::new();
+        for (i, c) in setup.scenario.references.iter().enumerate() {
+            let (nodes, base) = crate::reference::command_target(setup, c)
+                .map_err(|e| e.within(&format!("references[{i}]")))?;
+            let offset = match nodes.len() {
+                1 if c.joint == setup.scenario.root && rom.has_root() => rom.root_offset(),
+                2 => match names.iter().position(|n| *n == c.joint) {
+                    Some(j) => rom.joint_offset(j),
+                    None => {
+                        return Err(invalid(
+                            format!("references[{i}].joint"),
+                            &c.joint,
+                            "has no rotation state in the exact-joints model",
+                        ))
+                    }
+                },
+                _ => {
+                    return Err(invalid(
+                        format!("references[{i}].joint"),
+                        &c.joint,
+                        "commands act on the root support or on joints between links",
+                    ))
+                }
+            };
+            slots.push((offset, c.clone(), base));
+        }
+        crate::ReferenceSchedule::new(weights.x_ref.iter().copied().collect(), slots)
+    }
+}
+
 impl Dynamics for ExactDynamics {
     fn nx(&self) -> usize {
         self.rom.n_state()

@@ -71,6 +71,7 @@ mod exact_dynamics;
 mod export;
 mod orientation;
 mod plant;
+pub mod reference;
 mod scenario;
 mod validity;
 mod weights;
@@ -78,7 +79,10 @@ mod weights;
 #[cfg(test)]
 mod tests;
 
-pub use closed_loop::{open_loop, run, sweep, Record, RunResult, RunSummary, Snapshot};
+pub use closed_loop::{
+    open_loop, run, sweep, Record, RunResult, RunSummary, Snapshot, COMMAND_TOLERANCE_DEG,
+    ENERGY_RATIO_LIMIT,
+};
 pub use controller::{
     Controller, ControllerKind, ControllerSettings, SampleReport, Strategy,
     DEFAULT_PLAN_JOINT_LIMIT,
@@ -89,6 +93,7 @@ pub use exact_dynamics::{ExactDynamics, ModelKind};
 pub use export::{export_first_sample, first_sample_problem, OcpExport};
 pub use orientation::{chord_orientation, ChordOrientation};
 pub use plant::{ControlInput, PlantKind};
+pub use reference::{JointCommand, ReferenceSchedule};
 pub use scenario::{Scenario, Setup, MAX_PLANT_STEPS};
 pub use validity::JointMonitor;
 pub use weights::{ControlGrid, MpcSettings, Weights, SPATIAL_INPUT_WEIGHT};

@@ -10,6 +10,7 @@ mod control;
 mod error;
 mod inputs;
 mod names;
+mod reference;
 mod spec;
 mod structure;
 #[cfg(test)]
@@ -26,6 +27,7 @@ pub use control::{controller_kind, model_kind, plant_kind};
 pub use error::SceneError;
 use error::{field_at, field_from_message, table_at, Ctx};
 pub use names::*;
+pub use reference::{JointCommandSpec, ReferenceSpec};
 pub use spec::*;
 pub use structure::MAX_ELEMENTS_PER_BEAM;
 

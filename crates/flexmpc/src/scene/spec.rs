@@ -430,4 +430,6 @@ pub struct SceneSpec {
     pub scenario: Option<Spanned<ScenarioSpec>>,
     /// The runs of `flexmpc sweep`.
     pub sweep: Option<Spanned<SweepSpec>>,
+    /// Commanded joint rotations of the closed loop (reconfiguration).
+    pub reference: Option<Spanned<super::reference::ReferenceSpec>>,
 }
