@@ -20,7 +20,6 @@ use crate::error::{invalid, shape, ModalError, Result};
 use crate::layout::Layout;
 use crate::rom::Input;
 use crate::structure::StructureModel;
-use crate::tensor::SparseTensor3;
 use faer::linalg::solvers::Solve;
 use faer::{Mat, MatRef, Side};
 use intrinsic_beam::operators::{l1_times, l2_times};
@@ -255,13 +254,25 @@ impl LinkBasis {
     }
 }
 
+/// `Γ1`, `Γ2` of one link, dense (the link's fields couple only among themselves), stored
+/// with the first index `i` fastest: `g1[(l m + j) m + i] = Γ1^l_ij`,
+/// `g2[(l m2 + j) m + i] = Γ2^l_ij`.
+#[derive(Clone, Debug)]
+pub(crate) struct LinkTensors {
+    /// First column and count of the link's velocity fields.
+    c1: (usize, usize),
+    /// First column and count of the link's force fields.
+    c2: (usize, usize),
+    g1: Vec<f64>,
+    g2: Vec<f64>,
+}
+
 /// The Galerkin operators on a [`LinkBasis`] (module docs).
 #[derive(Clone, Debug)]
 pub(crate) struct AmbientOps {
     pub w: Mat<f64>,
     pub sigma: Mat<f64>,
-    pub gamma1: SparseTensor3,
-    pub gamma2: SparseTensor3,
+    links: Vec<LinkTensors>,
     pub b_u: Mat<f64>,
 }
 
@@ -270,7 +281,7 @@ impl AmbientOps {
         let layout = &basis.layout;
         let comps = layout.components;
         let k = comps.k();
-        let (na, nb, n1) = (basis.n1(), basis.n2(), layout.n1());
+        let (na, n1) = (basis.n1(), layout.n1());
         let phi1 = &basis.phi1;
         let phi2 = &basis.phi2;
         let w = phi1.transpose() * &basis.d * phi2;
@@ -290,8 +301,7 @@ impl AmbientOps {
             let vals: Vec<f64> = (0..k).map(|c| mat[(i0 + c, j)]).collect();
             comps.embed(&vals)
         };
-        let mut e1 = Vec::new();
-        let mut e2 = Vec::new();
+        let mut links = Vec::new();
         for (b, beam) in layout.beams.iter().enumerate() {
             let c1 = basis.cols1[b];
             let c2 = basis.cols2[b];
@@ -328,29 +338,26 @@ impl AmbientOps {
                     }
                 }
             }
+            // re-layout (l, i, j) → (l, j, i)
+            let mut d1 = vec![0.0; m * m * m];
             for l in 0..m {
                 for i in 0..m {
                     for j in 0..m {
-                        let v = g1[(l * m + i) * m + j];
-                        if v != 0.0 {
-                            e1.push(((c1.0 + i) as u32, (c1.0 + j) as u32, (c1.0 + l) as u32, v));
-                        }
+                        d1[(l * m + j) * m + i] = g1[(l * m + i) * m + j];
                     }
                 }
             }
+            let mut d2 = vec![0.0; m * m2 * m2];
             for l in 0..m2 {
                 for i in 0..m {
                     for j in 0..m2 {
-                        let v = g2[(l * m + i) * m2 + j];
-                        if v != 0.0 {
-                            e2.push(((c1.0 + i) as u32, (c2.0 + j) as u32, (c2.0 + l) as u32, v));
-                        }
+                        d2[(l * m2 + j) * m + i] = g2[(l * m + i) * m2 + j];
                     }
                 }
             }
+            links.push(LinkTensors { c1: (c1.0, m), c2: (c2.0, m2), g1: d1, g2: d2 });
         }
-        let gamma1 = SparseTensor3 { dims: (na, na, na), entries: e1 };
-        let gamma2 = SparseTensor3 { dims: (na, nb, nb), entries: e2 };
+
         let mut b_u = Mat::<f64>::zeros(na, inputs.len());
         for (c, input) in inputs.iter().enumerate() {
             for &(idx, wgt) in &input.entries {
@@ -366,69 +373,119 @@ impl AmbientOps {
                 }
             }
         }
-        Ok(AmbientOps { w, sigma, gamma1, gamma2, b_u })
+        Ok(AmbientOps { w, sigma, links, b_u })
     }
 
-    /// `(f1, f2)` at ambient coordinates `(q1, q2)` and input `u`.
-    pub fn rhs(&self, q1: &[f64], q2: &[f64], u: &[f64], f1: &mut [f64], f2: &mut [f64]) {
+    /// `(f1, f2)` at ambient coordinates `(q1, q2)` and input `u`, and with `jac` the dense
+    /// Jacobian of `(f1, f2)` with respect to `(q1, q2)` (`(na + nb)²`, column-major). `tmp`:
+    /// scratch of `max_link (m + m · m2)`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn eval(
+        &self,
+        q1: &[f64],
+        q2: &[f64],
+        u: &[f64],
+        f1: &mut [f64],
+        f2: &mut [f64],
+        mut jac: Option<&mut [f64]>,
+        tmp: &mut [f64],
+    ) {
         let (na, nb) = (q1.len(), q2.len());
-        for i in 0..na {
-            let mut acc = 0.0;
-            for j in 0..na {
-                acc += self.sigma[(i, j)] * q1[j];
-            }
-            for j in 0..nb {
-                acc += self.w[(i, j)] * q2[j];
-            }
-            for (c, uc) in u.iter().enumerate() {
-                acc += self.b_u[(i, c)] * uc;
-            }
-            f1[i] = acc;
+        let n = na + nb;
+        f1.fill(0.0);
+        f2.fill(0.0);
+        for j in 0..na {
+            let c = self.sigma.col_as_slice(j);
+            let s = q1[j];
+            f1.iter_mut().zip(c).for_each(|(f, a)| *f += s * a);
         }
         for j in 0..nb {
-            let mut acc = 0.0;
-            for i in 0..na {
-                acc -= self.w[(i, j)] * q1[i];
+            let c = self.w.col_as_slice(j);
+            let s = q2[j];
+            f1.iter_mut().zip(c).for_each(|(f, a)| *f += s * a);
+            f2[j] = -c.iter().zip(q1).map(|(a, q)| a * q).sum::<f64>();
+        }
+        for (k, &uk) in u.iter().enumerate() {
+            let c = self.b_u.col_as_slice(k);
+            f1.iter_mut().zip(c).for_each(|(f, a)| *f += uk * a);
+        }
+        if let Some(j) = jac.as_deref_mut() {
+            let j = &mut j[..n * n];
+            j.fill(0.0);
+            for c in 0..na {
+                j[c * n..c * n + na].copy_from_slice(self.sigma.col_as_slice(c));
             }
-            f2[j] = acc;
+            for c in 0..nb {
+                let w = self.w.col_as_slice(c);
+                j[(na + c) * n..(na + c) * n + na].copy_from_slice(w);
+                for (r, wr) in w.iter().enumerate() {
+                    j[r * n + na + c] = -wr;
+                }
+            }
         }
-        for &(i, j, l, v) in &self.gamma1.entries {
-            f1[i as usize] -= v * q1[j as usize] * q1[l as usize];
-        }
-        for &(i, j, l, v) in &self.gamma2.entries {
-            let (i, j, l) = (i as usize, j as usize, l as usize);
-            f1[i] -= v * q2[j] * q2[l];
-            f2[j] += v * q1[i] * q2[l];
+        let axpy = |y: &mut [f64], a: f64, x: &[f64]| {
+            y.iter_mut().zip(x).for_each(|(y, x)| *y += a * x);
+        };
+        let dot = |x: &[f64], y: &[f64]| x.iter().zip(y).map(|(a, b)| a * b).sum::<f64>();
+        for lt in &self.links {
+            let ((o1, m), (o2, m2)) = (lt.c1, lt.c2);
+            let (acc, tt) = tmp[..m + m * m2].split_at_mut(m);
+            let q1b = &q1[o1..o1 + m];
+            // Γ1: u^l = Σ_j q_j Γ1^l_{·j}; f1 −= Σ_l q_l u^l; J[·, j] −= Σ_l q_l Γ1^l_{·j}; J[·, l] −= u^l
+            for l in 0..m {
+                let ql = q1b[l];
+                acc.fill(0.0);
+                for (jj, &qj) in q1b.iter().enumerate() {
+                    let col = &lt.g1[(l * m + jj) * m..(l * m + jj + 1) * m];
+                    axpy(acc, qj, col);
+                    if let Some(jm) = jac.as_deref_mut() {
+                        let c = o1 + jj;
+                        axpy(&mut jm[c * n + o1..c * n + o1 + m], -ql, col);
+                    }
+                }
+                axpy(&mut f1[o1..o1 + m], -ql, acc);
+                if let Some(jm) = jac.as_deref_mut() {
+                    let c = o1 + l;
+                    axpy(&mut jm[c * n + o1..c * n + o1 + m], -1.0, acc);
+                }
+            }
+            // Γ2: f1_i −= Γ q2_j q2_l, f2_j += Γ q1_i q2_l
+            tt.fill(0.0);
+            let q2b = &q2[o2..o2 + m2];
+            for l in 0..m2 {
+                let ql = q2b[l];
+                acc.fill(0.0);
+                for (jj, &qj) in q2b.iter().enumerate() {
+                    let col = &lt.g2[(l * m2 + jj) * m..(l * m2 + jj + 1) * m];
+                    axpy(acc, qj, col);
+                    let d = dot(q1b, col);
+                    f2[o2 + jj] += ql * d;
+                    if let Some(jm) = jac.as_deref_mut() {
+                        let c = na + o2 + jj;
+                        axpy(&mut jm[c * n + o1..c * n + o1 + m], -ql, col);
+                        axpy(&mut tt[jj * m..(jj + 1) * m], ql, col);
+                        jm[(na + o2 + l) * n + na + o2 + jj] += d;
+                    }
+                }
+                axpy(&mut f1[o1..o1 + m], -ql, acc);
+                if let Some(jm) = jac.as_deref_mut() {
+                    let c = na + o2 + l;
+                    axpy(&mut jm[c * n + o1..c * n + o1 + m], -1.0, acc);
+                }
+            }
+            if let Some(jm) = jac.as_deref_mut() {
+                // J[na + j, i] += Σ_l Γ2^l_ij q2_l
+                for jj in 0..m2 {
+                    for i in 0..m {
+                        jm[(o1 + i) * n + na + o2 + jj] += tt[jj * m + i];
+                    }
+                }
+            }
         }
     }
 
-    /// Dense Jacobian of `(f1, f2)` with respect to `(q1, q2)` (`(na + nb)²`).
-    pub fn jacobian(&self, q1: &[f64], q2: &[f64]) -> Mat<f64> {
-        let (na, nb) = (q1.len(), q2.len());
-        let mut j = Mat::<f64>::zeros(na + nb, na + nb);
-        for c in 0..na {
-            for r in 0..na {
-                j[(r, c)] = self.sigma[(r, c)];
-            }
-        }
-        for c in 0..nb {
-            for r in 0..na {
-                j[(r, na + c)] = self.w[(r, c)];
-                j[(na + c, r)] = -self.w[(r, c)];
-            }
-        }
-        for &(i, jj, l, v) in &self.gamma1.entries {
-            let (i, jj, l) = (i as usize, jj as usize, l as usize);
-            j[(i, jj)] -= v * q1[l];
-            j[(i, l)] -= v * q1[jj];
-        }
-        for &(i, jj, l, v) in &self.gamma2.entries {
-            let (i, jj, l) = (i as usize, jj as usize, l as usize);
-            j[(i, na + jj)] -= v * q2[l];
-            j[(i, na + l)] -= v * q2[jj];
-            j[(na + jj, i)] += v * q2[l];
-            j[(na + jj, na + l)] += v * q1[i];
-        }
-        j
+    /// Scratch length [`AmbientOps::eval`] needs.
+    pub fn scratch_len(&self) -> usize {
+        self.links.iter().map(|l| l.c1.1 + l.c1.1 * l.c2.1).max().unwrap_or(0)
     }
 }

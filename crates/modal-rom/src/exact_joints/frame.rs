@@ -1,193 +1,207 @@
-//! The null-space basis `Z(ξ)` of the current compatibility rows and its derivatives
-//! (theory.md §10.4).
+//! Dense kernels of the null-space frame `Z(ξ)` (theory.md §10.4): column-major buffers viewed
+//! as faer matrices, Cholesky (faer's in-place `llt`), triangular solves and products, and the
+//! O(r·m) forms of the skew `K` and of the Cholesky-derivative triangle `Φ`.
 //!
-//! With `A = A(ξ)` (`r × na`, full row rank), `G = (AAᵀ)⁻¹`, `P = I − AᵀGA` and a fixed
-//! orthonormal `Z0` (`na × m`) with `A(ξ̄) Z0 = 0`:
-//!
-//! ```text
-//!   C0 = A Z0,   S = Z0ᵀ P Z0 = I − C0ᵀ G C0 = L Lᵀ,   Z̃ = Z0 L⁻ᵀ,   Z = P Z̃,
-//!   B = A Z̃,   W = G B.
-//! ```
-//!
-//! `ZᵀZ = I`, `AZ = 0`, and `Z = Z0` wherever `A Z0 = 0`. Along a change `Ȧ` of the rows, with
-//! `V = ȦZ` and `Φ(X)` the lower triangle of `X` with half its diagonal:
-//!
-//! ```text
-//!   X = −(WᵀV + VᵀW),  Λ = Φ(X),  Ż = −AᵀG V − P Ȧᵀ W − Z Λᵀ,  Z̃̇ = −Z̃ Λᵀ,
-//!   K(Ȧ) = ZᵀŻ = −VᵀW − Λᵀ          (skew: K + Kᵀ = −(VᵀW + WᵀV) − X = 0).
-//! ```
-//!
-//! At the reference rows (`A Z0 = 0`) `B = W = 0`, so `K = 0` for every `Ȧ`.
+//! With `M = aᵀb` (`a`, `b` of `r` rows, `m` columns), `K(a, b) = strictly upper(Mᵀ) − strictly
+//! lower(M)` is the skew matrix `−M − Φ(−(M + Mᵀ))ᵀ` of theory.md §10.4 (`K = −VᵀW − Λᵀ`,
+//! `Λ = Φ(X)`, `X = −(WᵀV + VᵀW)`), and `Φ(aᵀb + bᵀa)` is a triangle of inner products; both
+//! act on a vector by running sums of columns instead of forming the `m × m` matrix.
 
 use crate::error::{ModalError, Result};
-use faer::Mat;
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch};
+use faer::linalg::matmul::matmul;
+use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
+use faer::{Accum, MatMut, MatRef, Par};
 
-/// `Z(ξ)` and the factors its derivatives need.
-#[derive(Clone, Debug)]
-pub(crate) struct NullFrame {
-    pub a: Mat<f64>,
-    pub g: Mat<f64>,
-    pub z: Mat<f64>,
-    pub zt: Mat<f64>,
-    pub b: Mat<f64>,
-    pub w: Mat<f64>,
+/// `r × c` column-major view of `d`.
+pub(crate) fn view(d: &[f64], r: usize, c: usize) -> MatRef<'_, f64> {
+    MatRef::from_column_major_slice(&d[..r * c], r, c)
 }
 
-/// Lower Cholesky factor of a symmetric positive definite matrix, `None` when a pivot is
-/// not above `tol`.
-pub(crate) fn cholesky(s: &Mat<f64>, tol: f64) -> Option<Mat<f64>> {
-    let n = s.nrows();
-    let mut l = Mat::<f64>::zeros(n, n);
+/// `r × c` column-major mutable view of `d`.
+pub(crate) fn view_mut(d: &mut [f64], r: usize, c: usize) -> MatMut<'_, f64> {
+    MatMut::from_column_major_slice_mut(&mut d[..r * c], r, c)
+}
+
+/// `dst (+)= alpha · a b`.
+pub(crate) fn gemm(
+    dst: MatMut<'_, f64>,
+    add: bool,
+    a: MatRef<'_, f64>,
+    b: MatRef<'_, f64>,
+    alpha: f64,
+) {
+    if dst.nrows() == 0 || dst.ncols() == 0 {
+        return;
+    }
+    if a.ncols() == 0 {
+        if !add {
+            let mut dst = dst;
+            dst.fill(0.0);
+        }
+        return;
+    }
+    matmul(dst, if add { Accum::Add } else { Accum::Replace }, a, b, alpha, Par::Seq);
+}
+
+/// `y (+)= alpha · a x` for column-major `a` (`r × c`).
+pub(crate) fn gemv(y: &mut [f64], add: bool, a: &[f64], r: usize, x: &[f64], alpha: f64) {
+    if !add {
+        y[..r].fill(0.0);
+    }
+    for (j, &xj) in x.iter().enumerate() {
+        let s = alpha * xj;
+        if s != 0.0 {
+            y[..r].iter_mut().zip(&a[j * r..(j + 1) * r]).for_each(|(y, a)| *y += s * a);
+        }
+    }
+}
+
+/// `y (+)= alpha · aᵀ x` for column-major `a` (`r × c`, `x` of length `r`).
+pub(crate) fn gemv_t(y: &mut [f64], add: bool, a: &[f64], r: usize, x: &[f64], alpha: f64) {
+    for (j, y) in y.iter_mut().enumerate() {
+        let d: f64 = a[j * r..(j + 1) * r].iter().zip(x).map(|(a, x)| a * x).sum();
+        *y = if add { *y + alpha * d } else { alpha * d };
+    }
+}
+
+/// Lower Cholesky factor of the symmetric `n × n` matrix in `a`, in place (strict upper
+/// triangle zeroed). Errors when a pivot `L_jj²` is not above `tol · max_i a_ii` (relative) or
+/// `tol` (when `relative` is false).
+pub(crate) fn cholesky(
+    a: &mut [f64],
+    n: usize,
+    tol: f64,
+    relative: bool,
+    stage: &str,
+    reason: &str,
+) -> Result<()> {
+    let scale = if relative { (0..n).fold(0.0f64, |m, i| m.max(a[i * n + i])) } else { 1.0 };
+    let fail = || ModalError::Numerical { stage: stage.to_string(), reason: reason.to_string() };
+    if n == 0 {
+        return Ok(());
+    }
+    let mut mem = MemBuffer::new(cholesky_in_place_scratch::<f64>(n, Par::Seq, Default::default()));
+    let stack = MemStack::new(&mut mem);
+    cholesky_in_place(view_mut(a, n, n), Default::default(), Par::Seq, stack, Default::default())
+        .map_err(|_| fail())?;
     for j in 0..n {
-        let mut d = s[(j, j)];
-        for k in 0..j {
-            d -= l[(j, k)] * l[(j, k)];
+        let d = a[j * n + j];
+        if d.is_nan() || d * d <= tol * scale {
+            return Err(fail());
         }
-        if d.is_nan() || d <= tol {
-            return None;
-        }
-        let dj = d.sqrt();
-        l[(j, j)] = dj;
-        for i in j + 1..n {
-            let mut v = s[(i, j)];
-            for k in 0..j {
-                v -= l[(i, k)] * l[(j, k)];
-            }
-            l[(i, j)] = v / dj;
-        }
+        a[j * n..j * n + j].fill(0.0);
     }
-    Some(l)
+    Ok(())
 }
 
-/// Inverse of a lower-triangular matrix.
-fn lower_inverse(l: &Mat<f64>) -> Mat<f64> {
-    let n = l.nrows();
-    let mut inv = Mat::<f64>::zeros(n, n);
-    for c in 0..n {
-        inv[(c, c)] = 1.0 / l[(c, c)];
-        for i in c + 1..n {
-            let mut v = 0.0;
-            for k in c..i {
-                v -= l[(i, k)] * inv[(k, c)];
-            }
-            inv[(i, c)] = v / l[(i, i)];
-        }
+/// `M ← M L⁻ᵀ` for `M` (`r × n`, column-major) and lower `L` (`n × n`).
+pub(crate) fn right_solve_lt(l: &[f64], n: usize, m: &mut [f64], r: usize) {
+    if r == 0 || n == 0 {
+        return;
     }
-    inv
+    solve_lower_triangular_in_place(view(l, n, n), view_mut(m, r, n).transpose_mut(), Par::Seq);
 }
 
-/// Inverse of a symmetric positive definite matrix by Cholesky.
-pub(crate) fn spd_inverse(s: &Mat<f64>, what: &str) -> Result<Mat<f64>> {
-    let scale = (0..s.nrows()).fold(0.0f64, |m, i| m.max(s[(i, i)]));
-    let l = cholesky(s, 1e-14 * scale).ok_or_else(|| ModalError::Numerical {
-        stage: what.to_string(),
-        reason: "matrix is not positive definite (dependent rows)".into(),
-    })?;
-    let li = lower_inverse(&l);
-    Ok(li.transpose() * &li)
+/// `out (+)= K(a, b) p` with `K(a, b)_il = a_lᵀb_i (l > i)`, `−a_iᵀb_l (l < i)`, `0 (l = i)`
+/// (module docs): `out_i = b_iᵀ Σ_{l>i} p_l a_l − a_iᵀ Σ_{l<i} p_l b_l`. `a`, `b`: `r × m`
+/// column-major; `tmp`: `r` scratch.
+pub(crate) fn skew_apply(
+    a: &[f64],
+    b: &[f64],
+    r: usize,
+    p: &[f64],
+    out: &mut [f64],
+    tmp: &mut [f64],
+) {
+    let m = p.len();
+    let tmp = &mut tmp[..r];
+    // suffix sums of p_l a_l
+    tmp.fill(0.0);
+    for i in (0..m).rev() {
+        let bi = &b[i * r..(i + 1) * r];
+        out[i] += bi.iter().zip(tmp.iter()).map(|(x, y)| x * y).sum::<f64>();
+        let ai = &a[i * r..(i + 1) * r];
+        tmp.iter_mut().zip(ai).for_each(|(t, x)| *t += p[i] * x);
+    }
+    tmp.fill(0.0);
+    for i in 0..m {
+        let ai = &a[i * r..(i + 1) * r];
+        out[i] -= ai.iter().zip(tmp.iter()).map(|(x, y)| x * y).sum::<f64>();
+        let bi = &b[i * r..(i + 1) * r];
+        tmp.iter_mut().zip(bi).for_each(|(t, x)| *t += p[i] * x);
+    }
 }
 
-/// `Φ(X)ᵀ`: the upper triangle of `X` with half its diagonal.
-pub(crate) fn phi_t(x: &Mat<f64>) -> Mat<f64> {
-    let n = x.nrows();
-    Mat::from_fn(n, n, |i, j| match i.cmp(&j) {
-        std::cmp::Ordering::Less => x[(j, i)],
-        std::cmp::Ordering::Equal => 0.5 * x[(i, i)],
-        std::cmp::Ordering::Greater => 0.0,
-    })
+/// `out (+)= alpha · Φ(aᵀb + bᵀa)ᵀ p` (`upper`, the transposed triangle) or
+/// `alpha · Φ(aᵀb + bᵀa) p` (lower), `Φ` the lower triangle with half its diagonal.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn phi_apply(
+    a: &[f64],
+    b: &[f64],
+    r: usize,
+    p: &[f64],
+    upper: bool,
+    alpha: f64,
+    out: &mut [f64],
+    tmp: &mut [f64],
+) {
+    let m = p.len();
+    let (sa, sb) = tmp[..2 * r].split_at_mut(r);
+    sa.fill(0.0);
+    sb.fill(0.0);
+    let mut step = |i: usize| {
+        let (ai, bi) = (&a[i * r..(i + 1) * r], &b[i * r..(i + 1) * r]);
+        let h = 0.5 * p[i];
+        sa.iter_mut().zip(ai).for_each(|(s, x)| *s += h * x);
+        sb.iter_mut().zip(bi).for_each(|(s, x)| *s += h * x);
+        let v: f64 = ai.iter().zip(sb.iter()).map(|(x, y)| x * y).sum::<f64>()
+            + bi.iter().zip(sa.iter()).map(|(x, y)| x * y).sum::<f64>();
+        out[i] += alpha * v;
+        sa.iter_mut().zip(ai).for_each(|(s, x)| *s += h * x);
+        sb.iter_mut().zip(bi).for_each(|(s, x)| *s += h * x);
+    };
+    if upper {
+        (0..m).rev().for_each(&mut step);
+    } else {
+        (0..m).for_each(&mut step);
+    }
 }
 
-impl NullFrame {
-    /// The frame for rows `a`; `z0` orthonormal with `A(ξ̄) z0 = 0`. Errors when `Z0` has
-    /// (nearly) left the null space (`S` not positive definite): the joint rotation is
-    /// outside the range the fields can represent.
-    pub fn new(a: Mat<f64>, z0: &Mat<f64>) -> Result<Self> {
-        let m = z0.ncols();
-        if a.nrows() == 0 {
-            let g = Mat::zeros(0, 0);
-            return Ok(NullFrame {
-                b: Mat::zeros(0, m),
-                w: Mat::zeros(0, m),
-                z: z0.clone(),
-                zt: z0.clone(),
-                a,
-                g,
-            });
+/// `out += alpha · P Φ(X)ᵀ` for `X = −(bᵀa + aᵀb)` (`a`, `b`: `r × m`; `P`: `q × m`; `out`:
+/// `q × m`): column `l` of `PΦ(X)ᵀ` is `−(Σ_{i≤l} c_il P_i a_iᵀ) b_l − (Σ_{i≤l} c_il P_i b_iᵀ) a_l`,
+/// `c_il = 1`, `c_ll = ½`. `tmp`: `2 q r` scratch.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn right_phi_t(
+    pm: &[f64],
+    q: usize,
+    a: &[f64],
+    b: &[f64],
+    r: usize,
+    m: usize,
+    alpha: f64,
+    out: &mut [f64],
+    tmp: &mut [f64],
+) {
+    let (s1, s2) = tmp[..2 * q * r].split_at_mut(q * r);
+    s1.fill(0.0);
+    s2.fill(0.0);
+    let add_outer = |s: &mut [f64], pl: &[f64], x: &[f64]| {
+        for (k, &xk) in x.iter().enumerate() {
+            let h = 0.5 * xk;
+            s[k * q..(k + 1) * q].iter_mut().zip(pl).for_each(|(s, p)| *s += h * p);
         }
-        let g = spd_inverse(&(&a * a.transpose()), "Gram matrix of the joint rows AAᵀ")?;
-        let c0 = &a * z0;
-        let gc0 = &g * &c0;
-        let cgc = c0.transpose() * &gc0;
-        let s = Mat::from_fn(m, m, |i, j| {
-            let delta = if i == j { 1.0 } else { 0.0 };
-            delta - 0.5 * (cgc[(i, j)] + cgc[(j, i)])
-        });
-        let l = cholesky(&s, 1e-10).ok_or_else(|| ModalError::Numerical {
-            stage: "null-space basis Z(ξ)".into(),
-            reason: "the joint rotation is outside the range of the fields (ZᵀP Z0 singular)"
-                .into(),
-        })?;
-        let lit = lower_inverse(&l).transpose().to_owned();
-        let zt = z0 * &lit;
-        let y = z0 - a.transpose() * &gc0;
-        let z = &y * &lit;
-        let b = &c0 * &lit;
-        let w = &g * &b;
-        Ok(NullFrame { a, g, z, zt, b, w })
-    }
-
-    /// `P v = v − AᵀG A v`.
-    pub fn project(&self, v: &Mat<f64>) -> Mat<f64> {
-        if self.a.nrows() == 0 {
-            return v.clone();
-        }
-        v - self.a.transpose() * (&self.g * (&self.a * v))
-    }
-
-    /// `K(Ȧ) = ZᵀŻ` (skew, `m × m`).
-    pub fn k_of(&self, adot: &Mat<f64>) -> Mat<f64> {
-        let v = adot * &self.z;
-        self.k_from_v(&v)
-    }
-
-    fn k_from_v(&self, v: &Mat<f64>) -> Mat<f64> {
-        let vtw = v.transpose() * &self.w;
-        let x = Mat::from_fn(vtw.nrows(), vtw.ncols(), |i, j| -(vtw[(i, j)] + vtw[(j, i)]));
-        Mat::from_fn(vtw.nrows(), vtw.ncols(), |i, j| -vtw[(i, j)]) - phi_t(&x)
-    }
-
-    /// `(Ż, Λ)` along `Ȧ`.
-    pub fn z_dot(&self, adot: &Mat<f64>) -> (Mat<f64>, Mat<f64>) {
-        let v = adot * &self.z;
-        let vtw = v.transpose() * &self.w;
-        let x = Mat::from_fn(vtw.nrows(), vtw.ncols(), |i, j| -(vtw[(i, j)] + vtw[(j, i)]));
-        let lam_t = phi_t(&x);
-        let m1 = if self.a.nrows() == 0 {
-            Mat::zeros(self.z.nrows(), self.z.ncols())
-        } else {
-            -(self.a.transpose() * (&self.g * &v)) - self.project(&(adot.transpose() * &self.w))
-        };
-        (m1 - &self.z * &lam_t, lam_t)
-    }
-
-    /// `∂K(Ȧ)` along a change `ac` of the rows (with `Ż_c = zc`, `Λ_cᵀ = lam_t_c`) and the
-    /// change `adot_c` of `Ȧ` itself.
-    pub fn k_derivative(
-        &self,
-        adot: &Mat<f64>,
-        adot_c: &Mat<f64>,
-        ac: &Mat<f64>,
-        zc: &Mat<f64>,
-        lam_t_c: &Mat<f64>,
-    ) -> Mat<f64> {
-        let v = adot * &self.z;
-        let dv = adot_c * &self.z + adot * zc;
-        let ztc = -(&self.zt * lam_t_c);
-        let dg = -(&self.g * (ac * self.a.transpose() + &self.a * ac.transpose()) * &self.g);
-        let db = ac * &self.zt + &self.a * &ztc;
-        let dw = &dg * &self.b + &self.g * &db;
-        let t1 = dv.transpose() * &self.w + v.transpose() * &dw;
-        let x = Mat::from_fn(t1.nrows(), t1.ncols(), |i, j| t1[(i, j)] + t1[(j, i)]);
-        -t1 + phi_t(&x)
+    };
+    for l in 0..m {
+        let pl = &pm[l * q..(l + 1) * q];
+        let (al, bl) = (&a[l * r..(l + 1) * r], &b[l * r..(l + 1) * r]);
+        add_outer(s1, pl, al);
+        add_outer(s2, pl, bl);
+        let o = &mut out[l * q..(l + 1) * q];
+        gemv(o, true, s1, q, bl, -alpha);
+        gemv(o, true, s2, q, al, -alpha);
+        add_outer(s1, pl, al);
+        add_outer(s2, pl, bl);
     }
 }

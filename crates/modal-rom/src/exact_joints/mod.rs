@@ -16,7 +16,9 @@
 //! `Z = Z0` and `ZᵀŻ = 0` there.
 
 mod ambient;
+mod eval;
 mod frame;
+mod jacobian;
 mod model;
 mod rows;
 

@@ -18,16 +18,17 @@
 
 use crate::error::{invalid, shape, ModalError, Result};
 use crate::exact_joints::ambient::{AmbientOps, LinkBasis};
-use crate::exact_joints::frame::{spd_inverse, NullFrame};
+use crate::exact_joints::eval::with_workspace;
 use crate::exact_joints::rows::{relative_quaternion, Constraints};
 use crate::rom::Input;
-use faer::Mat;
+use faer::linalg::solvers::DenseSolveCore;
+use faer::{Mat, Side};
 use intrinsic_beam::Kinematics;
 use multibody_constraints::Structure;
 use nalgebra::{Matrix4, Vector3, Vector4};
 
 /// `U(ω)` of eq. (8): `U(ω)ξ = ½ ξ ⊗ (0, ω)`.
-fn u_right(w: &Vector3<f64>) -> Matrix4<f64> {
+pub(super) fn u_right(w: &Vector3<f64>) -> Matrix4<f64> {
     Matrix4::new(
         0.0, -w.x, -w.y, -w.z, //
         w.x, 0.0, w.z, -w.y, //
@@ -37,7 +38,7 @@ fn u_right(w: &Vector3<f64>) -> Matrix4<f64> {
 }
 
 /// `Ū(ω)`: `Ū(ω)ξ = ½ (0, ω) ⊗ ξ`.
-fn u_left(w: &Vector3<f64>) -> Matrix4<f64> {
+pub(super) fn u_left(w: &Vector3<f64>) -> Matrix4<f64> {
     Matrix4::new(
         0.0, -w.x, -w.y, -w.z, //
         w.x, 0.0, -w.z, w.y, //
@@ -46,69 +47,57 @@ fn u_left(w: &Vector3<f64>) -> Matrix4<f64> {
     ) * 0.5
 }
 
-/// Body-rate rows (`3 × na`) of the link fields at a node.
-fn rate_rows(basis: &LinkBasis, b: usize, n: usize) -> Mat<f64> {
-    let layout = &basis.layout;
-    let comps = layout.components;
-    let mut r = Mat::<f64>::zeros(3, basis.n1());
-    for c in 0..comps.k() {
-        let s = comps.spatial_index(c);
-        if s >= 3 {
-            let idx = layout.x1_index(b, n, c);
-            for col in 0..basis.n1() {
-                r[(s - 3, col)] = basis.phi1[(idx, col)];
-            }
-        }
-    }
-    r
-}
-
-fn mat_vec(m: &Mat<f64>, v: &[f64]) -> Vec<f64> {
-    (0..m.nrows()).map(|i| (0..m.ncols()).map(|j| m[(i, j)] * v[j]).sum()).collect()
-}
-
-fn mat_tvec(m: &Mat<f64>, v: &[f64]) -> Vec<f64> {
-    (0..m.ncols()).map(|j| (0..m.nrows()).map(|i| m[(i, j)] * v[i]).sum()).collect()
-}
-
-fn rate(r: &Mat<f64>, q1: &[f64]) -> Vector3<f64> {
-    let v = mat_vec(r, q1);
-    Vector3::new(v[0], v[1], v[2])
+fn flat(m: &Mat<f64>) -> Vec<f64> {
+    (0..m.ncols()).flat_map(|j| (0..m.nrows()).map(move |i| m[(i, j)])).collect()
 }
 
 fn col(m: &Mat<f64>, j: usize) -> Vec<f64> {
     (0..m.nrows()).map(|i| m[(i, j)]).collect()
 }
 
+/// Rows `T` on the link fields whose products with `Z(ξ)` the evaluation needs (a joint's
+/// end-node values `E_j`, or the root node's values), with their constant products.
+#[derive(Clone, Debug)]
+pub(super) struct Tracked {
+    /// `T` (`t × na`) and its column-major copy.
+    pub rows: Mat<f64>,
+    pub rows_flat: Vec<f64>,
+    /// `T Z0` (`t × m`).
+    pub z0: Vec<f64>,
+    /// `T Sᵀ` (`t × rs`), support rows `S`.
+    pub s: Vec<f64>,
+    /// `T E_iᵀ` (`t × 2k`) per joint `i`.
+    pub e: Vec<Vec<f64>>,
+}
+
 /// The exact-joints reduced model (module docs; theory.md §10).
 #[derive(Clone, Debug)]
 pub struct ExactJointsRom {
-    basis: LinkBasis,
-    ops: AmbientOps,
-    cons: Constraints,
-    z0: Mat<f64>,
-    z2: Mat<f64>,
+    pub(super) basis: LinkBasis,
+    pub(super) ops: AmbientOps,
+    pub(super) cons: Constraints,
+    pub(super) z0: Mat<f64>,
+    pub(super) z2: Mat<f64>,
+    pub(super) z2_identity: bool,
     inputs: Vec<String>,
-    root_rate: Option<Mat<f64>>,
-    /// `(rows of end a, rows of end b)` per joint.
-    joint_rates: Vec<(Mat<f64>, Mat<f64>)>,
+    /// Per joint, then the root node (when carried).
+    pub(super) tracked: Vec<Tracked>,
+    /// `S Sᵀ` (`rs × rs`).
+    pub(super) ss: Vec<f64>,
+    flat: FlatCopies,
+    /// `(component, rate axis)` of the rotational components.
+    pub(super) rate_comps: Vec<(usize, usize)>,
     /// First row of each joint in `A`.
-    row_offsets: Vec<usize>,
+    pub(super) row_offsets: Vec<usize>,
 }
 
-/// Everything one evaluation computes.
-struct Eval {
-    frame: NullFrame,
-    /// `∂A/∂ξ_jc` as full `r × na` matrices, `[joint][c]`.
-    da: Vec<[Mat<f64>; 4]>,
-    q1: Vec<f64>,
-    q2: Vec<f64>,
-    f1: Vec<f64>,
-
-    adot: Mat<f64>,
-    xi_dot: Vec<Vector4<f64>>,
-    root_dot: Option<Vector4<f64>>,
-    rhs: Vec<f64>,
+/// Column-major copies of the constant matrices.
+#[derive(Clone, Debug, Default)]
+struct FlatCopies {
+    support: Vec<f64>,
+    e: Vec<Vec<f64>>,
+    z0: Vec<f64>,
+    z2: Vec<f64>,
 }
 
 impl ExactJointsRom {
@@ -123,13 +112,16 @@ impl ExactJointsRom {
     ) -> Result<Self> {
         let nb = basis.n2();
         let mut rom = Self::assemble(structure, basis, damping, inputs)?;
-        let a0 = rom.rows_at(&rom.reference_joints()).0;
+        let a0 = rom.rows_full(&rom.reference_joints());
         let na = rom.basis.n1();
         let frame = if a0.nrows() == 0 {
             Mat::identity(na, na)
         } else {
-            let g = spd_inverse(&(&a0 * a0.transpose()), "Gram matrix of the joint rows AAᵀ")?;
-            Mat::<f64>::identity(na, na) - a0.transpose() * (&g * &a0)
+            let g = (&a0 * a0.transpose()).llt(Side::Lower).map_err(|e| ModalError::Numerical {
+                stage: "Gram matrix of the joint rows AAᵀ".into(),
+                reason: format!("matrix is not positive definite (dependent rows): {e:?}"),
+            })?;
+            Mat::<f64>::identity(na, na) - a0.transpose() * (g.inverse() * &a0)
         };
         let mut cols: Vec<Vec<f64>> = Vec::new();
         for i in 0..na {
@@ -148,6 +140,7 @@ impl ExactJointsRom {
         }
         rom.z0 = Mat::from_fn(na, cols.len(), |i, j| cols[j][i]);
         rom.z2 = Mat::identity(nb, nb);
+        rom.finish();
         Ok(rom)
     }
 
@@ -180,7 +173,7 @@ impl ExactJointsRom {
             }
         }
         let mut rom = Self::assemble(structure, basis, damping, inputs)?;
-        let a0 = rom.rows_at(&rom.reference_joints()).0;
+        let a0 = rom.rows_full(&rom.reference_joints());
         let c = &a0 * &z0;
         let viol = (0..c.nrows())
             .flat_map(|i| (0..c.ncols()).map(move |j| (i, j)))
@@ -194,6 +187,7 @@ impl ExactJointsRom {
         }
         rom.z0 = z0;
         rom.z2 = z2;
+        rom.finish();
         Ok(rom)
     }
 
@@ -205,34 +199,98 @@ impl ExactJointsRom {
     ) -> Result<Self> {
         let ops = AmbientOps::new(&basis, damping, inputs)?;
         let cons = Constraints::new(structure, &basis)?;
-        let root_rate = cons.root.map(|(b, n, _)| rate_rows(&basis, b, n));
-        let joint_rates = cons
-            .joints
-            .iter()
-            .map(|j| {
-                (
-                    rate_rows(&basis, j.ends[0].0, j.ends[0].1),
-                    rate_rows(&basis, j.ends[1].0, j.ends[1].1),
-                )
-            })
-            .collect();
         let mut row_offsets = Vec::new();
         let mut r = cons.support.nrows();
         for j in &cons.joints {
             row_offsets.push(r);
-            r += j.a_c.nrows();
+            r += j.rows;
         }
+        let layout = &basis.layout;
+        let comps = layout.components;
+        let k = comps.k();
+        let rate_comps = (0..k)
+            .filter_map(|c| {
+                let s = comps.spatial_index(c);
+                (s >= 3).then_some((c, s - 3))
+            })
+            .collect();
+        let mut rows: Vec<Mat<f64>> = cons.joints.iter().map(|j| j.e.clone()).collect();
+        if let Some((b, n, _)) = cons.root {
+            rows.push(Mat::from_fn(k, basis.n1(), |i, col| {
+                basis.phi1[(layout.x1_index(b, n, i), col)]
+            }));
+        }
+        let tracked = rows
+            .into_iter()
+            .map(|t| Tracked {
+                rows_flat: flat(&t),
+                z0: Vec::new(),
+                s: flat(&(&t * cons.support.transpose())),
+                e: cons.joints.iter().map(|j| flat(&(&t * j.e.transpose()))).collect(),
+                rows: t,
+            })
+            .collect();
+        let ss = flat(&(&cons.support * cons.support.transpose()));
         Ok(ExactJointsRom {
             ops,
-            cons,
             z0: Mat::zeros(basis.n1(), 0),
             z2: Mat::zeros(basis.n2(), 0),
+            z2_identity: false,
             inputs: inputs.iter().map(|i| i.name.clone()).collect(),
             basis,
-            root_rate,
-            joint_rates,
+            tracked,
+            ss,
+            flat: FlatCopies {
+                support: flat(&cons.support),
+                e: cons.joints.iter().map(|j| flat(&j.e)).collect(),
+                ..FlatCopies::default()
+            },
+            cons,
+            rate_comps,
             row_offsets,
         })
+    }
+
+    /// Products with the final `Z0`, `Z2`.
+    fn finish(&mut self) {
+        for t in &mut self.tracked {
+            t.z0 = flat(&(&t.rows * &self.z0));
+        }
+        self.flat.z0 = flat(&self.z0);
+        self.flat.z2 = flat(&self.z2);
+        let (nb, m2) = (self.z2.nrows(), self.z2.ncols());
+        self.z2_identity = nb == m2
+            && (0..nb).all(|i| (0..m2).all(|j| self.z2[(i, j)] == if i == j { 1.0 } else { 0.0 }));
+    }
+
+    /// Key of the evaluation buffers' sizes.
+    pub(super) fn dims_key(&self) -> (usize, usize, usize, usize, usize, usize, usize) {
+        let kk = self.cons.joints.iter().map(|j| j.e.nrows()).sum::<usize>();
+        (
+            self.basis.n1(),
+            self.basis.n2(),
+            self.n_p(),
+            self.n_p2(),
+            self.cons.n_rows(),
+            self.tracked.len(),
+            kk + 1000 * self.cons.support.nrows(),
+        )
+    }
+
+    pub(super) fn support_flat(&self) -> &[f64] {
+        &self.flat.support
+    }
+
+    pub(super) fn e_flat(&self, j: usize) -> &[f64] {
+        &self.flat.e[j]
+    }
+
+    pub(super) fn z0_flat(&self) -> &[f64] {
+        &self.flat.z0
+    }
+
+    pub(super) fn z2_flat(&self) -> &[f64] {
+        &self.flat.z2
     }
 
     /// The link fields.
@@ -257,7 +315,7 @@ impl ExactJointsRom {
 
     /// Whether the state carries the root link's orientation.
     pub fn has_root(&self) -> bool {
-        self.root_rate.is_some()
+        self.cons.root.is_some()
     }
 
     /// Offset of the root quaternion (when carried).
@@ -313,33 +371,16 @@ impl ExactJointsRom {
             .collect()
     }
 
-    /// `A(ξ)` and `∂A/∂ξ_jc` (full rows).
-    fn rows_at(&self, xis: &[Vector4<f64>]) -> (Mat<f64>, Vec<[Mat<f64>; 4]>) {
+    /// `A(ξ)` (`r × na`): support rows, then each joint's `C_j(ξ_j) E_j`.
+    fn rows_full(&self, xis: &[Vector4<f64>]) -> Mat<f64> {
         let na = self.basis.n1();
-        let r = self.cons.n_rows();
-        let mut a = Mat::<f64>::zeros(r, na);
+        let mut a = Mat::<f64>::zeros(self.cons.n_rows(), na);
         let rs = self.cons.support.nrows();
-        for i in 0..rs {
-            for c in 0..na {
-                a[(i, c)] = self.cons.support[(i, c)];
-            }
-        }
-        let mut das = Vec::new();
+        a.as_mut().subrows_mut(0, rs).copy_from(&self.cons.support);
         for (j, jr) in self.cons.joints.iter().enumerate() {
-            let (aj, daj) = jr.at(&xis[j]);
-            let o = self.row_offsets[j];
-            let mut full: [Mat<f64>; 4] = std::array::from_fn(|_| Mat::zeros(r, na));
-            for i in 0..aj.nrows() {
-                for c in 0..na {
-                    a[(o + i, c)] = aj[(i, c)];
-                    for (f, d) in full.iter_mut().zip(&daj) {
-                        f[(o + i, c)] = d[(i, c)];
-                    }
-                }
-            }
-            das.push(full);
+            a.as_mut().subrows_mut(self.row_offsets[j], jr.rows).copy_from(jr.rows_at(&xis[j]));
         }
-        (a, das)
+        a
     }
 
     fn check(&self, x: &[f64], u: &[f64]) -> Result<()> {
@@ -358,49 +399,13 @@ impl ExactJointsRom {
         Ok(())
     }
 
-    fn evaluate(&self, x: &[f64], u: &[f64]) -> Result<Eval> {
-        self.check(x, u)?;
-        let (m, m2) = (self.n_p(), self.n_p2());
-        let xis = self.joint_xi(x);
-        let (a, da) = self.rows_at(&xis);
-        let frame = NullFrame::new(a, &self.z0)?;
-        let p = &x[..m];
-        let q1 = mat_vec(&frame.z, p);
-        let q2 = mat_vec(&self.z2, &x[m..m + m2]);
-        let (mut f1, mut f2) = (vec![0.0; q1.len()], vec![0.0; q2.len()]);
-        self.ops.rhs(&q1, &q2, u, &mut f1, &mut f2);
-        let mut adot = Mat::<f64>::zeros(frame.a.nrows(), frame.a.ncols());
-        let mut xi_dot = Vec::new();
-        for (j, (ra, rb)) in self.joint_rates.iter().enumerate() {
-            let d = (u_right(&rate(rb, &q1)) - u_left(&rate(ra, &q1))) * xis[j];
-            for c in 0..4 {
-                if d[c] != 0.0 {
-                    adot += &da[j][c] * d[c];
-                }
-            }
-            xi_dot.push(d);
-        }
-        let root_dot = self.root_rate.as_ref().map(|r| {
-            let o = self.root_offset();
-            u_right(&rate(r, &q1)) * Vector4::from_column_slice(&x[o..o + 4])
-        });
-        let kp = mat_vec(&frame.k_of(&adot), p);
-        let ztf = mat_tvec(&frame.z, &f1);
-        let mut rhs = vec![0.0; self.n_state()];
-        for i in 0..m {
-            rhs[i] = ztf[i] - kp[i];
-        }
-        let z2f = mat_tvec(&self.z2, &f2);
-        rhs[m..m + m2].copy_from_slice(&z2f);
-        if let Some(d) = root_dot {
-            let o = self.root_offset();
-            rhs[o..o + 4].copy_from_slice(d.as_slice());
-        }
-        for (j, d) in xi_dot.iter().enumerate() {
-            let o = self.joint_offset(j);
-            rhs[o..o + 4].copy_from_slice(d.as_slice());
-        }
-        Ok(Eval { frame, da, q1, q2, f1, adot, xi_dot, root_dot, rhs })
+    /// `Z(ξ)` (`na × m`) at the joint rotations of `x` (theory.md §10.4).
+    fn null_basis(&self, x: &[f64]) -> Result<Mat<f64>> {
+        let (na, m) = (self.basis.n1(), self.n_p());
+        with_workspace(self, |ws| {
+            self.frame_into(ws, x)?;
+            Ok(Mat::from_fn(na, m, |i, j| ws.z[j * na + i]))
+        })
     }
 
     /// Right-hand side `ẋ = f(x, u)` into `out`.
@@ -408,9 +413,8 @@ impl ExactJointsRom {
         if out.len() != self.n_state() {
             return Err(shape("output", (self.n_state(), 1), (out.len(), 1)));
         }
-        let e = self.evaluate(x, u)?;
-        out.copy_from_slice(&e.rhs);
-        Ok(())
+        self.check(x, u)?;
+        with_workspace(self, |ws| self.eval_into(ws, x, u, out, None))
     }
 
     /// Right-hand side and exact Jacobians `∂f/∂x` (n × n) and `∂f/∂u` (n × inputs), both
@@ -434,154 +438,8 @@ impl ExactJointsRom {
         if ju.len() != n * nu {
             return Err(shape("Jacobian ∂f/∂u", (n, nu), (ju.len(), 1)));
         }
-        let e = self.evaluate(x, u)?;
-        f.copy_from_slice(&e.rhs);
-        jx.fill(0.0);
-        ju.fill(0.0);
-        let (m, m2) = (self.n_p(), self.n_p2());
-        let na = self.basis.n1();
-        let fr = &e.frame;
-        let p = &x[..m];
-        let xis = self.joint_xi(x);
-        let root_xi = self.has_root().then(|| {
-            let o = self.root_offset();
-            Vector4::from_column_slice(&x[o..o + 4])
-        });
-        let jf = self.ops.jacobian(&e.q1, &e.q2);
-        let nb = e.q2.len();
-        let j11 = Mat::from_fn(na, na, |i, j| jf[(i, j)]);
-        let j12 = Mat::from_fn(na, nb, |i, j| jf[(i, na + j)]);
-        let j21 = Mat::from_fn(nb, na, |i, j| jf[(na + i, j)]);
-        let j22 = Mat::from_fn(nb, nb, |i, j| jf[(na + i, na + j)]);
-        let k = fr.k_of(&e.adot);
-        let ztj11 = fr.z.transpose() * &j11;
-        let z2tj21 = self.z2.transpose() * &j21;
-        let mut set = |r: usize, c: usize, v: f64| jx[c * n + r] += v;
-        // quaternion rate changes for a change dq1 of q1
-        let xi_rate_change = |dq1: &[f64]| -> (Option<Vector4<f64>>, Vec<Vector4<f64>>) {
-            let root = root_xi.map(|xr| u_right(&rate(self.root_rate.as_ref().unwrap(), dq1)) * xr);
-            let joints = self
-                .joint_rates
-                .iter()
-                .enumerate()
-                .map(|(j, (ra, rb))| (u_right(&rate(rb, dq1)) - u_left(&rate(ra, dq1))) * xis[j])
-                .collect();
-            (root, joints)
-        };
-        let adot_of = |dxi: &[Vector4<f64>]| -> Mat<f64> {
-            let mut a = Mat::<f64>::zeros(fr.a.nrows(), na);
-            for (j, d) in dxi.iter().enumerate() {
-                for c in 0..4 {
-                    if d[c] != 0.0 {
-                        a += &e.da[j][c] * d[c];
-                    }
-                }
-            }
-            a
-        };
-        let put_xi = |set: &mut dyn FnMut(usize, usize, f64),
-                      c: usize,
-                      root: Option<Vector4<f64>>,
-                      joints: &[Vector4<f64>]| {
-            if let Some(d) = root {
-                for i in 0..4 {
-                    set(self.root_offset() + i, c, d[i]);
-                }
-            }
-            for (j, d) in joints.iter().enumerate() {
-                for i in 0..4 {
-                    set(self.joint_offset(j) + i, c, d[i]);
-                }
-            }
-        };
-        // columns of p
-        for kc in 0..m {
-            let ze = col(&fr.z, kc);
-            let a = mat_vec(&ztj11, &ze);
-            let (root, joints) = xi_rate_change(&ze);
-            let kk = fr.k_of(&adot_of(&joints));
-            let kkp = mat_vec(&kk, p);
-            for i in 0..m {
-                set(i, kc, a[i] - k[(i, kc)] - kkp[i]);
-            }
-            let b = mat_vec(&z2tj21, &ze);
-            for i in 0..m2 {
-                set(m + i, kc, b[i]);
-            }
-            put_xi(&mut set, kc, root, &joints);
-        }
-        // columns of p2
-        let c12 = fr.z.transpose() * &j12 * &self.z2;
-        let c22 = self.z2.transpose() * &j22 * &self.z2;
-        for kc in 0..m2 {
-            for i in 0..m {
-                set(i, m + kc, c12[(i, kc)]);
-            }
-            for i in 0..m2 {
-                set(m + i, m + kc, c22[(i, kc)]);
-            }
-        }
-        // columns of the root quaternion
-        if let (Some(r), Some(_)) = (&self.root_rate, e.root_dot) {
-            let ur = u_right(&rate(r, &e.q1));
-            let o = self.root_offset();
-            for c in 0..4 {
-                for i in 0..4 {
-                    set(o + i, o + c, ur[(i, c)]);
-                }
-            }
-        }
-        // columns of the joint quaternions
-        for j in 0..self.n_joints() {
-            let (ra, rb) = &self.joint_rates[j];
-            let mj = u_right(&rate(rb, &e.q1)) - u_left(&rate(ra, &e.q1));
-            for c in 0..4 {
-                let ac = &e.da[j][c];
-                let (zc, lam_t) = fr.z_dot(ac);
-                let q1c = mat_vec(&zc, p);
-                let (root, mut joints) = xi_rate_change(&q1c);
-                for i in 0..4 {
-                    joints[j][i] += mj[(i, c)];
-                }
-                // ∂Ȧ: second derivatives of A times ξ̇, plus ∂A times ∂ξ̇
-                let mut dadot = adot_of(&joints);
-                let jr = &self.cons.joints[j];
-                let o = self.row_offsets[j];
-                for c2 in 0..4 {
-                    let s = e.xi_dot[j][c2];
-                    if s == 0.0 {
-                        continue;
-                    }
-                    let sec = jr.second(c, c2);
-                    for i in 0..sec.nrows() {
-                        for cc in 0..na {
-                            dadot[(o + i, cc)] += sec[(i, cc)] * s;
-                        }
-                    }
-                }
-                let dk = fr.k_derivative(&e.adot, &dadot, ac, &zc, &lam_t);
-                let dkp = mat_vec(&dk, p);
-                let zcf = mat_tvec(&zc, &e.f1);
-                let jq = mat_vec(&ztj11, &q1c);
-                let kc = self.joint_offset(j) + c;
-                for i in 0..m {
-                    set(i, kc, zcf[i] + jq[i] - dkp[i]);
-                }
-                let b = mat_vec(&z2tj21, &q1c);
-                for i in 0..m2 {
-                    set(m + i, kc, b[i]);
-                }
-                put_xi(&mut set, kc, root, &joints);
-            }
-        }
-        // inputs
-        let zb = fr.z.transpose() * &self.ops.b_u;
-        for c in 0..nu {
-            for i in 0..m {
-                ju[c * n + i] = zb[(i, c)];
-            }
-        }
-        Ok(())
+        self.check(x, u)?;
+        with_workspace(self, |ws| self.eval_into(ws, x, u, f, Some((jx, ju))))
     }
 
     /// Energy `½|p|² + ½|p2|²`.
@@ -591,16 +449,19 @@ impl ExactJointsRom {
 
     /// Link-field velocity coordinates `q1 = Z(ξ) p`.
     pub fn link_velocities(&self, x: &[f64]) -> Result<Vec<f64>> {
-        let u = vec![0.0; self.n_inputs()];
-        Ok(self.evaluate(x, &u)?.q1)
+        self.check(x, &vec![0.0; self.n_inputs()])?;
+        let z = self.null_basis(x)?;
+        let m = self.n_p();
+        Ok((0..z.nrows()).map(|i| (0..m).map(|j| z[(i, j)] * x[j]).sum()).collect())
     }
 
     /// `max |A(ξ) q1|`: the compatibility residual of the current velocities (round-off).
     pub fn compatibility_residual(&self, x: &[f64]) -> Result<f64> {
-        let u = vec![0.0; self.n_inputs()];
-        let e = self.evaluate(x, &u)?;
-        let r = mat_vec(&e.frame.a, &e.q1);
-        Ok(r.iter().fold(0.0f64, |m, v| m.max(v.abs())))
+        let q1 = self.link_velocities(x)?;
+        let a = self.rows_full(&self.joint_xi(x));
+        Ok((0..a.nrows())
+            .map(|i| (0..a.ncols()).map(|j| a[(i, j)] * q1[j]).sum::<f64>())
+            .fold(0.0f64, |m, v| m.max(v.abs())))
     }
 
     /// The relative quaternion of joint `j` in state `x`.
@@ -649,11 +510,10 @@ impl ExactJointsRom {
             let o = self.joint_offset(j);
             x[o..o + 4].copy_from_slice(relative_quaternion(&a, &b).as_slice());
         }
-        let (a, _) = self.rows_at(&self.joint_xi(&x));
-        let frame = NullFrame::new(a, &self.z0)?;
+        let z = self.null_basis(&x)?;
         let q1 = self.basis.coordinates1(Mat::from_fn(x1.len(), 1, |i, _| x1[i]).as_ref());
         let q2 = self.basis.coordinates2(Mat::from_fn(x2.len(), 1, |i, _| x2[i]).as_ref());
-        let p = frame.z.transpose() * &q1;
+        let p = z.transpose() * &q1;
         let p2 = self.z2.transpose() * &q2;
         for i in 0..self.n_p() {
             x[i] = p[(i, 0)];

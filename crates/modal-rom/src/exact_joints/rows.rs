@@ -54,52 +54,72 @@ pub(crate) fn rotation_second(c: usize, d: usize) -> Matrix3<f64> {
     }
 }
 
-/// One two-end joint's rows on the link fields.
+/// One two-end joint's rows on the link fields, `A_j(ξ) = C(R(ξ)) E`: `E` (`2k × na`) holds the
+/// fields' values at the two end nodes (end `a` then end `b`, local components) and the
+/// coefficients `C(R) = C_c + Σ_pq R_pq C_pq` (`r_j × 2k`) are linear in `R`.
 #[derive(Clone, Debug)]
 pub(crate) struct JointRows {
     pub name: String,
     /// `(beam, node)` of ends `a` and `b`.
     pub ends: [(usize, usize); 2],
-    /// `A_c` (`r × na`).
-    pub a_c: Mat<f64>,
-    /// `A_pq` (`r × na`), index `3p + q`.
-    pub a_pq: Vec<Mat<f64>>,
+    /// `E` (`2k × na`).
+    pub e: Mat<f64>,
+    /// `C_c` (`r × 2k`, column-major).
+    pub c_c: Vec<f64>,
+    /// `C_pq` (`r × 2k`, column-major), index `3p + q`.
+    pub c_pq: Vec<Vec<f64>>,
+    /// Rows `r`.
+    pub rows: usize,
     /// Reference relative rotation `ξ̄_a* ⊗ ξ̄_b`.
     pub reference: Vector4<f64>,
 }
 
 impl JointRows {
-    /// `A(ξ)` and `∂A/∂ξ_c`.
-    pub fn at(&self, xi: &Vector4<f64>) -> (Mat<f64>, [Mat<f64>; 4]) {
+    /// `C(ξ)` into `c` and `∂C/∂ξ_d` into `dc[d]` (each `r × 2k`, column-major).
+    pub fn coefficients(&self, xi: &Vector4<f64>, c: &mut [f64], dc: &mut [&mut [f64]; 4]) {
         let (r, dr) = rotation_and_derivatives(xi);
-        let mut a = self.a_c.clone();
-        let mut da: [Mat<f64>; 4] = std::array::from_fn(|_| Mat::zeros(a.nrows(), a.ncols()));
+        c.copy_from_slice(&self.c_c);
+        for d in dc.iter_mut() {
+            d.fill(0.0);
+        }
         for p in 0..3 {
             for q in 0..3 {
-                let apq = &self.a_pq[3 * p + q];
-                a += apq * r[(p, q)];
-                for c in 0..4 {
-                    if dr[c][(p, q)] != 0.0 {
-                        da[c] += apq * dr[c][(p, q)];
+                let cpq = &self.c_pq[3 * p + q];
+                let w = r[(p, q)];
+                c.iter_mut().zip(cpq).for_each(|(x, y)| *x += w * y);
+                for (d, drd) in dc.iter_mut().zip(&dr) {
+                    let w = drd[(p, q)];
+                    if w != 0.0 {
+                        d.iter_mut().zip(cpq).for_each(|(x, y)| *x += w * y);
                     }
                 }
             }
         }
-        (a, da)
     }
 
-    /// `∂²A/∂ξ_c∂ξ_d`.
-    pub fn second(&self, c: usize, d: usize) -> Mat<f64> {
+    /// `∂²C/∂ξ_c∂ξ_d` (constant) into `out`.
+    pub fn second(&self, c: usize, d: usize, out: &mut [f64]) {
         let r2 = rotation_second(c, d);
-        let mut out = Mat::zeros(self.a_c.nrows(), self.a_c.ncols());
+        out.fill(0.0);
         for p in 0..3 {
             for q in 0..3 {
-                if r2[(p, q)] != 0.0 {
-                    out += &self.a_pq[3 * p + q] * r2[(p, q)];
+                let w = r2[(p, q)];
+                if w != 0.0 {
+                    out.iter_mut().zip(&self.c_pq[3 * p + q]).for_each(|(x, y)| *x += w * y);
                 }
             }
         }
-        out
+    }
+
+    /// `A(ξ) = C(ξ) E` (`r × na`).
+    pub fn rows_at(&self, xi: &Vector4<f64>) -> Mat<f64> {
+        let kk = self.e.nrows();
+        let mut c = vec![0.0; self.rows * kk];
+        let mut d: [Vec<f64>; 4] = std::array::from_fn(|_| vec![0.0; self.rows * kk]);
+        let [d0, d1, d2, d3] = &mut d;
+        self.coefficients(xi, &mut c, &mut [d0, d1, d2, d3]);
+        let cm = Mat::from_fn(self.rows, kk, |i, j| c[j * self.rows + i]);
+        &cm * &self.e
     }
 }
 
@@ -157,34 +177,34 @@ impl Constraints {
             }
             let nodes: Vec<(usize, usize)> =
                 j.ends.iter().map(|&(b, e)| (b, structure.end_node(b, e))).collect();
-            let assemble = |rots: &[Matrix3<f64>]| -> Mat<f64> {
+            // coefficients of the rows on the end nodes' components (`r × 2k`)
+            let coeffs = |rots: &[Matrix3<f64>]| -> Mat<f64> {
                 let rs: Vec<_> = rows(&j.axes, &j.signs, j.ground, rots)
                     .into_iter()
                     .filter(|r| r.kind == RowKind::Compatibility)
                     .collect();
-                let mut a = Mat::<f64>::zeros(rs.len(), na);
+                let mut c = Mat::<f64>::zeros(rs.len(), nodes.len() * k);
                 for (ri, row) in rs.iter().enumerate() {
                     for t in row.terms.iter().filter(|t| t.on_velocity) {
-                        let (b, n) = nodes[t.end];
-                        for c in 0..k {
-                            let s = comps.spatial_index(c);
+                        for comp in 0..k {
+                            let s = comps.spatial_index(comp);
                             let coef = match (t.part, s < 3) {
                                 (Part::Linear, true) => t.direction[s],
                                 (Part::Angular, false) => t.direction[s - 3],
                                 _ => 0.0,
                             };
-                            if coef == 0.0 {
-                                continue;
-                            }
-                            let idx = layout.x1_index(b, n, c);
-                            for col in 0..na {
-                                a[(ri, col)] += coef * basis.phi1[(idx, col)];
-                            }
+                            c[(ri, t.end * k + comp)] += coef;
                         }
                     }
                 }
-                a
+                c
             };
+            // the end nodes' field values (`2k × na`)
+            let e = Mat::from_fn(nodes.len() * k, na, |i, col| {
+                let (b, n) = nodes[i / k];
+                basis.phi1[(layout.x1_index(b, n, i % k), col)]
+            });
+            let assemble = |rots: &[Matrix3<f64>]| -> Mat<f64> { coeffs(rots) * &e };
             if j.ground {
                 let (b, n) = nodes[0];
                 let xi = layout.beams[b].xi(n);
@@ -204,15 +224,17 @@ impl Constraints {
                     "the exact-joints model needs two-end joints",
                 ));
             }
-            let a_c = assemble(&[Matrix3::identity(), Matrix3::zeros()]);
-            let mut a_pq = Vec::with_capacity(9);
+            let c_c = coeffs(&[Matrix3::identity(), Matrix3::zeros()]);
+            let mut c_pq = Vec::with_capacity(9);
             for p in 0..3 {
                 for q in 0..3 {
-                    let mut e = Matrix3::zeros();
-                    e[(p, q)] = 1.0;
-                    a_pq.push(assemble(&[Matrix3::identity(), e]) - &a_c);
+                    let mut r = Matrix3::zeros();
+                    r[(p, q)] = 1.0;
+                    c_pq.push(coeffs(&[Matrix3::identity(), r]) - &c_c);
                 }
             }
+            let a_c = &c_c * &e;
+            let a_pq: Vec<Mat<f64>> = c_pq.iter().map(|c| c * &e).collect();
             let (xa, xb) =
                 (layout.beams[nodes[0].0].xi(nodes[0].1), layout.beams[nodes[1].0].xi(nodes[1].1));
             let reference = relative_quaternion(&xa, &xb);
@@ -227,21 +249,26 @@ impl Constraints {
                         .any(|a| (0..na).any(|c| a[(r, c)].abs() > 1e-12 * scale))
                 })
                 .collect();
-            let pick = |a: &Mat<f64>| Mat::from_fn(keep.len(), na, |r, c| a[(keep[r], c)]);
+            let kk = e.nrows();
+            let pick = |c: &Mat<f64>| -> Vec<f64> {
+                (0..kk).flat_map(|col| keep.iter().map(move |&r| c[(r, col)])).collect()
+            };
             let rows = JointRows {
                 name: j.name.clone(),
                 ends: [nodes[0], nodes[1]],
-                a_c: pick(&a_c),
-                a_pq: a_pq.iter().map(pick).collect(),
+                c_c: pick(&c_c),
+                c_pq: c_pq.iter().map(pick).collect(),
+                rows: keep.len(),
+                e: e.clone(),
                 reference,
             };
             // linearity in R, checked at a rotation away from the axes
             let test = Vector4::new(0.8, 0.3, -0.4, 0.2).normalize();
-            let direct = pick(&assemble(&[Matrix3::identity(), rotation(&test)]));
-            let (lin, _) = rows.at(&test);
+            let direct = assemble(&[Matrix3::identity(), rotation(&test)]);
+            let lin = rows.rows_at(&test);
             let err = (0..lin.nrows())
                 .flat_map(|r| (0..na).map(move |c| (r, c)))
-                .fold(0.0f64, |m, (r, c)| m.max((lin[(r, c)] - direct[(r, c)]).abs()));
+                .fold(0.0f64, |m, (r, c)| m.max((lin[(r, c)] - direct[(keep[r], c)]).abs()));
             if err > 1e-10 * scale.max(1.0) {
                 return Err(invalid(
                     format!("joint `{}`", j.name),
@@ -290,6 +317,6 @@ impl Constraints {
 
     /// Total rows.
     pub fn n_rows(&self) -> usize {
-        self.support.nrows() + self.joints.iter().map(|j| j.a_c.nrows()).sum::<usize>()
+        self.support.nrows() + self.joints.iter().map(|j| j.rows).sum::<usize>()
     }
 }

@@ -1,0 +1,154 @@
+//! Criterion benches: right-hand side plus exact Jacobian of the exact-joints model
+//! (theory.md §10) against the paper's modal model at (nearly) the same state count, 2D
+//! (per-link rigid + 4 elastic modes per link) and 3D (per-link rigid + 16).
+
+#![allow(missing_docs)] // criterion's macros generate undocumented items
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use modal_rom::exact_joints::{from_fields, ExactJointsRom};
+use modal_rom::samples;
+use modal_rom::{
+    BasisSettings, LinkBasisSettings, ModalRom, ModeSelection, RomOptions, StructureModel,
+};
+use std::hint::black_box;
+
+/// CPU time of the calling thread (s): Linux `/proc/thread-self/schedstat` (ns on CPU).
+fn thread_cpu() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
+    s.split_whitespace().next()?.parse::<f64>().ok().map(|ns| ns * 1e-9)
+}
+
+/// Prints the thread CPU time per call of `f` over `calls` calls (criterion's figures are
+/// wall times, inflated when other jobs share the cores; thread CPU time is not).
+fn cpu_report(label: &str, calls: usize, mut f: impl FnMut()) {
+    let Some(c0) = thread_cpu() else { return };
+    for _ in 0..calls {
+        f();
+    }
+    let Some(c1) = thread_cpu() else { return };
+    eprintln!("{label}: thread CPU {:.3e} s/call over {calls} calls", (c1 - c0) / calls as f64);
+}
+
+/// The exact-joints model on the per-link basis (rigid link motions + the lowest `elastic`
+/// constrained modes at 0° split per link), and the paper's model (with quaternion states)
+/// on the lowest constrained modes whose state count is closest to the exact-joints one.
+fn models(spatial: bool, elements: usize, elastic: usize) -> (ExactJointsRom, ModalRom) {
+    let none = ModeSelection::Lowest(1);
+    let s = if spatial {
+        samples::paper_3d(elements, 0.0, true, &none, &RomOptions::default())
+    } else {
+        samples::paper_2d(elements, 0.0, true, &none, &RomOptions::default())
+    }
+    .expect("paper sample");
+    let inputs = if spatial {
+        samples::inputs_3d(&s.structure, &s.model)
+    } else {
+        samples::inputs_2d(&s.structure, &s.model)
+    }
+    .expect("inputs");
+    let model: &StructureModel = &s.model;
+    let modes = model.modes(&BasisSettings::default()).expect("modes");
+    let sel = modes.select(&ModeSelection::Lowest(modes.n_rigid() + elastic)).expect("select");
+    let exact = from_fields(
+        &s.structure,
+        model,
+        &[sel.phi1()],
+        &LinkBasisSettings::default(),
+        Some(&model.damping),
+        &inputs,
+    )
+    .expect("exact-joints model");
+    let target = exact.n_state();
+    let mut best: Option<ModalRom> = None;
+    for k in modes.n_rigid() + 1..modes.n_modes() {
+        let picked = modes.select(&ModeSelection::Lowest(k)).expect("select");
+        let rom = ModalRom::new(&picked, Some(&model.damping), &inputs, &RomOptions::default())
+            .expect("paper model");
+        let better = best
+            .as_ref()
+            .is_none_or(|b| rom.n_state().abs_diff(target) < b.n_state().abs_diff(target));
+        let over = rom.n_state() > target + 8;
+        if better {
+            best = Some(rom);
+        }
+        if over {
+            break;
+        }
+    }
+    (exact, best.expect("a paper model"))
+}
+
+/// A state away from the reference: velocities and forces from a fixed pattern, every joint
+/// turned by 0.7 rad about a skew axis.
+fn exact_state(rom: &ExactJointsRom) -> Vec<f64> {
+    let mut x = rom.reference_state();
+    let k = rom.n_p() + rom.n_p2();
+    for (i, v) in x[..k].iter_mut().enumerate() {
+        *v = 0.2 * (0.37 * i as f64 + 0.1).sin();
+    }
+    for j in 0..rom.n_joints() {
+        let o = rom.joint_offset(j);
+        let r = rom.joint_quaternion(&x, j);
+        let (c, s) = ((0.35f64).cos(), (0.35f64).sin());
+        let a = nalgebra::Vector3::new(0.2, 1.0, 0.1).normalize() * s;
+        // r ⊗ (c, a)
+        let (r0, rv) = (r[0], nalgebra::Vector3::new(r[1], r[2], r[3]));
+        let v = a * r0 + rv * c + rv.cross(&a);
+        x[o..o + 4].copy_from_slice(&[r0 * c - rv.dot(&a), v.x, v.y, v.z]);
+    }
+    x
+}
+
+fn bench_pair(c: &mut Criterion, name: &str, spatial: bool, elastic: usize) {
+    let (exact, paper) = models(spatial, 20, elastic);
+    let x = exact_state(&exact);
+    let (n, nu) = (exact.n_state(), exact.n_inputs());
+    let u: Vec<f64> = (0..nu).map(|i| 0.3 * (i as f64 + 1.0)).collect();
+    let (mut f, mut jx, mut ju) = (vec![0.0; n], vec![0.0; n * n], vec![0.0; n * nu]);
+    let np = paper.n_state();
+    let q: Vec<f64> = (0..np).map(|i| 0.1 * (i as f64 * 0.37).sin()).collect();
+    let (mut fp, mut jp, mut jup) = (vec![0.0; np], vec![0.0; np * np], vec![0.0; np * nu]);
+    eprintln!(
+        "{name}: exact-joints state {n} (p {}, p2 {}), paper state {np} ({} modes)",
+        exact.n_p(),
+        exact.n_p2(),
+        paper.n_modes()
+    );
+    cpu_report(&format!("{name}/exact_rhs_and_jacobian"), 2_000, || {
+        exact
+            .rhs_and_jacobian(black_box(&x), black_box(&u), &mut f, &mut jx, &mut ju)
+            .expect("exact")
+    });
+    cpu_report(&format!("{name}/paper_rhs_and_jacobian"), 20_000, || {
+        paper
+            .rhs_and_jacobian(black_box(&q), black_box(&u), &mut fp, &mut jp, &mut jup)
+            .expect("paper")
+    });
+    let mut group = c.benchmark_group("exact_joints");
+    group.bench_function(format!("{name}/exact_rhs_and_jacobian"), |b| {
+        b.iter(|| {
+            exact
+                .rhs_and_jacobian(black_box(&x), black_box(&u), &mut f, &mut jx, &mut ju)
+                .expect("exact")
+        })
+    });
+    group.bench_function(format!("{name}/paper_rhs_and_jacobian"), |b| {
+        b.iter(|| {
+            paper
+                .rhs_and_jacobian(black_box(&q), black_box(&u), &mut fp, &mut jp, &mut jup)
+                .expect("paper")
+        })
+    });
+    group.bench_function(format!("{name}/exact_rhs"), |b| {
+        b.iter(|| exact.rhs(black_box(&x), black_box(&u), &mut f).expect("exact"))
+    });
+    group.finish();
+}
+
+fn exact_joints(c: &mut Criterion) {
+    bench_pair(c, "2d_rigid+4", false, 4);
+    bench_pair(c, "3d_rigid+16", true, 16);
+}
+
+criterion_group!(benches, exact_joints);
+criterion_main!(benches);

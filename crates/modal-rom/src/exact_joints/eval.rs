@@ -1,0 +1,532 @@
+//! Right-hand side and exact Jacobian of the exact-joints model (theory.md §10.4–10.5),
+//! evaluated through the joints' end-node rows.
+//!
+//! Every joint row is `A_j(ξ) = C_j(ξ) E_j` with `E_j` the fields' values at the joint's two end
+//! nodes (`2k × na`, constant) and `C_j` small and linear in `R(ξ_j)`; support rows `S` are
+//! constant. So every product of `A`, `Ȧ`, `∂A/∂ξ` with `Z(ξ) = (Z0 − AᵀH) L⁻ᵀ`
+//! (`H = G A Z0`, theory.md §10.4) reduces to products of the precomputed `E_j Z0`, `E_j Sᵀ`,
+//! `E_j E_iᵀ`, `S Sᵀ` with `r × ·` matrices: the `ξ` columns of the Jacobian cost
+//! `O(na (m + r) + m r²)` each, the `p` columns are `ZᵀJ11Z − K − κ Ξ` (`κ_jc = K(∂A/∂ξ_jc) p`,
+//! `Ξ = ∂ξ̇/∂p`, a rank-`4·joints` term), and the dense work is the projection `ZᵀJZ` of the
+//! ambient Jacobian.
+
+use crate::error::Result;
+use crate::exact_joints::frame::{
+    cholesky, gemm, gemv, gemv_t, right_solve_lt, skew_apply, view, view_mut,
+};
+use crate::exact_joints::model::{u_left, u_right, ExactJointsRom};
+use nalgebra::{Matrix4, Vector3, Vector4};
+use std::cell::RefCell;
+
+/// Reused buffers of one evaluation (sized by the model's dimensions).
+#[derive(Debug, Default)]
+pub(crate) struct Workspace {
+    pub(super) key: (usize, usize, usize, usize, usize, usize, usize),
+    /// Per joint: `C_j` and `∂C_j/∂ξ_c` (`r_j × 2k`).
+    pub(super) c: Vec<Vec<f64>>,
+    pub(super) dc: Vec<[Vec<f64>; 4]>,
+    /// Per joint: `Ċ_j`, `Ċ'_j` (`r_j × 2k`), second derivative scratch.
+    pub(super) cdot: Vec<Vec<f64>>,
+    pub(super) cdot2: Vec<Vec<f64>>,
+    pub(super) c2: Vec<f64>,
+    /// Per tracked block: `T Aᵀ` (`t × r`), `T Z` (`t × m`).
+    pub(super) ta: Vec<Vec<f64>>,
+    pub(super) tz: Vec<Vec<f64>>,
+    pub(super) gram: Vec<f64>,
+    pub(super) g: Vec<f64>,
+    pub(super) c0: Vec<f64>,
+    pub(super) h: Vec<f64>,
+    pub(super) b: Vec<f64>,
+    pub(super) w: Vec<f64>,
+    /// `W` restricted to all joint rows (`rJ × m`) and to each joint's rows (`r_j × m`).
+    pub(super) wj: Vec<f64>,
+    pub(super) wjj: Vec<Vec<f64>>,
+    /// Cholesky factor of `S` (`m × m`).
+    pub(super) l: Vec<f64>,
+    pub(super) z: Vec<f64>,
+    pub(super) q1: Vec<f64>,
+    pub(super) q2: Vec<f64>,
+    pub(super) f1: Vec<f64>,
+    pub(super) f2: Vec<f64>,
+    pub(super) jf: Vec<f64>,
+    /// `E_j q1` per joint (`2k`), root node `E_r q1` (`k`): per tracked block.
+    pub(super) eq: Vec<Vec<f64>>,
+    pub(super) xi: Vec<Vector4<f64>>,
+    pub(super) xi_dot: Vec<Vector4<f64>>,
+    /// `V = ȦZ` on the joint rows (`rJ × m`); `∂A/∂ξ_jc Z` per joint and `c` (`r_j × m`).
+    pub(super) v: Vec<f64>,
+    pub(super) vc: Vec<[Vec<f64>; 4]>,
+    /// `∂ξ̇_j/∂p` (`4 × m`) per joint.
+    pub(super) xi_p: Vec<Vec<f64>>,
+    pub(super) ztf: Vec<f64>,
+    pub(super) t11: Vec<f64>,
+    pub(super) u21: Vec<f64>,
+    pub(super) t12: Vec<f64>,
+    pub(super) mm: Vec<f64>,
+    pub(super) adat: Vec<f64>,
+    pub(super) adat_g: Vec<f64>,
+    pub(super) gaac: Vec<f64>,
+    pub(super) x1: Vec<f64>,
+    pub(super) qq: Vec<f64>,
+    pub(super) dg: Vec<f64>,
+    pub(super) db: Vec<f64>,
+    pub(super) dv: Vec<f64>,
+    pub(super) dw: Vec<f64>,
+    pub(super) rtmp: Vec<f64>,
+    pub(super) ktmp: Vec<f64>,
+    pub(super) mtmp2: Vec<f64>,
+    pub(super) big: Vec<f64>,
+    pub(super) eqc: Vec<Vec<f64>>,
+    pub(super) af1: Vec<f64>,
+    pub(super) gf: Vec<f64>,
+    pub(super) zc: Vec<f64>,
+    pub(super) epf: Vec<Vec<f64>>,
+    pub(super) wp: Vec<f64>,
+    pub(super) vcp: Vec<f64>,
+    pub(super) lp: Vec<f64>,
+    pub(super) a1: Vec<f64>,
+    pub(super) dvec: Vec<f64>,
+    pub(super) gd: Vec<f64>,
+    pub(super) colp: Vec<f64>,
+    pub(super) tj: Vec<f64>,
+    pub(super) dxd: Vec<Vector4<f64>>,
+    pub(super) aac: Vec<f64>,
+    pub(super) x1tmp: Vec<f64>,
+    pub(super) phitmp: Vec<f64>,
+    pub(super) qj: Vec<f64>,
+    pub(super) dkp: Vec<f64>,
+    pub(super) ambient_tmp: Vec<f64>,
+}
+
+thread_local! {
+    static WORKSPACE: RefCell<Workspace> = RefCell::new(Workspace::default());
+}
+
+/// Runs `f` with this thread's workspace sized for `rom`.
+pub(crate) fn with_workspace<T>(rom: &ExactJointsRom, f: impl FnOnce(&mut Workspace) -> T) -> T {
+    WORKSPACE.with(|ws| {
+        let mut ws = ws.borrow_mut();
+        let key = rom.dims_key();
+        if ws.key != key {
+            *ws = Workspace::new(rom);
+        }
+        f(&mut ws)
+    })
+}
+
+fn zeros(n: usize) -> Vec<f64> {
+    vec![0.0; n]
+}
+
+impl Workspace {
+    fn new(rom: &ExactJointsRom) -> Self {
+        let (na, nb, m, m2) = (rom.basis.n1(), rom.basis.n2(), rom.n_p(), rom.n_p2());
+        let r = rom.cons.n_rows();
+        let rs = rom.cons.support.nrows();
+        let rj = r - rs;
+        let joints = &rom.cons.joints;
+        let per = |f: &dyn Fn(usize, usize) -> usize| -> Vec<Vec<f64>> {
+            joints.iter().map(|j| zeros(f(j.rows, j.e.nrows()))).collect()
+        };
+        let kk = joints.iter().map(|j| j.e.nrows()).max().unwrap_or(0);
+        let rmax = joints.iter().map(|j| j.rows).max().unwrap_or(0).max(r);
+        let big = (2 * m * r).max(2 * r * r).max(m * m).max(na * m);
+        Workspace {
+            key: rom.dims_key(),
+            c: per(&|rj, kk| rj * kk),
+            dc: joints
+                .iter()
+                .map(|j| std::array::from_fn(|_| zeros(j.rows * j.e.nrows())))
+                .collect(),
+            cdot: per(&|rj, kk| rj * kk),
+            cdot2: per(&|rj, kk| rj * kk),
+            c2: zeros(rmax * kk),
+            ta: rom.tracked.iter().map(|t| zeros(t.rows.nrows() * r)).collect(),
+            tz: rom.tracked.iter().map(|t| zeros(t.rows.nrows() * m)).collect(),
+            gram: zeros(r * r),
+            g: zeros(r * r),
+            c0: zeros(r * m),
+            h: zeros(r * m),
+            b: zeros(r * m),
+            w: zeros(r * m),
+            wj: zeros(rj * m),
+            wjj: per(&|rj, _| rj * m),
+            l: zeros(m * m),
+            z: zeros(na * m),
+            q1: zeros(na),
+            q2: zeros(nb),
+            f1: zeros(na),
+            f2: zeros(nb),
+            jf: zeros((na + nb) * (na + nb)),
+            eq: rom.tracked.iter().map(|t| zeros(t.rows.nrows())).collect(),
+            xi: vec![Vector4::zeros(); joints.len() + 1],
+            xi_dot: vec![Vector4::zeros(); joints.len() + 1],
+            v: zeros(rj * m),
+            vc: joints.iter().map(|j| std::array::from_fn(|_| zeros(j.rows * m))).collect(),
+            xi_p: joints.iter().map(|_| zeros(4 * m)).collect(),
+            ztf: zeros(m),
+            t11: zeros(m * na),
+            u21: zeros(m2.max(nb) * na),
+            t12: zeros(m * nb),
+            mm: zeros(m * m.max(m2)),
+            adat: zeros(rj * r),
+            adat_g: zeros(rj * rmax),
+            gaac: zeros(r * rmax),
+            x1: zeros(rj * rmax),
+            qq: zeros(r * r),
+            dg: zeros(r * r),
+            db: zeros(r * m),
+            dv: zeros(rj * m),
+            dw: zeros(rj * m),
+            rtmp: zeros(r.max(kk).max(1) * 4),
+            ktmp: zeros(kk.max(1)),
+            mtmp2: zeros(m),
+            big: zeros(big.max(1)),
+            eqc: rom.tracked.iter().map(|t| zeros(t.rows.nrows())).collect(),
+            af1: zeros(r),
+            gf: zeros(r),
+            zc: zeros(na),
+            epf: joints.iter().map(|j| zeros(j.e.nrows())).collect(),
+            wp: zeros(r),
+            vcp: zeros(rmax),
+            lp: zeros(m),
+            a1: zeros(kk),
+            dvec: zeros(r),
+            gd: zeros(r),
+            colp: zeros(m),
+            tj: zeros(rmax),
+            dxd: vec![Vector4::zeros(); joints.len()],
+            aac: zeros(r * rmax),
+            x1tmp: zeros(kk * rmax),
+            phitmp: zeros(2 * r * rmax),
+            qj: zeros(rmax * r),
+            dkp: zeros(m),
+            ambient_tmp: zeros(rom.ops.scratch_len()),
+        }
+    }
+}
+
+/// `ω_a`, `ω_b` of a joint from its end-node values `e` (`2k`), or the root's `ω` from its
+/// node values (`k`).
+pub(super) fn rates(rom: &ExactJointsRom, e: &[f64], end: usize) -> Vector3<f64> {
+    let k = rom.basis.layout.k();
+    let mut w = Vector3::zeros();
+    for &(c, axis) in &rom.rate_comps {
+        w[axis] = e[end * k + c];
+    }
+    w
+}
+
+/// `U(ω_b) − Ū(ω_a)` of joint block `e`.
+pub(super) fn joint_rate_matrix(rom: &ExactJointsRom, e: &[f64]) -> Matrix4<f64> {
+    u_right(&rates(rom, e, 1)) - u_left(&rates(rom, e, 0))
+}
+
+impl ExactJointsRom {
+    /// `Z(ξ)` and its factors into `ws` for the joint rotations in `x` (theory.md §10.4).
+    pub(crate) fn frame_into(&self, ws: &mut Workspace, x: &[f64]) -> Result<()> {
+        let (na, m) = (self.basis.n1(), self.n_p());
+        let r = self.cons.n_rows();
+        let rs = self.cons.support.nrows();
+        for (j, jr) in self.cons.joints.iter().enumerate() {
+            let o = self.joint_offset(j);
+            ws.xi[j] = Vector4::from_column_slice(&x[o..o + 4]);
+            let [d0, d1, d2, d3] = &mut ws.dc[j];
+            jr.coefficients(&ws.xi[j], &mut ws.c[j], &mut [d0, d1, d2, d3]);
+        }
+        // T Aᵀ = [T Sᵀ | T E_iᵀ C_iᵀ]
+        for (t, tr) in self.tracked.iter().enumerate() {
+            let nt = tr.rows.nrows();
+            let ta = &mut ws.ta[t];
+            ta[..nt * rs].copy_from_slice(&tr.s[..nt * rs]);
+            for (i, jr) in self.cons.joints.iter().enumerate() {
+                let o = self.row_offsets[i];
+                let kk = jr.e.nrows();
+                gemm(
+                    view_mut(&mut ta[o * nt..], nt, jr.rows),
+                    false,
+                    view(&tr.e[i], nt, kk),
+                    view(&ws.c[i], jr.rows, kk).transpose(),
+                    1.0,
+                );
+            }
+        }
+        // AAᵀ: support columns [SSᵀ; C_j E_j Sᵀ], joint i columns (E_i Aᵀ)ᵀ C_iᵀ
+        {
+            let mut gm = view_mut(&mut ws.gram, r, r);
+            for c in 0..rs {
+                for i in 0..rs {
+                    gm[(i, c)] = self.ss[c * rs + i];
+                }
+            }
+            for (j, jr) in self.cons.joints.iter().enumerate() {
+                let o = self.row_offsets[j];
+                let kk = jr.e.nrows();
+                gemm(
+                    gm.as_mut().submatrix_mut(o, 0, jr.rows, rs),
+                    false,
+                    view(&ws.c[j], jr.rows, kk),
+                    view(&self.tracked[j].s, kk, rs),
+                    1.0,
+                );
+                gemm(
+                    gm.as_mut().submatrix_mut(0, o, r, jr.rows),
+                    false,
+                    view(&ws.ta[j], kk, r).transpose(),
+                    view(&ws.c[j], jr.rows, kk).transpose(),
+                    1.0,
+                );
+            }
+            for c in 0..r {
+                for i in 0..c {
+                    let s = 0.5 * (gm[(i, c)] + gm[(c, i)]);
+                    gm[(i, c)] = s;
+                    gm[(c, i)] = s;
+                }
+            }
+        }
+        cholesky(
+            &mut ws.gram,
+            r,
+            1e-14,
+            true,
+            "Gram matrix of the joint rows AAᵀ",
+            "matrix is not positive definite (dependent rows)",
+        )?;
+        // G = L_g⁻ᵀ L_g⁻¹
+        {
+            let inv = &mut ws.big[..r * r];
+            inv.fill(0.0);
+            for i in 0..r {
+                inv[i * r + i] = 1.0;
+            }
+            if r > 0 {
+                faer::linalg::triangular_solve::solve_lower_triangular_in_place(
+                    view(&ws.gram, r, r),
+                    view_mut(inv, r, r),
+                    faer::Par::Seq,
+                );
+            }
+            gemm(
+                view_mut(&mut ws.g, r, r),
+                false,
+                view(inv, r, r).transpose(),
+                view(inv, r, r),
+                1.0,
+            );
+        }
+        // C0 = A Z0 (support rows vanish on Z0)
+        {
+            ws.c0.fill(0.0);
+            let mut c0 = view_mut(&mut ws.c0, r, m);
+            for (j, jr) in self.cons.joints.iter().enumerate() {
+                let kk = jr.e.nrows();
+                gemm(
+                    c0.as_mut().subrows_mut(self.row_offsets[j], jr.rows),
+                    false,
+                    view(&ws.c[j], jr.rows, kk),
+                    view(&self.tracked[j].z0, kk, m),
+                    1.0,
+                );
+            }
+        }
+        gemm(view_mut(&mut ws.h, r, m), false, view(&ws.g, r, r), view(&ws.c0, r, m), 1.0);
+        // S = I − sym(C0ᵀ G C0) = L Lᵀ
+        {
+            gemm(
+                view_mut(&mut ws.l, m, m),
+                false,
+                view(&ws.c0, r, m).transpose(),
+                view(&ws.h, r, m),
+                1.0,
+            );
+            for c in 0..m {
+                for i in 0..=c {
+                    let s =
+                        -0.5 * (ws.l[c * m + i] + ws.l[i * m + c]) + if i == c { 1.0 } else { 0.0 };
+                    ws.l[c * m + i] = s;
+                    ws.l[i * m + c] = s;
+                }
+            }
+        }
+        cholesky(
+            &mut ws.l,
+            m,
+            1e-10,
+            false,
+            "null-space basis Z(ξ)",
+            "the joint rotation is outside the range of the fields (ZᵀP Z0 singular)",
+        )?;
+        ws.b.copy_from_slice(&ws.c0);
+        right_solve_lt(&ws.l, m, &mut ws.b, r);
+        ws.w.copy_from_slice(&ws.h);
+        right_solve_lt(&ws.l, m, &mut ws.w, r);
+        // T Z = (T Z0 − T Aᵀ H) L⁻ᵀ
+        for (t, tr) in self.tracked.iter().enumerate() {
+            let nt = tr.rows.nrows();
+            ws.tz[t].copy_from_slice(&tr.z0);
+            gemm(
+                view_mut(&mut ws.tz[t], nt, m),
+                true,
+                view(&ws.ta[t], nt, r),
+                view(&ws.h, r, m),
+                -1.0,
+            );
+            right_solve_lt(&ws.l, m, &mut ws.tz[t], nt);
+        }
+        // Z = (Z0 − AᵀH) L⁻ᵀ, AᵀH = SᵀH_s + Σ E_jᵀ C_jᵀ H_j
+        {
+            ws.z.copy_from_slice(self.z0_flat());
+            let hv = view(&ws.h, r, m);
+            gemm(
+                view_mut(&mut ws.z, na, m),
+                true,
+                self.cons.support.transpose(),
+                hv.subrows(0, rs),
+                -1.0,
+            );
+            for (j, jr) in self.cons.joints.iter().enumerate() {
+                let kk = jr.e.nrows();
+                let tmp = &mut ws.big[..kk * m];
+                gemm(
+                    view_mut(tmp, kk, m),
+                    false,
+                    view(&ws.c[j], jr.rows, kk).transpose(),
+                    hv.subrows(self.row_offsets[j], jr.rows),
+                    1.0,
+                );
+                gemm(view_mut(&mut ws.z, na, m), true, jr.e.transpose(), view(tmp, kk, m), -1.0);
+            }
+            right_solve_lt(&ws.l, m, &mut ws.z, na);
+        }
+        // W on the joint rows
+        for c in 0..m {
+            ws.wj[c * (r - rs)..(c + 1) * (r - rs)].copy_from_slice(&ws.w[c * r + rs..(c + 1) * r]);
+            for (j, jr) in self.cons.joints.iter().enumerate() {
+                let o = self.row_offsets[j];
+                ws.wjj[j][c * jr.rows..(c + 1) * jr.rows]
+                    .copy_from_slice(&ws.w[c * r + o..c * r + o + jr.rows]);
+            }
+        }
+        Ok(())
+    }
+
+    /// `A v` (`r`) for a field vector `v` (`na`).
+    pub(crate) fn rows_times(
+        &self,
+        ws_c: &[Vec<f64>],
+        v: &[f64],
+        out: &mut [f64],
+        tmp: &mut [f64],
+    ) {
+        let rs = self.cons.support.nrows();
+        gemv(&mut out[..rs], false, self.support_flat(), rs, v, 1.0);
+        for (j, jr) in self.cons.joints.iter().enumerate() {
+            let kk = jr.e.nrows();
+            let ev = &mut tmp[..kk];
+            gemv(ev, false, self.e_flat(j), kk, v, 1.0);
+            let o = self.row_offsets[j];
+            gemv(&mut out[o..o + jr.rows], false, &ws_c[j], jr.rows, ev, 1.0);
+        }
+    }
+
+    /// `out (+)= alpha · Aᵀ u` (`na`) for a row vector `u` (`r`).
+    pub(crate) fn rows_t_times(
+        &self,
+        ws_c: &[Vec<f64>],
+        u: &[f64],
+        alpha: f64,
+        out: &mut [f64],
+        tmp: &mut [f64],
+    ) {
+        let rs = self.cons.support.nrows();
+        let na = self.basis.n1();
+        let s = self.support_flat();
+        gemv_t(out, true, s, rs, &u[..rs], alpha);
+        for (j, jr) in self.cons.joints.iter().enumerate() {
+            let kk = jr.e.nrows();
+            let o = self.row_offsets[j];
+            let cu = &mut tmp[..kk];
+            gemv_t(cu, false, &ws_c[j], jr.rows, &u[o..o + jr.rows], 1.0);
+            gemv_t(&mut out[..na], true, self.e_flat(j), kk, cu, alpha);
+        }
+    }
+
+    /// Right-hand side into `f`, and with `jac = Some((jx, ju))` the exact Jacobians
+    /// (theory.md §10.5); the state and input are checked by the caller.
+    pub(crate) fn eval_into(
+        &self,
+        ws: &mut Workspace,
+        x: &[f64],
+        u: &[f64],
+        f: &mut [f64],
+        jac: Option<(&mut [f64], &mut [f64])>,
+    ) -> Result<()> {
+        let (na, nb, m, m2) = (self.basis.n1(), self.basis.n2(), self.n_p(), self.n_p2());
+        let r = self.cons.n_rows();
+        let rs = self.cons.support.nrows();
+        let rj = r - rs;
+        let nj = self.n_joints();
+        self.frame_into(ws, x)?;
+        let p = &x[..m];
+        let p2 = &x[m..m + m2];
+        gemv(&mut ws.q1, false, &ws.z, na, p, 1.0);
+        if self.z2_identity {
+            ws.q2.copy_from_slice(p2);
+        } else {
+            gemv(&mut ws.q2, false, self.z2_flat(), nb, p2, 1.0);
+        }
+        let jf = if jac.is_some() { Some(&mut ws.jf[..]) } else { None };
+        self.ops.eval(&ws.q1, &ws.q2, u, &mut ws.f1, &mut ws.f2, jf, &mut ws.ambient_tmp);
+        for (t, tr) in self.tracked.iter().enumerate() {
+            gemv(&mut ws.eq[t], false, &ws.tz[t], tr.rows.nrows(), p, 1.0);
+        }
+        for j in 0..nj {
+            ws.xi_dot[j] = joint_rate_matrix(self, &ws.eq[j]) * ws.xi[j];
+        }
+        let root_xi = self.root_quaternion(x);
+        let root_dot = root_xi.map(|xr| u_right(&rates(self, &ws.eq[nj], 0)) * xr);
+        // V = ȦZ on the joint rows: Ċ_j (E_j Z)
+        for (j, jr) in self.cons.joints.iter().enumerate() {
+            let kk = jr.e.nrows();
+            let cd = &mut ws.cdot[j];
+            cd.fill(0.0);
+            for c in 0..4 {
+                let s = ws.xi_dot[j][c];
+                cd.iter_mut().zip(&ws.dc[j][c]).for_each(|(a, b)| *a += s * b);
+            }
+            gemm(
+                view_mut(&mut ws.v, rj, m).subrows_mut(self.row_offsets[j] - rs, jr.rows),
+                false,
+                view(cd, jr.rows, kk),
+                view(&ws.tz[j], kk, m),
+                1.0,
+            );
+        }
+        // ṗ = Zᵀf1 − K p
+        gemv_t(&mut ws.ztf, false, &ws.z, na, &ws.f1, 1.0);
+        let kp = &mut ws.mtmp2;
+        kp.fill(0.0);
+        skew_apply(&ws.v, &ws.wj, rj, p, kp, &mut ws.rtmp);
+        for i in 0..m {
+            f[i] = ws.ztf[i] - kp[i];
+        }
+        if self.z2_identity {
+            f[m..m + m2].copy_from_slice(&ws.f2);
+        } else {
+            gemv_t(&mut f[m..m + m2], false, self.z2_flat(), nb, &ws.f2, 1.0);
+        }
+        if let Some(d) = root_dot {
+            let o = self.root_offset();
+            f[o..o + 4].copy_from_slice(d.as_slice());
+        }
+        for j in 0..nj {
+            let o = self.joint_offset(j);
+            f[o..o + 4].copy_from_slice(ws.xi_dot[j].as_slice());
+        }
+        if let Some((jx, ju)) = jac {
+            self.jacobian_into(ws, x, root_xi, jx, ju);
+        }
+        Ok(())
+    }
+}

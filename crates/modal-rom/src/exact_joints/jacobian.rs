@@ -1,0 +1,410 @@
+//! Exact Jacobian of the exact-joints model (theory.md §10.5) from the factors of
+//! [`super::eval`].
+//!
+//! `∂f/∂(p, p2)`: `ZᵀJ11Z − K − κΞ`, `ZᵀJ12Z2`, `Z2ᵀJ21Z`, `Z2ᵀJ22Z2` with `κ_jc = K(∂A/∂ξ_jc)p`
+//! and `Ξ = ∂ξ̇/∂p`. `∂f/∂ξ_jc` with `A_c = ∂A/∂ξ_jc`, `V_c = A_cZ`, `Λ_c = Φ(−(WᵀV_c + V_cᵀW))`:
+//!
+//! ```text
+//!   Z_c p   = −AᵀG(V_c p − A A_cᵀ W p) − A_cᵀ W p − Z Λ_cᵀ p
+//!   Z_cᵀ f1 = −V_cᵀ G A f1 − Wᵀ A_c P f1 − Λ_c Zᵀ f1
+//!   ∂V      = ∂Ȧ Z − ȦAᵀG V_c − (ȦA_cᵀ − ȦAᵀG A A_cᵀ) W − V Λ_cᵀ
+//!   ∂W      = ∂G B + G ∂B,  ∂G = −G(A_cAᵀ + AA_cᵀ)G,  ∂B = V_c + A_cAᵀ W − B Λ_cᵀ
+//!   ∂(Kp)   = K(∂V, W) p + K(V, ∂W) p
+//! ```
+//!
+//! `∂Ȧ` from the change of every `ξ̇` (through `Z_c p` and, for joint `j`, `ξ_j` itself) and
+//! the constant `∂²A/∂ξ²`.
+
+use crate::exact_joints::eval::{joint_rate_matrix, rates, Workspace};
+use crate::exact_joints::frame::{
+    gemm, gemv, gemv_t, phi_apply, right_phi_t, skew_apply, view, view_mut,
+};
+use crate::exact_joints::model::{u_right, ExactJointsRom};
+use nalgebra::{Matrix4, Vector4};
+
+impl ExactJointsRom {
+    /// The Jacobians into `jx` (`n × n`) and `ju` (`n × inputs`), column-major, after
+    /// [`ExactJointsRom::eval_into`] filled `ws` at the same state.
+    pub(super) fn jacobian_into(
+        &self,
+        ws: &mut Workspace,
+        x: &[f64],
+        root_xi: Option<Vector4<f64>>,
+        jx: &mut [f64],
+        ju: &mut [f64],
+    ) {
+        let (na, nb, m, m2) = (self.basis.n1(), self.basis.n2(), self.n_p(), self.n_p2());
+        let (n, nu) = (self.n_state(), self.n_inputs());
+        let r = self.cons.n_rows();
+        let rs = self.cons.support.nrows();
+        let rj = r - rs;
+        let nj = self.n_joints();
+        let p = &x[..m];
+        jx.fill(0.0);
+        ju.fill(0.0);
+        let nf = na + nb;
+        let jf = view(&ws.jf, nf, nf);
+        let z = view(&ws.z, na, m);
+        // ZᵀJ11Z
+        gemm(view_mut(&mut ws.t11, m, na), false, z.transpose(), jf.submatrix(0, 0, na, na), 1.0);
+        gemm(view_mut(jx, n, n).submatrix_mut(0, 0, m, m), false, view(&ws.t11, m, na), z, 1.0);
+        // Z2ᵀJ21Z, ZᵀJ12Z2, Z2ᵀJ22Z2
+        let j21 = jf.submatrix(na, 0, nb, na);
+        if self.z2_identity {
+            view_mut(&mut ws.u21, nb, na).copy_from(j21);
+        } else {
+            gemm(view_mut(&mut ws.u21, m2, na), false, self.z2.transpose(), j21, 1.0);
+        }
+        gemm(view_mut(jx, n, n).submatrix_mut(m, 0, m2, m), false, view(&ws.u21, m2, na), z, 1.0);
+        gemm(view_mut(&mut ws.t12, m, nb), false, z.transpose(), jf.submatrix(0, na, na, nb), 1.0);
+        let j22 = jf.submatrix(na, na, nb, nb);
+        if self.z2_identity {
+            view_mut(jx, n, n).submatrix_mut(0, m, m, m2).copy_from(view(&ws.t12, m, nb));
+            view_mut(jx, n, n).submatrix_mut(m, m, m2, m2).copy_from(j22);
+        } else {
+            gemm(
+                view_mut(jx, n, n).submatrix_mut(0, m, m, m2),
+                false,
+                view(&ws.t12, m, nb),
+                self.z2.as_ref(),
+                1.0,
+            );
+            gemm(view_mut(&mut ws.big, nb, m2), false, j22, self.z2.as_ref(), 1.0);
+            gemm(
+                view_mut(jx, n, n).submatrix_mut(m, m, m2, m2),
+                false,
+                self.z2.transpose(),
+                view(&ws.big, nb, m2),
+                1.0,
+            );
+        }
+        // − K: K_il = M_li (i < l), −M_il (i > l), M = VᵀW
+        gemm(
+            view_mut(&mut ws.mm, m, m),
+            false,
+            view(&ws.v, rj, m).transpose(),
+            view(&ws.wj, rj, m),
+            1.0,
+        );
+        for l in 0..m {
+            for i in 0..m {
+                if i < l {
+                    jx[l * n + i] -= ws.mm[i * m + l];
+                } else if i > l {
+                    jx[l * n + i] += ws.mm[l * m + i];
+                }
+            }
+        }
+        // Ξ = ∂ξ̇/∂p (joint and root rows)
+        for (j, jr) in self.cons.joints.iter().enumerate() {
+            let kk = jr.e.nrows();
+            let o = self.joint_offset(j);
+            for k in 0..m {
+                let d = joint_rate_matrix(self, &ws.tz[j][k * kk..(k + 1) * kk]) * ws.xi[j];
+                for i in 0..4 {
+                    jx[k * n + o + i] = d[i];
+                    ws.xi_p[j][k * 4 + i] = d[i];
+                }
+            }
+        }
+        if let Some(xr) = root_xi {
+            let kr = self.tracked[nj].rows.nrows();
+            let o = self.root_offset();
+            for k in 0..m {
+                let d = u_right(&rates(self, &ws.tz[nj][k * kr..(k + 1) * kr], 0)) * xr;
+                for i in 0..4 {
+                    jx[k * n + o + i] = d[i];
+                }
+            }
+            let ur = u_right(&rates(self, &ws.eq[nj], 0));
+            for c in 0..4 {
+                for i in 0..4 {
+                    jx[(o + c) * n + o + i] = ur[(i, c)];
+                }
+            }
+        }
+        // − κ Ξ, κ_jc = K(∂A/∂ξ_jc) p
+        for (j, jr) in self.cons.joints.iter().enumerate() {
+            let kk = jr.e.nrows();
+            for c in 0..4 {
+                gemm(
+                    view_mut(&mut ws.vc[j][c], jr.rows, m),
+                    false,
+                    view(&ws.dc[j][c], jr.rows, kk),
+                    view(&ws.tz[j], kk, m),
+                    1.0,
+                );
+                let kap = &mut ws.colp;
+                kap.fill(0.0);
+                skew_apply(&ws.vc[j][c], &ws.wjj[j], jr.rows, p, kap, &mut ws.rtmp);
+                for k in 0..m {
+                    let s = ws.xi_p[j][k * 4 + c];
+                    if s != 0.0 {
+                        jx[k * n..k * n + m]
+                            .iter_mut()
+                            .zip(kap.iter())
+                            .for_each(|(a, b)| *a -= s * b);
+                    }
+                }
+            }
+        }
+        // inputs: ZᵀB_u
+        gemm(
+            view_mut(ju, n, nu).submatrix_mut(0, 0, m, nu),
+            false,
+            z.transpose(),
+            self.ops.b_u.as_ref(),
+            1.0,
+        );
+        if nj == 0 {
+            return;
+        }
+        self.joint_columns(ws, x, root_xi, jx);
+    }
+
+    /// The columns of the joint quaternions (module docs).
+    fn joint_columns(
+        &self,
+        ws: &mut Workspace,
+        x: &[f64],
+        root_xi: Option<Vector4<f64>>,
+        jx: &mut [f64],
+    ) {
+        let (na, m, m2) = (self.basis.n1(), self.n_p(), self.n_p2());
+        let n = self.n_state();
+        let r = self.cons.n_rows();
+        let rs = self.cons.support.nrows();
+        let rj = r - rs;
+        let nj = self.n_joints();
+        let p = &x[..m];
+        // A f1, G A f1, P f1, E_j P f1, W p, ȦAᵀ
+        self.rows_times(&ws.c, &ws.f1, &mut ws.af1, &mut ws.ktmp);
+        gemv(&mut ws.gf, false, &ws.g, r, &ws.af1, 1.0);
+        ws.zc.copy_from_slice(&ws.f1);
+        self.rows_t_times(&ws.c, &ws.gf, -1.0, &mut ws.zc, &mut ws.ktmp);
+        for (j, jr) in self.cons.joints.iter().enumerate() {
+            gemv(&mut ws.epf[j], false, self.e_flat(j), jr.e.nrows(), &ws.zc, 1.0);
+        }
+        gemv(&mut ws.wp, false, &ws.w, r, p, 1.0);
+        for (i, ir) in self.cons.joints.iter().enumerate() {
+            gemm(
+                view_mut(&mut ws.adat, rj, r).subrows_mut(self.row_offsets[i] - rs, ir.rows),
+                false,
+                view(&ws.cdot[i], ir.rows, ir.e.nrows()),
+                view(&ws.ta[i], ir.e.nrows(), r),
+                1.0,
+            );
+        }
+        let mjs: Vec<Matrix4<f64>> = (0..nj).map(|j| joint_rate_matrix(self, &ws.eq[j])).collect();
+        for (j, jr) in self.cons.joints.iter().enumerate() {
+            let (rjj, kk, o) = (jr.rows, jr.e.nrows(), self.row_offsets[j]);
+            // A_cᵀ-free pieces shared by the four c: G[:, rows j], ȦAᵀ G[:, rows j]
+            gemm(
+                view_mut(&mut ws.adat_g, rj, rjj),
+                false,
+                view(&ws.adat, rj, r),
+                view(&ws.g, r, r).subcols(o, rjj),
+                1.0,
+            );
+            for c in 0..4 {
+                let col = self.joint_offset(j) + c;
+                let vc = &ws.vc[j][c];
+                let dcj = &ws.dc[j][c];
+                let wjj = &ws.wjj[j];
+                // V_c p, Λ_cᵀ p, a1 = ∂C_jcᵀ W_j p
+                gemv(&mut ws.vcp, false, dcj, rjj, &ws.eq[j], 1.0);
+                ws.lp.fill(0.0);
+                phi_apply(vc, wjj, rjj, p, true, -1.0, &mut ws.lp, &mut ws.rtmp);
+                gemv_t(&mut ws.a1, false, dcj, rjj, &ws.wp[o..o + rjj], 1.0);
+                // d = V_c p − A A_cᵀ W p, z_c = −AᵀG d − E_jᵀ a1 − Z Λ_cᵀ p
+                gemv_t(&mut ws.dvec, false, &ws.ta[j], kk, &ws.a1, -1.0);
+                for i in 0..rjj {
+                    ws.dvec[o + i] += ws.vcp[i];
+                }
+                gemv(&mut ws.gd, false, &ws.g, r, &ws.dvec, 1.0);
+                ws.zc.fill(0.0);
+                self.rows_t_times(&ws.c, &ws.gd, -1.0, &mut ws.zc, &mut ws.ktmp);
+                gemv_t(&mut ws.zc, true, self.e_flat(j), kk, &ws.a1, -1.0);
+                gemv(&mut ws.zc, true, &ws.z, na, &ws.lp, -1.0);
+                // Z_cᵀ f1 + ZᵀJ11 z_c
+                let colp = &mut ws.colp;
+                colp.fill(0.0);
+                gemv_t(colp, true, vc, rjj, &ws.gf[o..o + rjj], -1.0);
+                gemv(&mut ws.tj, false, dcj, rjj, &ws.epf[j], 1.0);
+                gemv_t(colp, true, wjj, rjj, &ws.tj[..rjj], -1.0);
+                phi_apply(vc, wjj, rjj, &ws.ztf, false, 1.0, colp, &mut ws.rtmp);
+                gemv(colp, true, &ws.t11, m, &ws.zc, 1.0);
+                // p2 rows
+                gemv(&mut jx[col * n + m..col * n + m + m2], false, &ws.u21, m2, &ws.zc, 1.0);
+                // ∂ξ̇ (all joints, root)
+                for (t, tr) in self.tracked.iter().enumerate() {
+                    let nt = tr.rows.nrows();
+                    gemv(&mut ws.eqc[t], false, &tr.rows_flat, nt, &ws.zc, 1.0);
+                }
+                for i in 0..nj {
+                    let mut d = joint_rate_matrix(self, &ws.eqc[i]) * ws.xi[i];
+                    if i == j {
+                        d += mjs[j].column(c);
+                    }
+                    ws.dxd[i] = d;
+                    let oi = self.joint_offset(i);
+                    jx[col * n + oi..col * n + oi + 4].copy_from_slice(d.as_slice());
+                }
+                if let Some(xr) = root_xi {
+                    let d = u_right(&rates(self, &ws.eqc[nj], 0)) * xr;
+                    let oi = self.root_offset();
+                    jx[col * n + oi..col * n + oi + 4].copy_from_slice(d.as_slice());
+                }
+                // ∂Ȧ Z
+                for (i, ir) in self.cons.joints.iter().enumerate() {
+                    let cd = &mut ws.cdot2[i];
+                    cd.fill(0.0);
+                    for d in 0..4 {
+                        let s = ws.dxd[i][d];
+                        cd.iter_mut().zip(&ws.dc[i][d]).for_each(|(a, b)| *a += s * b);
+                    }
+                    if i == j {
+                        for d in 0..4 {
+                            let s = ws.xi_dot[j][d];
+                            if s != 0.0 {
+                                let c2 = &mut ws.c2[..rjj * kk];
+                                jr.second(c, d, c2);
+                                cd.iter_mut().zip(c2.iter()).for_each(|(a, b)| *a += s * b);
+                            }
+                        }
+                    }
+                    gemm(
+                        view_mut(&mut ws.dv, rj, m).subrows_mut(self.row_offsets[i] - rs, ir.rows),
+                        false,
+                        view(cd, ir.rows, ir.e.nrows()),
+                        view(&ws.tz[i], ir.e.nrows(), m),
+                        1.0,
+                    );
+                }
+                // − ȦAᵀG V_c
+                gemm(
+                    view_mut(&mut ws.dv, rj, m),
+                    true,
+                    view(&ws.adat_g, rj, rjj),
+                    view(vc, rjj, m),
+                    -1.0,
+                );
+                // X1 = ȦA_cᵀ − ȦAᵀ G A A_cᵀ; A A_cᵀ = (E_j Aᵀ)ᵀ ∂C_jcᵀ
+                gemm(
+                    view_mut(&mut ws.aac, r, rjj),
+                    false,
+                    view(&ws.ta[j], kk, r).transpose(),
+                    view(dcj, rjj, kk).transpose(),
+                    1.0,
+                );
+                gemm(
+                    view_mut(&mut ws.gaac, r, rjj),
+                    false,
+                    view(&ws.g, r, r),
+                    view(&ws.aac, r, rjj),
+                    1.0,
+                );
+                for (i, ir) in self.cons.joints.iter().enumerate() {
+                    let ki = ir.e.nrows();
+                    gemm(
+                        view_mut(&mut ws.x1tmp, ki, rjj),
+                        false,
+                        view(&self.tracked[i].e[j], ki, kk),
+                        view(dcj, rjj, kk).transpose(),
+                        1.0,
+                    );
+                    gemm(
+                        view_mut(&mut ws.x1, rj, rjj)
+                            .subrows_mut(self.row_offsets[i] - rs, ir.rows),
+                        false,
+                        view(&ws.cdot[i], ir.rows, ki),
+                        view(&ws.x1tmp, ki, rjj),
+                        1.0,
+                    );
+                }
+                gemm(
+                    view_mut(&mut ws.x1, rj, rjj),
+                    true,
+                    view(&ws.adat, rj, r),
+                    view(&ws.gaac, r, rjj),
+                    -1.0,
+                );
+                gemm(
+                    view_mut(&mut ws.dv, rj, m),
+                    true,
+                    view(&ws.x1, rj, rjj),
+                    view(wjj, rjj, m),
+                    -1.0,
+                );
+                right_phi_t(&ws.v, rj, vc, wjj, rjj, m, -1.0, &mut ws.dv, &mut ws.phitmp);
+                // ∂G = −G(Q + Qᵀ)G, Q = A_cAᵀ (rows j: ∂C_jc E_j Aᵀ)
+                gemm(
+                    view_mut(&mut ws.qj, rjj, r),
+                    false,
+                    view(dcj, rjj, kk),
+                    view(&ws.ta[j], kk, r),
+                    1.0,
+                );
+                ws.qq.fill(0.0);
+                for cc in 0..r {
+                    for i in 0..rjj {
+                        let v = ws.qj[cc * rjj + i];
+                        ws.qq[cc * r + o + i] += v;
+                        ws.qq[(o + i) * r + cc] += v;
+                    }
+                }
+                gemm(
+                    view_mut(&mut ws.big, r, r),
+                    false,
+                    view(&ws.qq, r, r),
+                    view(&ws.g, r, r),
+                    1.0,
+                );
+                gemm(
+                    view_mut(&mut ws.dg, r, r),
+                    false,
+                    view(&ws.g, r, r),
+                    view(&ws.big, r, r),
+                    -1.0,
+                );
+                // ∂B = V_c + Q W − B Λ_cᵀ
+                ws.db.fill(0.0);
+                for k in 0..m {
+                    ws.db[k * r + o..k * r + o + rjj].copy_from_slice(&vc[k * rjj..(k + 1) * rjj]);
+                }
+                gemm(
+                    view_mut(&mut ws.db, r, m).subrows_mut(o, rjj),
+                    true,
+                    view(&ws.qj, rjj, r),
+                    view(&ws.w, r, m),
+                    1.0,
+                );
+                right_phi_t(&ws.b, r, vc, wjj, rjj, m, -1.0, &mut ws.db, &mut ws.phitmp);
+                // ∂W on the joint rows
+                gemm(
+                    view_mut(&mut ws.dw, rj, m),
+                    false,
+                    view(&ws.dg, r, r).subrows(rs, rj),
+                    view(&ws.b, r, m),
+                    1.0,
+                );
+                gemm(
+                    view_mut(&mut ws.dw, rj, m),
+                    true,
+                    view(&ws.g, r, r).subrows(rs, rj),
+                    view(&ws.db, r, m),
+                    1.0,
+                );
+                // − ∂(K p)
+                let colp = &mut ws.colp;
+                let t = &mut ws.dkp;
+                t.fill(0.0);
+                skew_apply(&ws.dv, &ws.wj, rj, p, t, &mut ws.rtmp);
+                skew_apply(&ws.v, &ws.dw, rj, p, t, &mut ws.rtmp);
+                for i in 0..m {
+                    jx[col * n + i] = colp[i] - t[i];
+                }
+            }
+        }
+    }
+}
