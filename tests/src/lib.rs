@@ -13,6 +13,7 @@ pub mod modal;
 pub mod mpc;
 pub mod multibody;
 pub mod ocp;
+pub mod reconfiguration;
 pub mod stress;
 
 use std::time::Instant;
@@ -110,6 +111,7 @@ pub fn all_cases() -> Vec<Case> {
     cases.extend(exact_joints::cases());
     cases.extend(ocp::cases());
     cases.extend(mpc::cases());
+    cases.extend(reconfiguration::cases());
     cases.extend(stress::cases());
     cases
 }

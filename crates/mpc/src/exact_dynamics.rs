@@ -160,23 +160,12 @@ impl ExactDynamics {
     /// reference state. The joints' outboard lengths assume the beams are ordered from the root
     /// outward along a chain (every scenario of the paper).
     pub fn for_setup(setup: &crate::Setup, elastic: usize) -> Result<(Self, Weights)> {
-        use modal_rom::exact_joints::{from_fields, LinkBasisSettings};
-        use modal_rom::{BasisSettings, ModeSelection};
         let sc = &setup.scenario;
         let structure = &sc.structure;
         let model = &setup.model;
-        let modes = model.modes(&BasisSettings::default())?;
-        let sel = modes.select(&ModeSelection::Lowest(modes.n_rigid() + elastic))?;
         let inputs =
             sc.inputs.iter().map(|i| i.modal(structure, model)).collect::<Result<Vec<_>>>()?;
-        let rom = from_fields(
-            structure,
-            model,
-            &[sel.phi1()],
-            &LinkBasisSettings::default(),
-            Some(&model.damping),
-            &inputs,
-        )?;
+        let rom = crate::modal_plant::exact_joints_rom(structure, model, elastic, &inputs)?;
         let lengths: Vec<f64> = structure.beams().iter().map(|b| b.beam.mesh().length()).collect();
         let total: f64 = lengths.iter().sum();
         let outboard: Vec<f64> = structure
