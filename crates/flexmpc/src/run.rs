@@ -275,7 +275,7 @@ pub fn simulate_model(
                 r.extend_from_slice(&[x.x, x.y, x.z]);
             }
         }
-        r.extend(std::iter::repeat(f64::NAN).take(n_reactions));
+        r.extend(std::iter::repeat_n(f64::NAN, n_reactions));
         for (i, h) in scene.inputs.iter().zip(&histories) {
             r.push(match &i.kind {
                 InputKind::Load { beam, index } => {
