@@ -17,6 +17,7 @@
 //! forces (theory.md §10.3). `q1ᵀf1 + q2ᵀf2 = q1ᵀΣq1 + q1ᵀB_u u` for every `(q1, q2)`.
 
 use crate::error::{invalid, shape, ModalError, Result};
+use crate::exact_joints::frame::{gemm, gemv, gemv_t, view, view_mut};
 use crate::layout::Layout;
 use crate::rom::Input;
 use crate::structure::StructureModel;
@@ -254,17 +255,19 @@ impl LinkBasis {
     }
 }
 
-/// `Γ1`, `Γ2` of one link, dense (the link's fields couple only among themselves), stored
-/// with the first index `i` fastest: `g1[(l m + j) m + i] = Γ1^l_ij`,
-/// `g2[(l m2 + j) m + i] = Γ2^l_ij`.
+/// `Γ1`, `Γ2` of one link, dense (the link's fields couple only among themselves), each in two
+/// orders so that every contraction is one matrix–vector product: `g1_lj[i + m(j + m l)] =
+/// g1_jl[i + m(l + m j)] = Γ1^l_ij`, `g2_lj[i + m(j + m2 l)] = g2_jl[i + m(l + m2 j)] = Γ2^l_ij`.
 #[derive(Clone, Debug)]
 pub(crate) struct LinkTensors {
     /// First column and count of the link's velocity fields.
     c1: (usize, usize),
     /// First column and count of the link's force fields.
     c2: (usize, usize),
-    g1: Vec<f64>,
-    g2: Vec<f64>,
+    g1_lj: Vec<f64>,
+    g1_jl: Vec<f64>,
+    g2_lj: Vec<f64>,
+    g2_jl: Vec<f64>,
 }
 
 /// The Galerkin operators on a [`LinkBasis`] (module docs).
@@ -273,6 +276,9 @@ pub(crate) struct AmbientOps {
     pub w: Mat<f64>,
     pub sigma: Mat<f64>,
     links: Vec<LinkTensors>,
+    /// `Σ` and `W` couple no two links (the FE operators are per beam): the Jacobian of
+    /// `(f1, f2)` is block-diagonal by link.
+    block_diagonal: bool,
     pub b_u: Mat<f64>,
 }
 
@@ -338,24 +344,28 @@ impl AmbientOps {
                     }
                 }
             }
-            // re-layout (l, i, j) → (l, j, i)
-            let mut d1 = vec![0.0; m * m * m];
+            // re-layout (l, i, j) → both orders of the docs of `LinkTensors`
+            let (mut g1_lj, mut g1_jl) = (vec![0.0; m * m * m], vec![0.0; m * m * m]);
             for l in 0..m {
                 for i in 0..m {
                     for j in 0..m {
-                        d1[(l * m + j) * m + i] = g1[(l * m + i) * m + j];
+                        let v = g1[(l * m + i) * m + j];
+                        g1_lj[i + m * (j + m * l)] = v;
+                        g1_jl[i + m * (l + m * j)] = v;
                     }
                 }
             }
-            let mut d2 = vec![0.0; m * m2 * m2];
+            let (mut g2_lj, mut g2_jl) = (vec![0.0; m * m2 * m2], vec![0.0; m * m2 * m2]);
             for l in 0..m2 {
                 for i in 0..m {
                     for j in 0..m2 {
-                        d2[(l * m2 + j) * m + i] = g2[(l * m + i) * m2 + j];
+                        let v = g2[(l * m + i) * m2 + j];
+                        g2_lj[i + m * (j + m2 * l)] = v;
+                        g2_jl[i + m * (l + m2 * j)] = v;
                     }
                 }
             }
-            links.push(LinkTensors { c1: (c1.0, m), c2: (c2.0, m2), g1: d1, g2: d2 });
+            links.push(LinkTensors { c1: (c1.0, m), c2: (c2.0, m2), g1_lj, g1_jl, g2_lj, g2_jl });
         }
 
         let mut b_u = Mat::<f64>::zeros(na, inputs.len());
@@ -373,7 +383,17 @@ impl AmbientOps {
                 }
             }
         }
-        Ok(AmbientOps { w, sigma, links, b_u })
+        let link_of =
+            |cols: &[(usize, usize)], c: usize| cols.iter().position(|r| c >= r.0 && c < r.1);
+        let block_diagonal = (0..na).all(|j| {
+            (0..na).all(|i| {
+                sigma[(i, j)] == 0.0 || link_of(&basis.cols1, i) == link_of(&basis.cols1, j)
+            })
+        }) && (0..w.ncols()).all(|j| {
+            (0..na)
+                .all(|i| w[(i, j)] == 0.0 || link_of(&basis.cols1, i) == link_of(&basis.cols2, j))
+        });
+        Ok(AmbientOps { w, sigma, links, block_diagonal, b_u })
     }
 
     /// `(f1, f2)` at ambient coordinates `(q1, q2)` and input `u`, and with `jac` the dense
@@ -423,69 +443,77 @@ impl AmbientOps {
                 }
             }
         }
-        let axpy = |y: &mut [f64], a: f64, x: &[f64]| {
-            y.iter_mut().zip(x).for_each(|(y, x)| *y += a * x);
+        let mv = |out: &mut [f64], g: &[f64], rows: usize, x: &[f64]| {
+            gemm(view_mut(out, rows, 1), false, view(g, rows, x.len()), view(x, x.len(), 1), 1.0);
         };
-        let dot = |x: &[f64], y: &[f64]| x.iter().zip(y).map(|(a, b)| a * b).sum::<f64>();
         for lt in &self.links {
             let ((o1, m), (o2, m2)) = (lt.c1, lt.c2);
-            let (acc, tt) = tmp[..m + m * m2].split_at_mut(m);
+            let (u1, rest) = tmp[..2 * m * m + 2 * m * m2 + m2 * m2].split_at_mut(m * m);
+            let (j1, rest) = rest.split_at_mut(m * m);
+            let (t2, rest) = rest.split_at_mut(m * m2);
+            let (s2, k22) = rest.split_at_mut(m * m2);
             let q1b = &q1[o1..o1 + m];
-            // Γ1: u^l = Σ_j q_j Γ1^l_{·j}; f1 −= Σ_l q_l u^l; J[·, j] −= Σ_l q_l Γ1^l_{·j}; J[·, l] −= u^l
-            for l in 0..m {
-                let ql = q1b[l];
-                acc.fill(0.0);
-                for (jj, &qj) in q1b.iter().enumerate() {
-                    let col = &lt.g1[(l * m + jj) * m..(l * m + jj + 1) * m];
-                    axpy(acc, qj, col);
-                    if let Some(jm) = jac.as_deref_mut() {
-                        let c = o1 + jj;
-                        axpy(&mut jm[c * n + o1..c * n + o1 + m], -ql, col);
-                    }
-                }
-                axpy(&mut f1[o1..o1 + m], -ql, acc);
-                if let Some(jm) = jac.as_deref_mut() {
-                    let c = o1 + l;
-                    axpy(&mut jm[c * n + o1..c * n + o1 + m], -1.0, acc);
-                }
-            }
-            // Γ2: f1_i −= Γ q2_j q2_l, f2_j += Γ q1_i q2_l
-            tt.fill(0.0);
             let q2b = &q2[o2..o2 + m2];
-            for l in 0..m2 {
-                let ql = q2b[l];
-                acc.fill(0.0);
-                for (jj, &qj) in q2b.iter().enumerate() {
-                    let col = &lt.g2[(l * m2 + jj) * m..(l * m2 + jj + 1) * m];
-                    axpy(acc, qj, col);
-                    let d = dot(q1b, col);
-                    f2[o2 + jj] += ql * d;
-                    if let Some(jm) = jac.as_deref_mut() {
-                        let c = na + o2 + jj;
-                        axpy(&mut jm[c * n + o1..c * n + o1 + m], -ql, col);
-                        axpy(&mut tt[jj * m..(jj + 1) * m], ql, col);
-                        jm[(na + o2 + l) * n + na + o2 + jj] += d;
-                    }
-                }
-                axpy(&mut f1[o1..o1 + m], -ql, acc);
-                if let Some(jm) = jac.as_deref_mut() {
-                    let c = na + o2 + l;
-                    axpy(&mut jm[c * n + o1..c * n + o1 + m], -1.0, acc);
-                }
+            // Γ1: U[i, l] = Σ_j Γ1^l_ij q_j, f1 −= U q, J[·, l] −= U[·, l]
+            mv(u1, &lt.g1_jl, m * m, q1b);
+            gemv(&mut f1[o1..o1 + m], true, u1, m, q1b, -1.0);
+            // Γ2: T[i, j] = Σ_l Γ2^l_ij q2_l, S[i, l] = Σ_j Γ2^l_ij q2_j; f1 −= S q2, f2 += Tᵀ q1
+            mv(t2, &lt.g2_lj, m * m2, q2b);
+            mv(s2, &lt.g2_jl, m * m2, q2b);
+            gemv(&mut f1[o1..o1 + m], true, s2, m, q2b, -1.0);
+            gemv_t(&mut f2[o2..o2 + m2], true, t2, m, q1b, 1.0);
+            let Some(jm) = jac.as_deref_mut() else { continue };
+            // Γ1: Jc[i, j] = Σ_l Γ1^l_ij q_l; J[·, j] −= Jc[·, j] + U[·, j]
+            mv(j1, &lt.g1_lj, m * m, q1b);
+            // Γ2: K22[j, l] = Σ_i Γ2^l_ij q1_i
+            gemm(
+                view_mut(k22, m2 * m2, 1),
+                false,
+                view(&lt.g2_lj, m, m2 * m2).transpose(),
+                view(q1b, m, 1),
+                1.0,
+            );
+            for c in 0..m {
+                let col = &mut jm[(o1 + c) * n + o1..(o1 + c) * n + o1 + m];
+                col.iter_mut()
+                    .zip(&j1[c * m..(c + 1) * m])
+                    .zip(&u1[c * m..(c + 1) * m])
+                    .for_each(|((x, a), b)| *x -= a + b);
             }
-            if let Some(jm) = jac.as_deref_mut() {
-                // J[na + j, i] += Σ_l Γ2^l_ij q2_l
-                for jj in 0..m2 {
-                    for i in 0..m {
-                        jm[(o1 + i) * n + na + o2 + jj] += tt[jj * m + i];
-                    }
+            for c in 0..m2 {
+                let cc = na + o2 + c;
+                let col = &mut jm[cc * n + o1..cc * n + o1 + m];
+                col.iter_mut()
+                    .zip(&t2[c * m..(c + 1) * m])
+                    .zip(&s2[c * m..(c + 1) * m])
+                    .for_each(|((x, a), b)| *x -= a + b);
+                for (i, t) in t2[c * m..(c + 1) * m].iter().enumerate() {
+                    jm[(o1 + i) * n + cc] += t;
+                }
+                for (j, k) in k22[c * m2..(c + 1) * m2].iter().enumerate() {
+                    jm[cc * n + na + o2 + j] += k;
                 }
             }
         }
     }
 
+    /// `((first velocity column, count), (first force column, count))` per link when the
+    /// Jacobian of `(f1, f2)` is block-diagonal by link.
+    pub fn link_blocks(
+        &self,
+    ) -> Option<impl Iterator<Item = ((usize, usize), (usize, usize))> + '_> {
+        self.block_diagonal.then(|| self.links.iter().map(|l| (l.c1, l.c2)))
+    }
+
     /// Scratch length [`AmbientOps::eval`] needs.
     pub fn scratch_len(&self) -> usize {
-        self.links.iter().map(|l| l.c1.1 + l.c1.1 * l.c2.1).max().unwrap_or(0)
+        self.links
+            .iter()
+            .map(|l| {
+                let (m, m2) = (l.c1.1, l.c2.1);
+                2 * m * m + 2 * m * m2 + m2 * m2
+            })
+            .max()
+            .unwrap_or(0)
     }
 }

@@ -21,14 +21,13 @@ use std::cell::RefCell;
 /// Reused buffers of one evaluation (sized by the model's dimensions).
 #[derive(Debug, Default)]
 pub(crate) struct Workspace {
-    pub(super) key: (usize, usize, usize, usize, usize, usize, usize),
+    pub(super) key: Vec<usize>,
     /// Per joint: `C_j` and `∂C_j/∂ξ_c` (`r_j × 2k`).
     pub(super) c: Vec<Vec<f64>>,
     pub(super) dc: Vec<[Vec<f64>; 4]>,
-    /// Per joint: `Ċ_j`, `Ċ'_j` (`r_j × 2k`), second derivative scratch.
+    /// Per joint: `Ċ_j` and its change `Ċ'_j` along one joint-quaternion column (`r_j × 2k`).
     pub(super) cdot: Vec<Vec<f64>>,
     pub(super) cdot2: Vec<Vec<f64>>,
-    pub(super) c2: Vec<f64>,
     /// Per tracked block: `T Aᵀ` (`t × r`), `T Z` (`t × m`).
     pub(super) ta: Vec<Vec<f64>>,
     pub(super) tz: Vec<Vec<f64>>,
@@ -106,8 +105,7 @@ thread_local! {
 pub(crate) fn with_workspace<T>(rom: &ExactJointsRom, f: impl FnOnce(&mut Workspace) -> T) -> T {
     WORKSPACE.with(|ws| {
         let mut ws = ws.borrow_mut();
-        let key = rom.dims_key();
-        if ws.key != key {
+        if !rom.dims_match(&ws.key) {
             *ws = Workspace::new(rom);
         }
         f(&mut ws)
@@ -130,7 +128,7 @@ impl Workspace {
         };
         let kk = joints.iter().map(|j| j.e.nrows()).max().unwrap_or(0);
         let rmax = joints.iter().map(|j| j.rows).max().unwrap_or(0).max(r);
-        let big = (2 * m * r).max(2 * r * r).max(m * m).max(na * m);
+        let big = (2 * m * r).max(2 * r * r).max(m * m).max(na * m).max(kk * m).max(nb * m2);
         Workspace {
             key: rom.dims_key(),
             c: per(&|rj, kk| rj * kk),
@@ -140,7 +138,6 @@ impl Workspace {
                 .collect(),
             cdot: per(&|rj, kk| rj * kk),
             cdot2: per(&|rj, kk| rj * kk),
-            c2: zeros(rmax * kk),
             ta: rom.tracked.iter().map(|t| zeros(t.rows.nrows() * r)).collect(),
             tz: rom.tracked.iter().map(|t| zeros(t.rows.nrows() * m)).collect(),
             gram: zeros(r * r),

@@ -184,23 +184,23 @@ pub(crate) fn right_phi_t(
     out: &mut [f64],
     tmp: &mut [f64],
 ) {
+    // column l: −(S1 b_l + S2 a_l) − (a_l·b_l) P_l with S1 = Σ_{i<l} P_i a_iᵀ, S2 = Σ_{i<l} P_i b_iᵀ
     let (s1, s2) = tmp[..2 * q * r].split_at_mut(q * r);
     s1.fill(0.0);
     s2.fill(0.0);
     let add_outer = |s: &mut [f64], pl: &[f64], x: &[f64]| {
         for (k, &xk) in x.iter().enumerate() {
-            let h = 0.5 * xk;
-            s[k * q..(k + 1) * q].iter_mut().zip(pl).for_each(|(s, p)| *s += h * p);
+            s[k * q..(k + 1) * q].iter_mut().zip(pl).for_each(|(s, p)| *s += xk * p);
         }
     };
     for l in 0..m {
         let pl = &pm[l * q..(l + 1) * q];
         let (al, bl) = (&a[l * r..(l + 1) * r], &b[l * r..(l + 1) * r]);
-        add_outer(s1, pl, al);
-        add_outer(s2, pl, bl);
         let o = &mut out[l * q..(l + 1) * q];
         gemv(o, true, s1, q, bl, -alpha);
         gemv(o, true, s2, q, al, -alpha);
+        let d: f64 = al.iter().zip(bl).map(|(x, y)| x * y).sum();
+        o.iter_mut().zip(pl).for_each(|(o, p)| *o -= alpha * d * p);
         add_outer(s1, pl, al);
         add_outer(s2, pl, bl);
     }

@@ -45,19 +45,67 @@ impl ExactJointsRom {
         let nf = na + nb;
         let jf = view(&ws.jf, nf, nf);
         let z = view(&ws.z, na, m);
-        // ZᵀJ11Z
-        gemm(view_mut(&mut ws.t11, m, na), false, z.transpose(), jf.submatrix(0, 0, na, na), 1.0);
-        gemm(view_mut(jx, n, n).submatrix_mut(0, 0, m, m), false, view(&ws.t11, m, na), z, 1.0);
-        // Z2ᵀJ21Z, ZᵀJ12Z2, Z2ᵀJ22Z2
+        // ZᵀJ11Z, Z2ᵀJ21Z, ZᵀJ12Z2, Z2ᵀJ22Z2 (link by link when J is block-diagonal by link)
         let j21 = jf.submatrix(na, 0, nb, na);
-        if self.z2_identity {
-            view_mut(&mut ws.u21, nb, na).copy_from(j21);
-        } else {
-            gemm(view_mut(&mut ws.u21, m2, na), false, self.z2.transpose(), j21, 1.0);
-        }
-        gemm(view_mut(jx, n, n).submatrix_mut(m, 0, m2, m), false, view(&ws.u21, m2, na), z, 1.0);
-        gemm(view_mut(&mut ws.t12, m, nb), false, z.transpose(), jf.submatrix(0, na, na, nb), 1.0);
         let j22 = jf.submatrix(na, na, nb, nb);
+        match self.ops.link_blocks() {
+            Some(blocks) if self.z2_identity => {
+                for ((o1, k1), (o2, k2)) in blocks {
+                    let zb = z.subrows(o1, k1);
+                    gemm(
+                        view_mut(&mut ws.t11, m, na).subcols_mut(o1, k1),
+                        false,
+                        zb.transpose(),
+                        jf.submatrix(o1, o1, k1, k1),
+                        1.0,
+                    );
+                    gemm(
+                        view_mut(&mut ws.t12, m, nb).subcols_mut(o2, k2),
+                        false,
+                        zb.transpose(),
+                        jf.submatrix(o1, na + o2, k1, k2),
+                        1.0,
+                    );
+                    gemm(
+                        view_mut(jx, n, n).submatrix_mut(m + o2, 0, k2, m),
+                        false,
+                        jf.submatrix(na + o2, o1, k2, k1),
+                        zb,
+                        1.0,
+                    );
+                }
+                view_mut(&mut ws.u21, nb, na).copy_from(j21);
+            }
+            _ => {
+                gemm(
+                    view_mut(&mut ws.t11, m, na),
+                    false,
+                    z.transpose(),
+                    jf.submatrix(0, 0, na, na),
+                    1.0,
+                );
+                gemm(
+                    view_mut(&mut ws.t12, m, nb),
+                    false,
+                    z.transpose(),
+                    jf.submatrix(0, na, na, nb),
+                    1.0,
+                );
+                if self.z2_identity {
+                    view_mut(&mut ws.u21, nb, na).copy_from(j21);
+                } else {
+                    gemm(view_mut(&mut ws.u21, m2, na), false, self.z2.transpose(), j21, 1.0);
+                }
+                gemm(
+                    view_mut(jx, n, n).submatrix_mut(m, 0, m2, m),
+                    false,
+                    view(&ws.u21, m2, na),
+                    z,
+                    1.0,
+                );
+            }
+        }
+        gemm(view_mut(jx, n, n).submatrix_mut(0, 0, m, m), false, view(&ws.t11, m, na), z, 1.0);
         if self.z2_identity {
             view_mut(jx, n, n).submatrix_mut(0, m, m, m2).copy_from(view(&ws.t12, m, nb));
             view_mut(jx, n, n).submatrix_mut(m, m, m2, m2).copy_from(j22);
@@ -267,8 +315,7 @@ impl ExactJointsRom {
                         for d in 0..4 {
                             let s = ws.xi_dot[j][d];
                             if s != 0.0 {
-                                let c2 = &mut ws.c2[..rjj * kk];
-                                jr.second(c, d, c2);
+                                let c2 = &jr.c2[4 * c + d];
                                 cd.iter_mut().zip(c2.iter()).for_each(|(a, b)| *a += s * b);
                             }
                         }
@@ -367,7 +414,7 @@ impl ExactJointsRom {
                     view(&ws.big, r, r),
                     -1.0,
                 );
-                // ∂B = V_c + Q W − B Λ_cᵀ
+                // ∂B = V_c + Q W − B Λ_cᵀ (the last term enters ∂W_J as −W_J Λ_cᵀ below)
                 ws.db.fill(0.0);
                 for k in 0..m {
                     ws.db[k * r + o..k * r + o + rjj].copy_from_slice(&vc[k * rjj..(k + 1) * rjj]);
@@ -379,7 +426,6 @@ impl ExactJointsRom {
                     view(&ws.w, r, m),
                     1.0,
                 );
-                right_phi_t(&ws.b, r, vc, wjj, rjj, m, -1.0, &mut ws.db, &mut ws.phitmp);
                 // ∂W on the joint rows
                 gemm(
                     view_mut(&mut ws.dw, rj, m),
@@ -395,6 +441,8 @@ impl ExactJointsRom {
                     view(&ws.db, r, m),
                     1.0,
                 );
+                // − G_J B Λ_cᵀ = − W_J Λ_cᵀ
+                right_phi_t(&ws.wj, rj, vc, wjj, rjj, m, -1.0, &mut ws.dw, &mut ws.phitmp);
                 // − ∂(K p)
                 let colp = &mut ws.colp;
                 let t = &mut ws.dkp;

@@ -263,18 +263,41 @@ impl ExactJointsRom {
             && (0..nb).all(|i| (0..m2).all(|j| self.z2[(i, j)] == if i == j { 1.0 } else { 0.0 }));
     }
 
-    /// Key of the evaluation buffers' sizes.
-    pub(super) fn dims_key(&self) -> (usize, usize, usize, usize, usize, usize, usize) {
-        let kk = self.cons.joints.iter().map(|j| j.e.nrows()).sum::<usize>();
-        (
+    /// The sizes the evaluation buffers depend on.
+    pub(super) fn dims_key(&self) -> Vec<usize> {
+        let mut key = vec![
             self.basis.n1(),
             self.basis.n2(),
             self.n_p(),
             self.n_p2(),
-            self.cons.n_rows(),
-            self.tracked.len(),
-            kk + 1000 * self.cons.support.nrows(),
-        )
+            self.cons.support.nrows(),
+            self.ops.scratch_len(),
+        ];
+        key.extend(self.tracked.iter().map(|t| t.rows.nrows()));
+        key.extend(self.cons.joints.iter().flat_map(|j| [j.rows, j.e.nrows()]));
+        key
+    }
+
+    /// Whether buffers sized for `key` fit this model.
+    pub(super) fn dims_match(&self, key: &[usize]) -> bool {
+        let head = [
+            self.basis.n1(),
+            self.basis.n2(),
+            self.n_p(),
+            self.n_p2(),
+            self.cons.support.nrows(),
+            self.ops.scratch_len(),
+        ];
+        let nt = self.tracked.len();
+        key.len() == head.len() + nt + 2 * self.n_joints()
+            && key[..head.len()] == head
+            && self.tracked.iter().zip(&key[head.len()..]).all(|(t, &k)| t.rows.nrows() == k)
+            && self
+                .cons
+                .joints
+                .iter()
+                .zip(key[head.len() + nt..].chunks(2))
+                .all(|(j, k)| k == [j.rows, j.e.nrows()])
     }
 
     pub(super) fn support_flat(&self) -> &[f64] {

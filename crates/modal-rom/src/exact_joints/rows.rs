@@ -70,6 +70,8 @@ pub(crate) struct JointRows {
     pub c_pq: Vec<Vec<f64>>,
     /// Rows `r`.
     pub rows: usize,
+    /// `∂²C/∂ξ_c∂ξ_d` (constant, `r × 2k`), index `4c + d`.
+    pub c2: Vec<Vec<f64>>,
     /// Reference relative rotation `ξ̄_a* ⊗ ξ̄_b`.
     pub reference: Vector4<f64>,
 }
@@ -97,18 +99,19 @@ impl JointRows {
         }
     }
 
-    /// `∂²C/∂ξ_c∂ξ_d` (constant) into `out`.
-    pub fn second(&self, c: usize, d: usize, out: &mut [f64]) {
+    /// `∂²C/∂ξ_c∂ξ_d` (constant).
+    fn second(c_pq: &[Vec<f64>], c: usize, d: usize) -> Vec<f64> {
         let r2 = rotation_second(c, d);
-        out.fill(0.0);
+        let mut out = vec![0.0; c_pq[0].len()];
         for p in 0..3 {
             for q in 0..3 {
                 let w = r2[(p, q)];
                 if w != 0.0 {
-                    out.iter_mut().zip(&self.c_pq[3 * p + q]).for_each(|(x, y)| *x += w * y);
+                    out.iter_mut().zip(&c_pq[3 * p + q]).for_each(|(x, y)| *x += w * y);
                 }
             }
         }
+        out
     }
 
     /// `A(ξ) = C(ξ) E` (`r × na`).
@@ -253,11 +256,14 @@ impl Constraints {
             let pick = |c: &Mat<f64>| -> Vec<f64> {
                 (0..kk).flat_map(|col| keep.iter().map(move |&r| c[(r, col)])).collect()
             };
+            let c_pq: Vec<Vec<f64>> = c_pq.iter().map(pick).collect();
+            let c2 = (0..16).map(|cd| JointRows::second(&c_pq, cd / 4, cd % 4)).collect();
             let rows = JointRows {
                 name: j.name.clone(),
                 ends: [nodes[0], nodes[1]],
                 c_c: pick(&c_c),
-                c_pq: c_pq.iter().map(pick).collect(),
+                c_pq,
+                c2,
                 rows: keep.len(),
                 e: e.clone(),
                 reference,
