@@ -27,7 +27,6 @@ pub use control::{controller_kind, model_kind, plant_kind};
 pub use error::SceneError;
 use error::{field_at, field_from_message, table_at, Ctx};
 pub use names::*;
-pub use reference::{JointCommandSpec, ReferenceSpec};
 pub use spec::*;
 pub use structure::MAX_ELEMENTS_PER_BEAM;
 

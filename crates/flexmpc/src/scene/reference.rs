@@ -13,32 +13,9 @@
 //! `angle_deg` from 0 along a smooth step (default 0: the target from the start).
 
 use multibody_constraints::Structure;
-use serde::Deserialize;
 
 use super::error::{Ctx, SceneError};
 use super::spec::SceneSpec;
-
-/// `[reference]`.
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ReferenceSpec {
-    /// Commanded joint rotations, at most one per joint or support.
-    pub joints: Vec<JointCommandSpec>,
-}
-
-/// One commanded rotation.
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct JointCommandSpec {
-    /// Joint or support name.
-    pub joint: String,
-    /// Rotation axis (joint: first end frame; support: global).
-    pub axis: [f64; 3],
-    /// Target angle (deg).
-    pub angle_deg: f64,
-    /// Time to reach the target (s) [0].
-    pub ramp_s: Option<f64>,
-}
 
 /// The commands of `[reference]` (empty without it) for the controller `model` (the paper
 /// model refuses them); errors name `reference.joints[i].<field>`.
