@@ -182,7 +182,14 @@ fn observe(
     t: f64,
 ) -> Result<(Observation, Option<Positions>)> {
     let (mut obs, pos, xi) = observe_plant(setup, plant, with_positions)?;
-    obs.command_errors = crate::reference::command_errors(setup, &xi, t);
+    obs.command_errors = crate::reference::command_errors(
+        &setup.scenario.references,
+        &setup.joint_names,
+        &setup.joint_nodes,
+        &setup.reference_xi,
+        &xi,
+        t,
+    );
     Ok((obs, pos))
 }
 

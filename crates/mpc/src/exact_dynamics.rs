@@ -17,7 +17,9 @@
 
 use crate::error::{invalid, Result};
 use crate::weights::{MpcSettings, Weights};
-use modal_rom::ExactJointsRom;
+use modal_rom::StructureModel;
+use modal_rom::{BasisSettings, ExactJointsRom, Input, LinkBasisSettings, ModeSelection};
+use multibody_constraints::Structure;
 use nalgebra::{DMatrix, DVector, Vector4};
 use ocp_transcription::Dynamics;
 use serde::{Deserialize, Serialize};
@@ -153,6 +155,27 @@ pub fn default_link_elastic_modes(spatial: bool) -> usize {
     }
 }
 
+/// The exact-joints model of `structure`: per-link basis of the rigid link motions plus the
+/// lowest `elastic` constrained modes at the reference split per link (theory.md §10.7), the
+/// structure's damping, the inputs `inputs`.
+pub fn exact_joints_rom(
+    structure: &Structure,
+    model: &StructureModel,
+    elastic: usize,
+    inputs: &[Input],
+) -> Result<ExactJointsRom> {
+    let modes = model.modes(&BasisSettings::default())?;
+    let sel = modes.select(&ModeSelection::Lowest(modes.n_rigid() + elastic))?;
+    Ok(modal_rom::exact_joints::from_fields(
+        structure,
+        model,
+        &[sel.phi1()],
+        &LinkBasisSettings::default(),
+        Some(&model.damping),
+        inputs,
+    )?)
+}
+
 impl ExactDynamics {
     /// The exact-joints controller model of a scenario's setup: per-link basis of the rigid link
     /// motions plus the lowest `elastic` constrained modes at the reference split per link, the
@@ -165,7 +188,7 @@ impl ExactDynamics {
         let model = &setup.model;
         let inputs =
             sc.inputs.iter().map(|i| i.modal(structure, model)).collect::<Result<Vec<_>>>()?;
-        let rom = crate::modal_plant::exact_joints_rom(structure, model, elastic, &inputs)?;
+        let rom = exact_joints_rom(structure, model, elastic, &inputs)?;
         let lengths: Vec<f64> = structure.beams().iter().map(|b| b.beam.mesh().length()).collect();
         let total: f64 = lengths.iter().sum();
         let outboard: Vec<f64> = structure
@@ -197,8 +220,13 @@ impl ExactDynamics {
         let names = rom.joint_names();
         let mut slots = Vec::new();
         for (i, c) in setup.scenario.references.iter().enumerate() {
-            let (nodes, base) = crate::reference::command_target(setup, c)
-                .map_err(|e| e.within(&format!("references[{i}]")))?;
+            let (nodes, base) = crate::reference::command_target(
+                &setup.joint_names,
+                &setup.joint_nodes,
+                &setup.reference_xi,
+                c,
+            )
+            .map_err(|e| e.within(&format!("references[{i}]")))?;
             let offset = match nodes.len() {
                 1 if c.joint == setup.scenario.root && rom.has_root() => rom.root_offset(),
                 2 => match names.iter().position(|n| *n == c.joint) {

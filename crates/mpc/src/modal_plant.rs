@@ -4,11 +4,11 @@
 //! `flexmpc simulate --plant rom` runs, to put model and plant side by side.
 
 use crate::error::{invalid, Result};
-use crate::exact_dynamics::{default_link_elastic_modes, ModelKind};
+use crate::exact_dynamics::{default_link_elastic_modes, exact_joints_rom, ModelKind};
 use crate::plant::{relative_angle, ExactPlant};
 use intrinsic_beam::{Components, Kinematics};
-use modal_rom::{BasisSettings, ExactJointsRom, Input, ModalRom, ModeSelection, RomOptions};
-use modal_rom::{LinkBasisSettings, StructureModel};
+use modal_rom::StructureModel;
+use modal_rom::{BasisSettings, Input, ModalRom, ModeSelection, RomOptions};
 use multibody_constraints::Structure;
 use nalgebra::{Vector3, Vector4};
 
@@ -28,27 +28,6 @@ pub struct ModalPlant {
     state: State,
     root: usize,
     t: f64,
-}
-
-/// The exact-joints model of `structure`: per-link basis of the rigid link motions plus the
-/// lowest `elastic` constrained modes at the reference split per link (theory.md §10.7), the
-/// structure's damping, the inputs `inputs`.
-pub fn exact_joints_rom(
-    structure: &Structure,
-    model: &StructureModel,
-    elastic: usize,
-    inputs: &[Input],
-) -> Result<ExactJointsRom> {
-    let modes = model.modes(&BasisSettings::default())?;
-    let sel = modes.select(&ModeSelection::Lowest(modes.n_rigid() + elastic))?;
-    Ok(modal_rom::exact_joints::from_fields(
-        structure,
-        model,
-        &[sel.phi1()],
-        &LinkBasisSettings::default(),
-        Some(&model.damping),
-        inputs,
-    )?)
 }
 
 impl ModalPlant {

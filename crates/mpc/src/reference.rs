@@ -86,34 +86,41 @@ pub fn quaternion_distance(a: &Vector4<f64>, b: &Vector4<f64>) -> f64 {
 }
 
 /// Where a command acts: the joint's nodes (global node indices; one for a support) and its
-/// reference rotation (relative rotation of a joint, orientation of a support's node).
+/// reference rotation (relative rotation of a joint, orientation of a support's node), from
+/// the joints' names and nodes (structure order) and the reference node quaternions.
 pub(crate) fn command_target(
-    setup: &crate::Setup,
+    joint_names: &[String],
+    joint_nodes: &[Vec<usize>],
+    reference_xi: &[Vector4<f64>],
     command: &JointCommand,
 ) -> Result<(Vec<usize>, Vector4<f64>)> {
-    let j = setup
-        .joint_names
+    let j = joint_names
         .iter()
         .position(|n| *n == command.joint)
         .ok_or_else(|| invalid("joint", &command.joint, "no such joint or support"))?;
-    let nodes = setup.joint_nodes[j].clone();
+    let nodes = joint_nodes[j].clone();
     let base = match nodes.as_slice() {
-        [n] => setup.reference_xi[*n],
-        [a, b] => relative_quaternion(&setup.reference_xi[*a], &setup.reference_xi[*b]),
+        [n] => reference_xi[*n],
+        [a, b] => relative_quaternion(&reference_xi[*a], &reference_xi[*b]),
         _ => return Err(invalid("joint", &command.joint, "must join two ends or be a support")),
     };
     Ok((nodes, base))
 }
 
-/// Per command of `setup`'s scenario, the rotation angle (rad) between the commanded rotation
-/// at time `t` and the one of the node quaternions `xi` (global node order).
-pub(crate) fn command_errors(setup: &crate::Setup, xi: &[Vector4<f64>], t: f64) -> Vec<f64> {
-    setup
-        .scenario
-        .references
+/// Per command, the rotation angle (rad) between the commanded rotation at time `t` and the one
+/// of the node quaternions `xi` (global node order); joints as in [`command_target`].
+pub(crate) fn command_errors(
+    commands: &[JointCommand],
+    joint_names: &[String],
+    joint_nodes: &[Vec<usize>],
+    reference_xi: &[Vector4<f64>],
+    xi: &[Vector4<f64>],
+    t: f64,
+) -> Vec<f64> {
+    commands
         .iter()
         .filter_map(|c| {
-            let (nodes, base) = command_target(setup, c).ok()?;
+            let (nodes, base) = command_target(joint_names, joint_nodes, reference_xi, c).ok()?;
             let actual = match nodes.as_slice() {
                 [n] => xi[*n],
                 [a, b] => relative_quaternion(&xi[*a], &xi[*b]),
