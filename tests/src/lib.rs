@@ -16,6 +16,7 @@ pub mod mpc;
 pub mod multibody;
 pub mod ocp;
 pub mod perf;
+pub mod reconfiguration;
 pub mod stress;
 
 use std::time::Instant;
@@ -113,6 +114,7 @@ pub fn all_cases() -> Vec<Case> {
     cases.extend(exact_joints::cases());
     cases.extend(ocp::cases());
     cases.extend(mpc::cases());
+    cases.extend(reconfiguration::cases());
     cases.extend(stress::cases());
     cases
 }

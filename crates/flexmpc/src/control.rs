@@ -22,7 +22,8 @@ pub struct Overrides {
     /// `--duration` (s).
     pub duration: Option<f64>,
     /// `--model`; `exact-joints` also switches off the joint-angle check of the plans (it
-    /// reads the paper model's state).
+    /// reads the paper model's state) and the linear MPC fallback (the linear MPC is the model
+    /// linearised at the reference angle, the range the exact-joints model is built to leave).
     pub model: Option<mpc::ModelKind>,
 }
 
@@ -55,6 +56,7 @@ pub fn control_of(scene: &Scene, overrides: &Overrides) -> Result<Control> {
         c.controller.model = m;
         if m == mpc::ModelKind::ExactJoints {
             c.controller.plan_joint_limit_deg = None;
+            c.controller.fallback_to_lmpc = false;
         }
     }
     if c.controller.model == mpc::ModelKind::ExactJoints {

@@ -78,6 +78,13 @@ enum Command {
         /// Simulated time (s; default: `[run] duration`).
         #[arg(long)]
         duration: Option<f64>,
+        /// Plant: the FE model (default) or the reduced model (`rom`, open loop, same CSV
+        /// columns; out/<scene>/simulate-rom-<model>/).
+        #[arg(long, value_parser = ["fe", "rom"])]
+        plant: Option<String>,
+        /// Reduced model of `--plant rom` (default: `[controller] model`, else paper).
+        #[arg(long, value_parser = ["paper", "exact-joints"])]
+        model: Option<String>,
     },
     /// Constrained linear modes of a scene's structure: frequencies, labels, plots.
     Modes {
@@ -432,7 +439,7 @@ fn run(cli: &Cli) -> Result<()> {
         rayon::ThreadPoolBuilder::new().num_threads(n).build_global()?;
     }
     match &cli.command {
-        Some(Command::Simulate { scene, duration }) => {
+        Some(Command::Simulate { scene, duration, plant, model }) => {
             let mut s = scene::load(scene)?;
             if let Some(d) = *duration {
                 if !(d.is_finite() && d > 0.0) {
@@ -440,8 +447,23 @@ fn run(cli: &Cli) -> Result<()> {
                 }
                 s.steps = (d / s.plant_settings.dt).round().max(1.0) as usize;
             }
-            let out = cli.out.clone().unwrap_or_else(|| scene_out(scene).join("simulate"));
-            let summary = run::simulate_with(s, &out, cli.quiet || cli.json, cli.vtk)?;
+            let rom = plant_of(plant.as_deref())? == Some(mpc::PlantKind::Rom);
+            let model = model_of(model.as_deref())?;
+            if model.is_some() && !rom {
+                bail!("--model selects the reduced model of `--plant rom`");
+            }
+            let model = model
+                .or_else(|| s.control.as_ref().map(|c| c.controller.model))
+                .unwrap_or_default();
+            let sub =
+                if rom { format!("simulate-rom-{}", model.name()) } else { "simulate".into() };
+            let out = cli.out.clone().unwrap_or_else(|| scene_out(scene).join(sub));
+            let quiet = cli.quiet || cli.json;
+            let summary = if rom {
+                run::simulate_model(s, &out, quiet, model)?
+            } else {
+                run::simulate_with(s, &out, quiet, cli.vtk)?
+            };
             print_simulation(&summary, cli)?;
         }
         Some(Command::Modes { scene, angle, modes: n_modes }) => {

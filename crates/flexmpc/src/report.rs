@@ -303,6 +303,7 @@ pub fn write(
     );
     for (k, v) in [
         ("controller / plant", format!("{} / {}", s.controller, s.plant)),
+        ("reduced model", s.model.clone()),
         (
             "ω0 (rad/s) × axis",
             format!(

@@ -6,7 +6,7 @@ use crate::controller::{Controller, ControllerKind, ControllerSettings, SampleRe
 use crate::dynamics::RomDynamics;
 use crate::error::{invalid, Result};
 use crate::exact_dynamics::{default_link_elastic_modes, ExactDynamics, ModelKind};
-use crate::plant::{relative_angle, PlantKind, SimPlant};
+use crate::plant::{relative_angle, ExactPlant, PlantKind, SimPlant};
 use crate::scenario::{ratio, Setup};
 use crate::validity::JointMonitor;
 use crate::weights::ControlGrid;
@@ -29,6 +29,12 @@ pub struct Record {
     pub joint_angles: Vec<f64>,
     /// Global position of the last node of the last beam.
     pub tip: [f64; 3],
+    /// Mechanical energy of the plant (kinetic + strain: the FE plant's, or the reduced
+    /// model's `½|q1|² + ½|q2|²`).
+    pub energy: f64,
+    /// Per [`crate::Scenario::references`] command: rotation angle between the commanded and
+    /// the plant's rotation of the joint (rad; empty without commands).
+    pub command_errors: Vec<f64>,
     /// Modal state `q_a` (projected FE state, or the ROM plant's state).
     pub q: Vec<f64>,
 }
@@ -54,6 +60,14 @@ pub struct Snapshot {
     pub state: Vec<f64>,
 }
 
+/// Largest rotation error (deg) of a joint command at the end of a reconfiguration for
+/// [`RunSummary::stabilised`].
+pub const COMMAND_TOLERANCE_DEG: f64 = 1.0;
+
+/// Largest plant energy at the end of a reconfiguration, relative to its peak, for
+/// [`RunSummary::stabilised`].
+pub const ENERGY_RATIO_LIMIT: f64 = 0.01;
+
 /// The summary of one closed loop.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RunSummary {
@@ -63,6 +77,9 @@ pub struct RunSummary {
     pub controller: String,
     /// `fe` or `rom`.
     pub plant: String,
+    /// The controller's reduced model: `paper` or `exact-joints` (the ROM plant is this
+    /// model too).
+    pub model: String,
     /// `V(T)/V(0)`, state part of the cost (T = end of the run).
     pub v_ratio_final: f64,
     /// Largest `|joint angle|` of the joints between links (deg).
@@ -74,9 +91,17 @@ pub struct RunSummary {
     /// Rigid rotation rate at T over its initial value (`ω0`): the norm of the rigid modes'
     /// velocity coordinates `q1`, relative to t = 0.
     pub rigid_rate_ratio: f64,
-    /// The stabilisation criterion at T: `rigid_rate_ratio < 0.05`, orientation error within 20% of
-    /// the largest excursion, `V(T)/V(0) < 0.1`, and the run completed.
+    /// The criterion at T, and the run completed. Without joint commands (stabilisation):
+    /// `rigid_rate_ratio < 0.05`, orientation error within 20% of the largest excursion,
+    /// `V(T)/V(0) < 0.1`. With joint commands ([`crate::Scenario::references`],
+    /// reconfiguration): every command met to [`COMMAND_TOLERANCE_DEG`] and
+    /// `energy_ratio_final` below [`ENERGY_RATIO_LIMIT`].
     pub stabilised: bool,
+    /// Plant energy (kinetic + strain) at T over its largest value during the run.
+    pub energy_ratio_final: f64,
+    /// Per joint command: rotation angle between the commanded and the plant's rotation at T
+    /// (deg; empty without commands).
+    pub command_errors_deg: Vec<f64>,
     /// Worst per-sample solve time (s).
     pub solve_time_worst_s: f64,
     /// Median per-sample solve time (s).
@@ -156,20 +181,39 @@ struct Observation {
     q: Vec<f64>,
     joint_angles: Vec<f64>,
     tip: [f64; 3],
+    energy: f64,
+    command_errors: Vec<f64>,
 }
 
 fn observe(
     setup: &Setup,
     plant: &SimPlant,
     with_positions: bool,
+    t: f64,
 ) -> Result<(Observation, Option<Snapshot>)> {
+    let (mut obs, pos, xi) = observe_plant(setup, plant, with_positions)?;
+    obs.command_errors = crate::reference::command_errors(
+        &setup.scenario.references,
+        &setup.joint_names,
+        &setup.joint_nodes,
+        &setup.reference_xi,
+        &xi,
+        t,
+    );
+    Ok((obs, pos))
+}
+
+/// [`observe`] without the command errors, and the node quaternions (global node order).
+fn observe_plant(
+    setup: &Setup,
+    plant: &SimPlant,
+    with_positions: bool,
+) -> Result<(Observation, Option<Snapshot>, Vec<Vector4<f64>>)> {
     match plant {
         SimPlant::Fe { plant, .. } => {
-            let xi: Vec<[f64; 4]> = plant
-                .kinematics()
-                .iter()
-                .flat_map(|k| k.xi.iter().map(|v| [v[0], v[1], v[2], v[3]]))
-                .collect();
+            let nodes: Vec<Vector4<f64>> =
+                plant.kinematics().iter().flat_map(|k| k.xi.iter().copied()).collect();
+            let xi: Vec<[f64; 4]> = nodes.iter().map(|v| [v[0], v[1], v[2], v[3]]).collect();
             let q = setup.rom.project_full(plant.state(), Some(&xi))?;
             let nb = plant.structure().beams().len();
             let kin = plant.kinematics();
@@ -191,9 +235,40 @@ fn observe(
                     q,
                     joint_angles: plant.joint_angles().to_vec(),
                     tip: [last.x, last.y, last.z],
+                    energy: plant.energy(),
+                    command_errors: Vec::new(),
                 },
                 pos,
+                nodes,
             ))
+        }
+        SimPlant::Exact(p) => {
+            let (x, kin) =
+                p.configuration(&setup.scenario.structure, &setup.model.layout, setup.root_joint)?;
+            let xi: Vec<Vector4<f64>> = kin.iter().flat_map(|k| k.xi.iter().copied()).collect();
+            let xi4: Vec<[f64; 4]> = xi.iter().map(|v| [v[0], v[1], v[2], v[3]]).collect();
+            let q = setup.rom.project_full(&x, Some(&xi4))?;
+            let tip = kin.last().and_then(|k| k.r.last()).map_or([0.0; 3], |r| [r.x, r.y, r.z]);
+            let pos = with_positions.then(|| Snapshot {
+                t: 0.0,
+                positions: kin
+                    .iter()
+                    .map(|k| k.r.iter().map(|r| [r.x, r.y, r.z]).collect())
+                    .collect(),
+                orientations: kin
+                    .iter()
+                    .map(|k| k.xi.iter().map(|v| [v[0], v[1], v[2], v[3]]).collect())
+                    .collect(),
+                state: x.clone(),
+            });
+            let obs = Observation {
+                q,
+                joint_angles: node_joint_angles(setup, &xi),
+                tip,
+                energy: p.rom.energy(&p.x),
+                command_errors: Vec::new(),
+            };
+            Ok((obs, pos, xi))
         }
         SimPlant::Rom { q, .. } => {
             let fields = setup.rom.reconstruct(q)?;
@@ -202,25 +277,7 @@ fn observe(
                 .as_ref()
                 .map(|v| v.iter().map(|a| Vector4::from_column_slice(a)).collect())
                 .unwrap_or_else(|| setup.reference_xi.clone());
-            let angles = setup
-                .joint_nodes
-                .iter()
-                .map(|nodes| {
-                    if nodes.len() == 1 {
-                        let n = nodes[0];
-                        relative_angle(&setup.reference_xi[n], &xi[n], setup.planar_axis)
-                    } else {
-                        let (a, b) = (nodes[0], nodes[1]);
-                        let rel = relative_angle(&xi[a], &xi[b], setup.planar_axis);
-                        let rel0 = relative_angle(
-                            &setup.reference_xi[a],
-                            &setup.reference_xi[b],
-                            setup.planar_axis,
-                        );
-                        rel - rel0
-                    }
-                })
-                .collect();
+            let angles = node_joint_angles(setup, &xi);
             let positions = setup.rom.positions(q)?;
             let lb = positions.last().and_then(|b| b.last()).copied().unwrap_or([0.0; 3]);
             let snapshot = if with_positions {
@@ -232,9 +289,41 @@ fn observe(
             } else {
                 None
             };
-            Ok((Observation { q: q.clone(), joint_angles: angles, tip: lb }, snapshot))
+            let obs = Observation {
+                q: q.clone(),
+                joint_angles: angles,
+                tip: lb,
+                energy: setup.rom.energy(q),
+                command_errors: Vec::new(),
+            };
+            Ok((obs, snapshot, xi))
         }
     }
+}
+
+/// Joint angles (structure order) from the node quaternions `xi` (global node order):
+/// supports relative to their reference, joints between links relative to their reference
+/// relative rotation; signed for planar structures.
+fn node_joint_angles(setup: &Setup, xi: &[Vector4<f64>]) -> Vec<f64> {
+    setup
+        .joint_nodes
+        .iter()
+        .map(|nodes| {
+            if nodes.len() == 1 {
+                let n = nodes[0];
+                relative_angle(&setup.reference_xi[n], &xi[n], setup.planar_axis)
+            } else {
+                let (a, b) = (nodes[0], nodes[1]);
+                let rel = relative_angle(&xi[a], &xi[b], setup.planar_axis);
+                let rel0 = relative_angle(
+                    &setup.reference_xi[a],
+                    &setup.reference_xi[b],
+                    setup.planar_axis,
+                );
+                rel - rel0
+            }
+        })
+        .collect()
 }
 
 /// Runs one closed loop of `setup`'s scenario with disturbance magnitude `omega0`.
@@ -263,12 +352,20 @@ pub fn run(
     let omega = Vector3::from_column_slice(&sc.omega_direction) * omega0;
     let x0 = sc.structure.rigid_rotation_state(omega, Vector3::from_column_slice(&sc.center));
     let mut plant = SimPlant::fe(&sc.structure, sc.plant, steps, &sc.inputs, &x0)?;
-    if plant_kind == PlantKind::Rom {
-        let (obs, _) = observe(setup, &plant, false)?;
+    if plant_kind == PlantKind::Rom && controller.model == ModelKind::Paper {
+        let (obs, _) = observe(setup, &plant, false, 0.0)?;
         plant = SimPlant::rom(&setup.rom, obs.q, sc.output_interval, sc.rom_plant_substeps)?;
     }
     match controller.model {
         ModelKind::Paper => {
+            if let Some(c) = sc.references.first() {
+                return Err(invalid(
+                    "references",
+                    &c.joint,
+                    "the paper model cannot follow joint commands (its modes and joint rows are \
+                     linearised at the reference angle); use model = exact-joints",
+                ));
+            }
             let mut ctrl = Controller::new(
                 RomDynamics::new(&setup.rom)?,
                 &setup.weights,
@@ -281,26 +378,39 @@ pub fn run(
             })
         }
         ModelKind::ExactJoints => {
-            if plant_kind == PlantKind::Rom {
-                return Err(invalid(
-                    "plant",
-                    "rom",
-                    "model = exact-joints needs the FE plant (its state is projected from it)",
-                ));
-            }
             let elastic = controller
                 .link_elastic_modes
                 .unwrap_or_else(|| default_link_elastic_modes(setup.planar_axis.is_none()));
             let (dynamics, weights) = ExactDynamics::for_setup(setup, elastic)?;
             let rom = dynamics.rom().clone();
-            let ctrl = Controller::new(dynamics, &weights, &sc.mpc, controller)?;
+            if plant_kind == PlantKind::Rom {
+                // the exact-joints model itself as plant, from the projected initial state
+                let x0 = match &plant {
+                    SimPlant::Fe { plant, .. } => {
+                        rom.project_fe(plant.state(), plant.kinematics())?
+                    }
+                    _ => return Err(invalid("plant", "rom", "starts from the FE state")),
+                };
+                plant = SimPlant::Exact(Box::new(ExactPlant::new(
+                    rom.clone(),
+                    x0,
+                    sc.output_interval,
+                    sc.rom_plant_substeps,
+                )?));
+            }
+            let schedule = dynamics.reference_schedule(setup, &weights)?;
+            let mut ctrl = Controller::new(dynamics, &weights, &sc.mpc, controller)?;
+            if !sc.references.is_empty() {
+                ctrl.set_reference_schedule(schedule)?;
+            }
             // state feedback: the FE plant state projected onto the exact-joints state
             // (theory.md §10)
             drive(setup, omega0, controller, plant_kind, plant, ctrl, start, move |p, _| match p {
                 SimPlant::Fe { plant, .. } => {
                     Ok(rom.project_fe(plant.state(), plant.kinematics())?)
                 }
-                SimPlant::Rom { .. } => Err(invalid("plant", "rom", "needs the FE plant")),
+                SimPlant::Exact(p) => Ok(p.x.clone()),
+                SimPlant::Rom { .. } => Err(invalid("plant", "rom", "not the exact-joints model")),
             })
         }
     }
@@ -337,7 +447,7 @@ fn drive<D: ocp_transcription::Dynamics + Clone>(
     let mut error = None;
     for k in 0..=n_out {
         let t = k as f64 * sc.output_interval;
-        let (obs, pos) = observe(setup, &plant, k % per_snap == 0)?;
+        let (obs, pos) = observe(setup, &plant, k % per_snap == 0, t)?;
         if let Some(s) = pos {
             snapshots.push(Snapshot { t, ..s });
         }
@@ -369,6 +479,8 @@ fn drive<D: ocp_transcription::Dynamics + Clone>(
                         u: u.clone(),
                         joint_angles: obs.joint_angles,
                         tip: obs.tip,
+                        energy: obs.energy,
+                        command_errors: obs.command_errors,
                         q: obs.q,
                     });
                     break;
@@ -397,6 +509,8 @@ fn drive<D: ocp_transcription::Dynamics + Clone>(
             u: u.clone(),
             joint_angles: obs.joint_angles,
             tip: obs.tip,
+            energy: obs.energy,
+            command_errors: obs.command_errors,
             q: obs.q,
         });
         if k == n_out {
@@ -407,7 +521,9 @@ fn drive<D: ocp_transcription::Dynamics + Clone>(
             break;
         }
     }
-    let summary = summarise(setup, omega0, controller.kind, plant_kind, &records, &samples, error);
+    let mut summary =
+        summarise(setup, omega0, controller.kind, plant_kind, &records, &samples, error);
+    summary.model = controller.model.name().into();
     Ok(RunResult {
         summary,
         joint_names: setup.joint_names.clone(),
@@ -442,12 +558,12 @@ pub fn open_loop(
     let x0 = sc.structure.rigid_rotation_state(omega, Vector3::from_column_slice(&sc.center));
     let mut plant = SimPlant::fe(&sc.structure, sc.plant, steps, &sc.inputs, &x0)?;
     if plant_kind == PlantKind::Rom {
-        let (obs, _) = observe(setup, &plant, false)?;
+        let (obs, _) = observe(setup, &plant, false, 0.0)?;
         plant = SimPlant::rom(&setup.rom, obs.q, sc.output_interval, sc.rom_plant_substeps)?;
     }
     let mut records = Vec::with_capacity(inputs.len() + 1);
     for k in 0..=inputs.len() {
-        let (obs, _) = observe(setup, &plant, false)?;
+        let (obs, _) = observe(setup, &plant, false, k as f64 * sc.output_interval)?;
         let u = inputs.get(k).cloned().unwrap_or_else(|| vec![0.0; nu]);
         records.push(Record {
             t: k as f64 * sc.output_interval,
@@ -455,6 +571,8 @@ pub fn open_loop(
             u: u.clone(),
             joint_angles: obs.joint_angles,
             tip: obs.tip,
+            energy: obs.energy,
+            command_errors: obs.command_errors,
             q: obs.q,
         });
         if k < inputs.len() {
@@ -504,18 +622,29 @@ fn summarise(
     };
     let worst = times.last().copied().unwrap_or(0.0);
     let completed = error.is_none();
-    let stabilised =
-        completed && rigid_rate_ratio < 0.05 && orient <= 0.2 * max_orient && v_ratio_final < 0.1;
+    let peak = records.iter().map(|r| r.energy).fold(0.0, f64::max);
+    let energy_ratio_final = if peak > 0.0 { last.energy / peak } else { 0.0 };
+    let command_errors_deg: Vec<f64> = last.command_errors.iter().map(|e| e.to_degrees()).collect();
+    let stabilised = completed
+        && if command_errors_deg.is_empty() {
+            rigid_rate_ratio < 0.05 && orient <= 0.2 * max_orient && v_ratio_final < 0.1
+        } else {
+            command_errors_deg.iter().all(|e| *e <= COMMAND_TOLERANCE_DEG)
+                && energy_ratio_final < ENERGY_RATIO_LIMIT
+        };
     RunSummary {
         omega0,
         controller: kind.name().into(),
         plant: plant.name().into(),
+        model: ModelKind::Paper.name().into(),
         v_ratio_final,
         max_joint_angle_deg: max_joint.to_degrees(),
         orientation_error_deg: orient.to_degrees(),
         max_orientation_deg: max_orient.to_degrees(),
         rigid_rate_ratio,
         stabilised,
+        energy_ratio_final,
+        command_errors_deg,
         solve_time_worst_s: worst,
         solve_time_median_s: median,
         failed_first_attempts: samples

@@ -4,6 +4,7 @@
 use crate::dynamics::RomDynamics;
 use crate::error::{invalid, Result};
 use crate::exact_dynamics::ModelKind;
+use crate::reference::ReferenceSchedule;
 use crate::validity::JointMonitor;
 use crate::weights::{MpcSettings, Weights};
 use nalgebra::DVector;
@@ -317,6 +318,8 @@ pub struct Controller<D: Dynamics + Clone = RomDynamics> {
     predictor: D,
     /// Joint angles of plans, for the validity check and the reports.
     monitor: Option<JointMonitor>,
+    /// Time-dependent reference (joint commands); `None`: the weights' constant reference.
+    schedule: Option<ReferenceSchedule>,
 }
 
 impl<D: Dynamics + Clone> std::fmt::Debug for Controller<D> {
@@ -408,6 +411,7 @@ impl<D: Dynamics + Clone> Controller<D> {
             last_start: None,
             predictor,
             monitor: None,
+            schedule: None,
         })
     }
 
@@ -416,6 +420,33 @@ impl<D: Dynamics + Clone> Controller<D> {
     /// ([`crate::run`] does this).
     pub fn set_joint_monitor(&mut self, monitor: JointMonitor) {
         self.monitor = Some(monitor);
+    }
+
+    /// Makes the reference of every plan the schedule's state at the plan's start time
+    /// (constant over the horizon; [`crate::reference`]).
+    pub fn set_reference_schedule(&mut self, schedule: ReferenceSchedule) -> Result<()> {
+        let nx = self.predictor.nx();
+        if schedule.at(0.0).len() != nx {
+            return Err(invalid(
+                "reference schedule",
+                schedule.at(0.0).len(),
+                format!("needs {nx} entries"),
+            ));
+        }
+        self.schedule = Some(schedule);
+        Ok(())
+    }
+
+    /// Sets the reference of every solver to the schedule's at `start`.
+    fn apply_schedule(&mut self, start: f64) -> Result<()> {
+        let Some(s) = &self.schedule else { return Ok(()) };
+        let x_ref = s.at(start);
+        let u_ref = vec![0.0; self.predictor.nu()];
+        self.lmpc.set_references(&x_ref, &u_ref)?;
+        for solver in [self.nmpc.as_mut(), self.relaxed.as_mut()].into_iter().flatten() {
+            solver.set_references(&x_ref, &u_ref)?;
+        }
+        Ok(())
     }
 
     /// Largest predicted joint angle (deg) over the nodes of `solver`'s plan.
@@ -507,6 +538,7 @@ impl<D: Dynamics + Clone> Controller<D> {
         };
         self.last_start = Some(start);
         let clock = Instant::now();
+        self.apply_schedule(start)?;
         let report = match self.settings.kind {
             ControllerKind::Lmpc => {
                 let st = self.solve_lmpc(x0, shift)?;

@@ -17,7 +17,9 @@
 
 use crate::error::{invalid, Result};
 use crate::weights::{MpcSettings, Weights};
-use modal_rom::ExactJointsRom;
+use modal_rom::StructureModel;
+use modal_rom::{BasisSettings, ExactJointsRom, Input, LinkBasisSettings, ModeSelection};
+use multibody_constraints::Structure;
 use nalgebra::{DMatrix, DVector, Vector4};
 use ocp_transcription::Dynamics;
 use serde::{Deserialize, Serialize};
@@ -153,6 +155,27 @@ pub fn default_link_elastic_modes(spatial: bool) -> usize {
     }
 }
 
+/// The exact-joints model of `structure`: per-link basis of the rigid link motions plus the
+/// lowest `elastic` constrained modes at the reference split per link (theory.md §10.7), the
+/// structure's damping, the inputs `inputs`.
+pub fn exact_joints_rom(
+    structure: &Structure,
+    model: &StructureModel,
+    elastic: usize,
+    inputs: &[Input],
+) -> Result<ExactJointsRom> {
+    let modes = model.modes(&BasisSettings::default())?;
+    let sel = modes.select(&ModeSelection::Lowest(modes.n_rigid() + elastic))?;
+    Ok(modal_rom::exact_joints::from_fields(
+        structure,
+        model,
+        &[sel.phi1()],
+        &LinkBasisSettings::default(),
+        Some(&model.damping),
+        inputs,
+    )?)
+}
+
 impl ExactDynamics {
     /// The exact-joints controller model of a scenario's setup: per-link basis of the rigid link
     /// motions plus the lowest `elastic` constrained modes at the reference split per link, the
@@ -160,23 +183,12 @@ impl ExactDynamics {
     /// reference state. The joints' outboard lengths assume the beams are ordered from the root
     /// outward along a chain (every scenario of the paper).
     pub fn for_setup(setup: &crate::Setup, elastic: usize) -> Result<(Self, Weights)> {
-        use modal_rom::exact_joints::{from_fields, LinkBasisSettings};
-        use modal_rom::{BasisSettings, ModeSelection};
         let sc = &setup.scenario;
         let structure = &sc.structure;
         let model = &setup.model;
-        let modes = model.modes(&BasisSettings::default())?;
-        let sel = modes.select(&ModeSelection::Lowest(modes.n_rigid() + elastic))?;
         let inputs =
             sc.inputs.iter().map(|i| i.modal(structure, model)).collect::<Result<Vec<_>>>()?;
-        let rom = from_fields(
-            structure,
-            model,
-            &[sel.phi1()],
-            &LinkBasisSettings::default(),
-            Some(&model.damping),
-            &inputs,
-        )?;
+        let rom = exact_joints_rom(structure, model, elastic, &inputs)?;
         let lengths: Vec<f64> = structure.beams().iter().map(|b| b.beam.mesh().length()).collect();
         let total: f64 = lengths.iter().sum();
         let outboard: Vec<f64> = structure
@@ -192,6 +204,52 @@ impl ExactDynamics {
         let refs = vec![None; outboard.len()];
         let weights = dynamics.weights(&sc.mpc, total, &outboard, None, &refs)?;
         Ok((dynamics, weights))
+    }
+}
+
+impl ExactDynamics {
+    /// The reference schedule of the scenario's joint commands ([`crate::reference`]) on the
+    /// reference state of `weights`: a command on a two-end joint sets that joint's
+    /// relative-rotation state `ξ_j`, one on the root support the root quaternion `ξ_root`.
+    pub fn reference_schedule(
+        &self,
+        setup: &crate::Setup,
+        weights: &Weights,
+    ) -> Result<crate::ReferenceSchedule> {
+        let rom = &self.rom;
+        let names = rom.joint_names();
+        let mut slots = Vec::new();
+        for (i, c) in setup.scenario.references.iter().enumerate() {
+            let (nodes, base) = crate::reference::command_target(
+                &setup.joint_names,
+                &setup.joint_nodes,
+                &setup.reference_xi,
+                c,
+            )
+            .map_err(|e| e.within(&format!("references[{i}]")))?;
+            let offset = match nodes.len() {
+                1 if c.joint == setup.scenario.root && rom.has_root() => rom.root_offset(),
+                2 => match names.iter().position(|n| *n == c.joint) {
+                    Some(j) => rom.joint_offset(j),
+                    None => {
+                        return Err(invalid(
+                            format!("references[{i}].joint"),
+                            &c.joint,
+                            "has no rotation state in the exact-joints model",
+                        ))
+                    }
+                },
+                _ => {
+                    return Err(invalid(
+                        format!("references[{i}].joint"),
+                        &c.joint,
+                        "commands act on the root support or on joints between links",
+                    ))
+                }
+            };
+            slots.push((offset, c.clone(), base));
+        }
+        crate::ReferenceSchedule::new(weights.x_ref.iter().copied().collect(), slots)
     }
 }
 

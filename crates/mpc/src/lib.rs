@@ -180,8 +180,10 @@ mod dynamics;
 mod error;
 mod exact_dynamics;
 mod export;
+mod modal_plant;
 mod orientation;
 mod plant;
+pub mod reference;
 mod scenario;
 mod validity;
 mod weights;
@@ -189,17 +191,23 @@ mod weights;
 #[cfg(test)]
 mod tests;
 
-pub use closed_loop::{open_loop, run, sweep, Record, RunResult, RunSummary, Snapshot};
+pub use closed_loop::{
+    open_loop, run, sweep, Record, RunResult, RunSummary, Snapshot, COMMAND_TOLERANCE_DEG,
+    ENERGY_RATIO_LIMIT,
+};
 pub use controller::{
     Controller, ControllerKind, ControllerSettings, SampleReport, Strategy,
     DEFAULT_PLAN_JOINT_LIMIT,
 };
 pub use dynamics::RomDynamics;
 pub use error::{MpcError, Result};
+pub use exact_dynamics::exact_joints_rom;
 pub use exact_dynamics::{ExactDynamics, ModelKind};
 pub use export::{export_first_sample, first_sample_problem, OcpExport};
+pub use modal_plant::ModalPlant;
 pub use orientation::{chord_orientation, ChordOrientation};
 pub use plant::{ControlInput, PlantKind};
+pub use reference::{JointCommand, ReferenceSchedule};
 pub use scenario::{Scenario, Setup, MAX_PLANT_STEPS};
 pub use validity::JointMonitor;
 pub use weights::{ControlGrid, MpcSettings, Weights, SPATIAL_INPUT_WEIGHT};

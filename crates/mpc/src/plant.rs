@@ -4,8 +4,9 @@
 use crate::dynamics::RomDynamics;
 use crate::error::{invalid, MpcError, Result};
 use intrinsic_beam::rotation::{quat_conj, quat_mul};
+use intrinsic_beam::Kinematics;
 use intrinsic_beam::{Amplitude, LoadFrame, PointLoad};
-use modal_rom::{Input, ModalRom, StructureModel};
+use modal_rom::{ExactJointsRom, FullIndex, Input, ModalRom, StructureModel};
 use multibody_constraints::Structure;
 use multibody_constraints::{Plant, PlantSettings};
 use nalgebra::{Vector4, Vector6};
@@ -66,7 +67,8 @@ impl ControlInput {
 pub enum PlantKind {
     /// The constrained FE model (joints as hard constraints), the paper's plant.
     Fe,
-    /// The augmented modal model itself (fast studies; no model mismatch).
+    /// The controller's reduced model itself (fast studies; no model mismatch): the paper's
+    /// augmented modal model (Lawson RK4) or the exact-joints model (implicit midpoint).
     Rom,
 }
 
@@ -102,6 +104,7 @@ pub(crate) fn relative_angle(
 pub(crate) enum SimPlant {
     Fe { plant: Box<Plant>, handles: Vec<Handle>, steps: usize },
     Rom { model: RomDynamics, integrator: Box<Integrator>, q: Vec<f64>, t: f64, buf: Vec<f64> },
+    Exact(Box<ExactPlant>),
 }
 
 /// How an input reaches the FE plant.
@@ -199,6 +202,159 @@ impl SimPlant {
                 *t += integrator.interval();
                 Ok(())
             }
+            SimPlant::Exact(p) => p.advance(u),
         }
+    }
+}
+
+/// The exact-joints reduced model (theory.md §10) as a plant: advanced by its implicit
+/// midpoint rule (energy-preserving, theory.md §10.4) with `steps` steps of `dt` per
+/// [`SimPlant::advance`], and observed through the FE configuration it represents
+/// ([`ExactPlant::configuration`]).
+pub(crate) struct ExactPlant {
+    pub rom: ExactJointsRom,
+    /// State `[p, p2, ξ_root, ξ_j…]`.
+    pub x: Vec<f64>,
+    pub t: f64,
+    pub dt: f64,
+    pub steps: usize,
+}
+
+fn beam_error(e: intrinsic_beam::BeamError) -> MpcError {
+    invalid("exact-joints plant configuration", e, "the strains must rebuild the beam")
+}
+
+/// Newton tolerance and iteration limit of the exact-joints plant's midpoint steps.
+const EXACT_PLANT_TOLERANCE: f64 = 1e-11;
+const EXACT_PLANT_MAX_NEWTON: usize = 30;
+
+impl ExactPlant {
+    /// The plant from the state `x0`, advancing by `interval` per [`SimPlant::advance`] in
+    /// `substeps` midpoint steps.
+    pub fn new(rom: ExactJointsRom, x0: Vec<f64>, interval: f64, substeps: usize) -> Result<Self> {
+        if x0.len() != rom.n_state() {
+            return Err(invalid(
+                "exact-joints plant state",
+                x0.len(),
+                format!("must have {} entries", rom.n_state()),
+            ));
+        }
+        if substeps == 0 || !(interval.is_finite() && interval > 0.0) {
+            return Err(invalid(
+                "rom plant steps",
+                substeps,
+                "needs ≥ 1 step of a positive interval",
+            ));
+        }
+        if rom.n_p2() != rom.basis().n2() {
+            return Err(invalid(
+                "exact-joints plant",
+                rom.n_p2(),
+                format!("needs the full force fields (p2 = q2, {} coordinates)", rom.basis().n2()),
+            ));
+        }
+        Ok(Self { rom, x: x0, t: 0.0, dt: interval / substeps as f64, steps: substeps })
+    }
+
+    /// Holds `u` for `steps` midpoint steps.
+    pub fn advance(&mut self, u: &[f64]) -> Result<()> {
+        for _ in 0..self.steps {
+            self.rom
+                .midpoint_step(
+                    &mut self.x,
+                    u,
+                    self.dt,
+                    EXACT_PLANT_TOLERANCE,
+                    EXACT_PLANT_MAX_NEWTON,
+                )
+                .map_err(|_| MpcError::PlantDiverged { t: self.t })?;
+            self.t += self.dt;
+        }
+        Ok(())
+    }
+
+    /// The FE configuration the model's state represents: the full FE vector
+    /// (`x1 = Φ1 Z(ξ) p`, `x2 = Φ2 p2`, theory.md §10.2–10.4) and each beam's nodes rebuilt in
+    /// space from its strains (eqs. 7, 10), starting from the root support's node at its
+    /// quaternion `ξ_root` and, across each joint, from the first end's node rotated by the
+    /// joint's relative rotation `ξ_j` (`ξ_b = ξ_a ⊗ ξ_j`). Beams are rebuilt from their start
+    /// node, reached through the support or a joint's second end (every two-link of the
+    /// paper).
+    pub fn configuration(
+        &self,
+        structure: &Structure,
+        layout: &modal_rom::Layout,
+        root: usize,
+    ) -> Result<(Vec<f64>, Vec<Kinematics>)> {
+        let rom = &self.rom;
+        let q1 = rom.link_velocities(&self.x)?;
+        let (phi1, phi2) = (rom.basis().phi1(), rom.basis().phi2());
+        let p2 = &self.x[rom.n_p()..rom.n_p() + rom.n_p2()];
+        let mut x = vec![0.0; layout.n_full()];
+        for (i, v) in x.iter_mut().enumerate() {
+            match layout.classify_full(i) {
+                FullIndex::X1(r) => *v = (0..q1.len()).map(|c| phi1[(r, c)] * q1[c]).sum(),
+                FullIndex::X2(r) => *v = (0..p2.len()).map(|c| phi2[(r, c)] * p2[c]).sum(),
+                _ => {}
+            }
+        }
+        let beams = structure.beams();
+        let state = |b: usize| {
+            let o = layout.full_offset(b);
+            &x[o..o + beams[b].beam.dim()]
+        };
+        let reference = structure.reference();
+        let mut kin: Vec<Option<Kinematics>> = vec![None; beams.len()];
+        let joints = structure.joints();
+        let start_only = |what: &str, name: &str| {
+            invalid(
+                format!("{what} `{name}`"),
+                "end node",
+                "the exact-joints plant rebuilds each beam from its start node",
+            )
+        };
+        let (rb, re) = joints[root].ends[0];
+        let rn = structure.end_node(rb, re);
+        if rn != 0 {
+            return Err(start_only("support", &joints[root].name));
+        }
+        let xi_root = rom.root_quaternion(&self.x).unwrap_or(reference[rb].xi[rn]);
+        kin[rb] = Some(
+            Kinematics::from_strains(&beams[rb].beam, state(rb), xi_root, reference[rb].r[rn])
+                .map_err(beam_error)?,
+        );
+        let names = rom.joint_names();
+        for _ in 0..joints.len() {
+            for (j, name) in names.iter().enumerate() {
+                let Some(info) = joints.iter().find(|i| &i.name == name) else { continue };
+                let ((ba, ea), (bb, eb)) = (info.ends[0], info.ends[1]);
+                if kin[bb].is_some() {
+                    continue;
+                }
+                let Some(ka) = &kin[ba] else { continue };
+                if structure.end_node(bb, eb) != 0 {
+                    return Err(start_only("joint", name));
+                }
+                let na = structure.end_node(ba, ea);
+                let xi_b = quat_mul(&ka.xi[na], &rom.joint_quaternion(&self.x, j));
+                let r_b = ka.r[na];
+                let k = Kinematics::from_strains(&beams[bb].beam, state(bb), xi_b, r_b);
+                kin[bb] = Some(k.map_err(beam_error)?);
+            }
+        }
+        let kin = kin
+            .into_iter()
+            .enumerate()
+            .map(|(b, k)| {
+                k.ok_or_else(|| {
+                    invalid(
+                        format!("beam {b}"),
+                        "unreached",
+                        "no joint chain from the root support",
+                    )
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok((x, kin))
     }
 }

@@ -4,6 +4,7 @@
 
 use crate::error::{invalid, MpcError, Result};
 use crate::plant::ControlInput;
+use crate::reference::JointCommand;
 use crate::weights::{MpcSettings, Weights};
 use intrinsic_beam::Section;
 use modal_rom::{BasisSettings, ModalRom, ModeSelection, RomOptions, StructureModel};
@@ -44,6 +45,9 @@ pub struct Scenario {
     pub rom_plant_substeps: usize,
     /// Weights, horizon and timing of the MPC (paper defaults).
     pub mpc: MpcSettings,
+    /// Commanded joint rotations (reconfiguration; [`crate::reference`]) \[none: every joint
+    /// held at its reference angle\]. Only the exact-joints controller model can follow them.
+    pub references: Vec<JointCommand>,
 }
 
 impl Scenario {
@@ -86,6 +90,7 @@ impl Scenario {
             plant: PlantSettings::default(),
             rom_plant_substeps: 16,
             mpc: MpcSettings::default(),
+            references: Vec::new(),
         })
     }
 
@@ -170,6 +175,7 @@ impl Scenario {
                 ),
             ));
         }
+        self.validate_references()?;
         if self.omega_direction.iter().any(|v| !v.is_finite())
             || self.omega_direction.iter().all(|v| *v == 0.0)
         {
@@ -194,6 +200,33 @@ impl Scenario {
                     format!("must name a support (supports: {})", supports.join(", "))
                 },
             ));
+        }
+        Ok(())
+    }
+}
+
+impl Scenario {
+    /// Each command valid (errors name `references[i].<field>`), on a joint or support of the
+    /// structure, at most one per joint.
+    fn validate_references(&self) -> Result<()> {
+        for (i, c) in self.references.iter().enumerate() {
+            let at = format!("references[{i}]");
+            c.validate().map_err(|e| e.within(&at))?;
+            let Some(j) = self.structure.joint_index(&c.joint) else {
+                let names: Vec<&str> =
+                    self.structure.joints().iter().map(|j| j.name.as_str()).collect();
+                return Err(invalid(
+                    format!("{at}.joint"),
+                    &c.joint,
+                    format!("must name a joint or support ({})", names.join(", ")),
+                ));
+            };
+            if self.structure.joints()[j].ends.is_empty() {
+                return Err(invalid(format!("{at}.joint"), &c.joint, "has no end"));
+            }
+            if self.references[..i].iter().any(|d| d.joint == c.joint) {
+                return Err(invalid(format!("{at}.joint"), &c.joint, "has a command already"));
+            }
         }
         Ok(())
     }

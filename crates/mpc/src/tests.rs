@@ -710,7 +710,8 @@ fn paper_model_controls_are_unchanged() {
 const PAPER_FIRST_SAMPLE_BITS: [u64; 3] =
     [13831740066684223502, 4589398429732434489, 4609990541550897318];
 
-/// The exact-joints model is NMPC only and without the paper model's joint-angle check.
+/// The exact-joints model is NMPC only and without the paper model's joint-angle check; joint
+/// commands need it.
 #[test]
 fn exact_joints_rejects_paper_only_settings() {
     let ej = ControllerSettings {
@@ -723,8 +724,17 @@ fn exact_joints_rejects_paper_only_settings() {
     assert!(e.unwrap_err().to_string().contains("kind"));
     let e = ControllerSettings { plan_joint_limit_deg: Some(20.0), ..ej.clone() }.validate();
     assert!(e.unwrap_err().to_string().contains("plan_joint_limit_deg"));
-    let e = run(setup_2d(), 0.5, &ej, PlantKind::Rom);
-    assert!(e.unwrap_err().to_string().contains("plant"));
+    // joint commands: the paper model refuses them
+    let mut sc = setup_2d().scenario.clone();
+    sc.references = vec![crate::JointCommand {
+        joint: "elbow".into(),
+        axis: [0.0, 1.0, 0.0],
+        angle_deg: 30.0,
+        ramp_s: 1.0,
+    }];
+    let setup = Setup::new(&sc).unwrap();
+    let e = run(&setup, 0.0, &ControllerSettings::default(), PlantKind::Fe);
+    assert!(e.unwrap_err().to_string().contains("references"));
 }
 
 /// A short closed loop with the exact-joints NMPC on the FE plant (2D, coarse mesh, 1.6 s):

@@ -193,6 +193,10 @@ fn controller_of(
         // the joint-angle check reads the paper model's state: off by default
         c.plan_joint_limit_deg = None;
     }
+    if c.model == mpc::ModelKind::ExactJoints && cs.fallback_to_lmpc.is_none() {
+        // the linear MPC is the model linearised at the reference angle: off by default
+        c.fallback_to_lmpc = false;
+    }
     set(&mut c.link_elastic_modes, cs.link_elastic_modes.map(Some));
     set(&mut c.integrator.kind, cs.integrator.map(|i| i.kind()));
     set(&mut c.integrator.substeps, cs.substeps);
@@ -225,6 +229,7 @@ pub(super) fn control_of(
         for (what, present, span) in [
             ("controller", spec.controller.is_some(), spec.controller.as_ref().map(|c| c.span())),
             ("sweep", spec.sweep.is_some(), spec.sweep.as_ref().map(|c| c.span())),
+            ("reference", spec.reference.is_some(), spec.reference.as_ref().map(|c| c.span())),
         ] {
             if present {
                 return ctx.err(
@@ -281,6 +286,7 @@ pub(super) fn control_of(
         plant,
         rom_plant_substeps: ss.rom_plant_substeps.unwrap_or(16),
         mpc: m,
+        references: super::reference::references_of(ctx, spec, structure, controller.model)?,
     };
     scenario.validate().or_else(|e| ctx.library(spec, Owner::Scenario, e))?;
     let (sweep_omegas, sweep_controllers) = match &spec.sweep {

@@ -10,6 +10,7 @@ mod control;
 mod error;
 mod inputs;
 mod names;
+mod reference;
 mod spec;
 mod structure;
 #[cfg(test)]

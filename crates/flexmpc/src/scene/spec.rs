@@ -430,4 +430,28 @@ pub struct SceneSpec {
     pub scenario: Option<Spanned<ScenarioSpec>>,
     /// The runs of `flexmpc sweep`.
     pub sweep: Option<Spanned<SweepSpec>>,
+    /// Commanded joint rotations of the closed loop (reconfiguration).
+    pub reference: Option<Spanned<ReferenceSpec>>,
+}
+
+/// `[reference]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReferenceSpec {
+    /// Commanded joint rotations, at most one per joint or support.
+    pub joints: Vec<JointCommandSpec>,
+}
+
+/// One commanded rotation.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointCommandSpec {
+    /// Joint or support name.
+    pub joint: String,
+    /// Rotation axis (joint: first end frame; support: global).
+    pub axis: [f64; 3],
+    /// Target angle (deg).
+    pub angle_deg: f64,
+    /// Time to reach the target (s) [0].
+    pub ramp_s: Option<f64>,
 }

@@ -404,3 +404,39 @@ fn default_scene_is_the_shipped_paper_2d_mpc() {
     assert_eq!(c.scenario.inputs.len(), 3);
     assert_eq!(s.name, "paper-2d-mpc");
 }
+
+/// `[[reference.joints]]`: the shipped fold scene loads with its two commands; each rule's
+/// error names its field, and the paper model refuses commands.
+#[test]
+fn joint_commands_load_and_name_their_fields() {
+    let text = include_str!("../../../../scenes/fold-2d.toml");
+    let s = load_str(Path::new("fold-2d.toml"), text).unwrap();
+    let c = s.control.unwrap();
+    assert_eq!(c.scenario.references.len(), 2);
+    assert_eq!(c.scenario.references[0].joint, "elbow");
+    assert_eq!(c.scenario.references[1].ramp_s, 4.0);
+    for (from, to, field) in [
+        ("angle_deg = 90.0", "angle_deg = 270.0", "reference.joints[0].angle_deg"),
+        (
+            "axis = [0.0, 1.0, 0.0], angle_deg = 90.0",
+            "axis = [0.0, 0.0, 0.0], angle_deg = 90.0",
+            "reference.joints[0].axis",
+        ),
+        (
+            "ramp_s = 4.0 },\n  { joint = \"root\"",
+            "ramp_s = -1.0 },\n  { joint = \"root\"",
+            "reference.joints[0].ramp_s",
+        ),
+        ("joint = \"root\", axis", "joint = \"wrist\", axis", "reference.joints[1].joint"),
+        ("joint = \"root\", axis", "joint = \"elbow\", axis", "reference.joints[1].joint"),
+        ("model = \"exact-joints\"", "model = \"paper\"", "reference"),
+    ] {
+        assert!(text.contains(from), "{from}");
+        let bad = text.replacen(from, to, 1);
+        let msg = match load_str(Path::new("fold-2d.toml"), &bad) {
+            Ok(_) => panic!("`{to}` was accepted"),
+            Err(e) => e.to_string(),
+        };
+        assert!(msg.contains(field), "expected `{field}` in: {msg}");
+    }
+}

@@ -171,6 +171,7 @@ fn mpc_with_the_exact_joints_model() {
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("stdout is only JSON");
     assert_summary_shape(&v);
     assert_eq!(v["controller"], "nmpc");
+    assert_eq!(v["model"], "exact-joints");
     assert!(v["error"].is_null(), "{v}");
     assert!(v["rigid_rate_ratio"].as_f64().unwrap() < 0.5, "{v}");
     let folder = dir.join("out/small-2d/nmpc-exact-fe-w1");
