@@ -452,6 +452,6 @@ pub struct JointCommandSpec {
     pub axis: [f64; 3],
     /// Target angle (deg).
     pub angle_deg: f64,
-    /// Time to reach the target (s) [0].
+    /// Time to reach the target (s) \[0\].
     pub ramp_s: Option<f64>,
 }
