@@ -109,7 +109,7 @@ impl ModalPlant {
 
     /// Node rotations and positions of every beam: the paper model's quaternion field and
     /// positions rebuilt from its strains (eq. 10); the exact-joints model's configuration
-    /// of [`ExactPlant::configuration`].
+    /// of `ExactPlant::configuration`.
     pub fn kinematics(&self) -> Result<Vec<Kinematics>> {
         match &self.state {
             State::Paper { rom, q } => {
