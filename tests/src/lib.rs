@@ -98,12 +98,8 @@ pub struct Row {
     pub seconds: f64,
 }
 
-/// Thread CPU time of the calling thread (s), from `/proc/thread-self/schedstat` (Linux);
-/// `None` elsewhere.
-pub fn thread_cpu() -> Option<f64> {
-    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
-    Some(s.split_whitespace().next()?.parse::<f64>().ok()? * 1e-9)
-}
+/// Thread CPU time of the calling thread (s); `None` off Linux.
+pub use ocp_transcription::thread_cpu_time as thread_cpu;
 
 /// Every case of every crate, in crate order.
 pub fn all_cases() -> Vec<Case> {

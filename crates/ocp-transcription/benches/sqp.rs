@@ -52,19 +52,11 @@ fn integrator(kind: IntegratorKind, substeps: usize) -> IntegratorSettings {
     IntegratorSettings::new(kind, substeps)
 }
 
-/// CPU time of the calling thread in seconds (Linux `/proc/thread-self/schedstat`; the
-/// machine is shared, so wall time overstates the cost); falls back to wall time.
-fn cpu_time() -> Option<f64> {
-    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
-    let ns: f64 = s.split_whitespace().next()?.parse().ok()?;
-    Some(ns * 1e-9)
-}
-
 /// Runs `f` and returns its CPU seconds (wall seconds when unavailable).
 fn timed<R>(f: impl FnOnce() -> R) -> (f64, R) {
-    let (c0, w0) = (cpu_time(), Instant::now());
+    let (c0, w0) = (ocp_transcription::thread_cpu_time(), Instant::now());
     let r = f();
-    let t = match (c0, cpu_time()) {
+    let t = match (c0, ocp_transcription::thread_cpu_time()) {
         (Some(a), Some(b)) => b - a,
         _ => w0.elapsed().as_secs_f64(),
     };

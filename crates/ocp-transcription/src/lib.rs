@@ -66,6 +66,7 @@
 //! [`SqpSettings::parallel_intervals`] is on. See `docs/ocp-transcription.md` for the
 //! measured error/cost tables and the decisions.
 
+mod clock;
 mod dynamics;
 mod error;
 mod integrator;
@@ -76,6 +77,7 @@ mod quadratic;
 pub mod samples;
 mod sqp;
 
+pub use clock::thread_cpu_time;
 pub use dynamics::Dynamics;
 pub use error::{OcpError, Result};
 pub use integrator::{
