@@ -10,6 +10,7 @@ use crate::plant::{relative_angle, ExactPlant, PlantKind, SimPlant};
 use crate::scenario::{ratio, Setup};
 use crate::validity::JointMonitor;
 use crate::weights::ControlGrid;
+use intrinsic_beam::Kinematics;
 use nalgebra::{Vector3, Vector4};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -218,18 +219,8 @@ fn observe_plant(
             let nb = plant.structure().beams().len();
             let kin = plant.kinematics();
             let last = kin[nb - 1].r[kin[nb - 1].r.len() - 1];
-            let pos = with_positions.then(|| Snapshot {
-                t: plant.time(),
-                positions: kin
-                    .iter()
-                    .map(|k| k.r.iter().map(|r| [r.x, r.y, r.z]).collect())
-                    .collect(),
-                orientations: kin
-                    .iter()
-                    .map(|k| k.xi.iter().map(|v| [v[0], v[1], v[2], v[3]]).collect())
-                    .collect(),
-                state: plant.state().to_vec(),
-            });
+            let pos =
+                with_positions.then(|| snapshot_of(plant.time(), kin, plant.state().to_vec()));
             Ok((
                 Observation {
                     q,
@@ -249,18 +240,7 @@ fn observe_plant(
             let xi4: Vec<[f64; 4]> = xi.iter().map(|v| [v[0], v[1], v[2], v[3]]).collect();
             let q = setup.rom.project_full(&x, Some(&xi4))?;
             let tip = kin.last().and_then(|k| k.r.last()).map_or([0.0; 3], |r| [r.x, r.y, r.z]);
-            let pos = with_positions.then(|| Snapshot {
-                t: 0.0,
-                positions: kin
-                    .iter()
-                    .map(|k| k.r.iter().map(|r| [r.x, r.y, r.z]).collect())
-                    .collect(),
-                orientations: kin
-                    .iter()
-                    .map(|k| k.xi.iter().map(|v| [v[0], v[1], v[2], v[3]]).collect())
-                    .collect(),
-                state: x.clone(),
-            });
+            let pos = with_positions.then(|| snapshot_of(0.0, &kin, x.clone()));
             let obs = Observation {
                 q,
                 joint_angles: node_joint_angles(setup, &xi),
@@ -298,6 +278,19 @@ fn observe_plant(
             };
             Ok((obs, snapshot, xi))
         }
+    }
+}
+
+/// A snapshot of an FE configuration: node positions and quaternions per beam, and `state`.
+fn snapshot_of(t: f64, kin: &[Kinematics], state: Vec<f64>) -> Snapshot {
+    Snapshot {
+        t,
+        positions: kin.iter().map(|k| k.r.iter().map(|r| [r.x, r.y, r.z]).collect()).collect(),
+        orientations: kin
+            .iter()
+            .map(|k| k.xi.iter().map(|v| [v[0], v[1], v[2], v[3]]).collect())
+            .collect(),
+        state,
     }
 }
 
