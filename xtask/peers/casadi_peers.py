@@ -29,7 +29,8 @@ Output: one JSON line on stdout with
   check_defect:   max |constraint residual| of this NLP at flexmpc's solution,
   ipopt: {status, cost, iterations, inf_pr, inf_du, cpu_s (process CPU time of the solve),
           wall_s, t_proc_total (IPOPT's own timer)}.
-IPOPT runs with the exact Hessian of the Lagrangian (CasADi's AD), tol 1e-10, MUMPS.
+IPOPT runs with the exact Hessian of the Lagrangian (CasADi's AD of the expression graph),
+tol 1e-10, MUMPS.
 """
 
 import json
@@ -187,10 +188,9 @@ def main():
             "inf_du": float(its["inf_du"][-1]) if its else float("nan"),
             "cpu_s": cpu,
             "wall_s": wall,
-            "t_proc_total": float(st.get("t_proc_total", float("nan"))),
         },
     }
-    print(json.dumps(out))
+    print(json.dumps(out).replace("NaN", "null"))
 
 
 if __name__ == "__main__":
