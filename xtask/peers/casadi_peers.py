@@ -28,7 +28,7 @@ Output: one JSON line on stdout with
                   at flexmpc's solution against flexmpc's own cost),
   check_defect:   max |constraint residual| of this NLP at flexmpc's solution,
   ipopt: {status, cost, iterations, inf_pr, inf_du, cpu_s (process CPU time of the solve),
-          wall_s, t_proc_total (IPOPT's own timer)}.
+          wall_s)}.
 IPOPT runs with the exact Hessian of the Lagrangian (CasADi's AD of the expression graph),
 tol 1e-10, MUMPS.
 """
