@@ -6,17 +6,25 @@
 
 use anyhow::{bail, Context, Result};
 use mpc::RomDynamics;
-use nalgebra::DVector;
-use ocp_transcription::{Globalisation, Ocp, SqpMode, SqpSettings, SqpSolver, SqpStats};
-use std::path::Path;
+use nalgebra::{DMatrix, DVector};
+use ocp_transcription::{
+    Dynamics, Globalisation, IntegratorKind, Ocp, SqpMode, SqpSettings, SqpSolver, SqpStats,
+};
+use std::path::{Path, PathBuf};
 
 const USAGE: &str = "\
 usage: cargo xtask bench peers [--variant NAME]... [--scene 2d|3d] [--omega0 W]...
+                               [--python PATH | --no-casadi]
 
 Solves the first sample's problem of scenes/paper-2d-mpc.toml (ω0 = 0.5, 1, 2, 2.5) and
 scenes/paper-3d-mpc.toml (ω0 = 0.5, 1, 1.5) to convergence (KKT tolerance 1e-8) from the
 linear MPC plan and prints status, iterations, KKT, cost J*, CPU time per solve and per
-iteration. --variant picks the globalisation (converge (default), merit, full, exact).";
+iteration. --variant picks the globalisation (converge (default), merit, full, exact).
+
+When --python PATH is given, or `python3` can `import casadi`, each problem is exported to a
+temporary directory (modal model, `problem.json` with the OCP data, the Lawson propagator,
+the start and flexmpc's solution) and solved by xtask/peers/casadi_peers.py with IPOPT
+(exact Hessian) from the same start; a second table compares both (the first --variant).";
 
 /// One first-sample problem: the model, the OCP and the initial state.
 pub struct Problem {
@@ -32,6 +40,8 @@ pub struct Problem {
     pub x0: Vec<f64>,
     /// The scene's controller settings (integrator).
     pub controller: mpc::ControllerSettings,
+    /// The controller's reduced model (what the export writes).
+    pub rom: modal_rom::ModalRom,
 }
 
 /// Builds the first-sample problem of `scene` (`2d` or `3d`) at `omega0` through the scene
@@ -54,7 +64,15 @@ pub fn problem(root: &Path, scene: &'static str, omega0: f64) -> Result<Problem>
     ocp.u_ref = DVector::zeros(nu);
     ocp.u_min = DVector::from_vec(p.u_min.clone());
     ocp.u_max = DVector::from_vec(p.u_max.clone());
-    Ok(Problem { scene, omega0, model, ocp, x0: p.x0, controller: control.controller })
+    Ok(Problem {
+        scene,
+        omega0,
+        model,
+        ocp,
+        x0: p.x0,
+        controller: control.controller,
+        rom: setup.rom.clone(),
+    })
 }
 
 /// CPU time of the calling thread (s), from `/proc/thread-self/schedstat`; wall time if absent.
@@ -148,9 +166,21 @@ fn settings(variant: &str, p: &Problem) -> Result<SqpSettings> {
     })
 }
 
+/// A solve of one problem: the statistics, the start and the solution.
+pub struct Solved {
+    /// SQP statistics.
+    pub stats: SqpStats,
+    /// Thread CPU seconds of the SQP solve (the linear MPC start excluded).
+    pub cpu: f64,
+    /// Start: the linear MPC plan's nodes `s_0 … s_Nc` and controls `u_0 … u_{Nc−1}`.
+    pub start: (Vec<DVector<f64>>, Vec<DVector<f64>>),
+    /// Solution nodes and controls.
+    pub solution: (Vec<DVector<f64>>, Vec<DVector<f64>>),
+}
+
 /// Solves `p` from the linear MPC plan (the controller's first-sample initial guess) with
-/// `settings`; returns the stats, the thread CPU seconds of the SQP solve and `u_0`.
-pub fn solve(p: &Problem, settings: SqpSettings) -> Result<(SqpStats, f64, Vec<f64>)> {
+/// `settings`.
+pub fn solve(p: &Problem, settings: SqpSettings) -> Result<Solved> {
     let lq = SqpSettings {
         mode: SqpMode::LinearQuadratic,
         globalisation: Globalisation::FullStep,
@@ -184,7 +214,94 @@ pub fn solve(p: &Problem, settings: SqpSettings) -> Result<(SqpStats, f64, Vec<f
             );
         }
     }
-    Ok((st, cpu, nmpc.first_control().iter().copied().collect()))
+    Ok(Solved {
+        stats: st,
+        cpu,
+        start: (lmpc.states().to_vec(), lmpc.controls().to_vec()),
+        solution: (nmpc.states().to_vec(), nmpc.controls().to_vec()),
+    })
+}
+
+fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
+    (0..m.nrows()).map(|i| m.row(i).iter().copied().collect()).collect()
+}
+
+fn plan(v: &[DVector<f64>]) -> Vec<Vec<f64>> {
+    v.iter().map(|x| x.iter().copied().collect()).collect()
+}
+
+/// Writes the modal model and `problem.json` (OCP data, integrator with the Lawson propagator
+/// `E = exp(L h/2)` of the model's linear part `L` as flexmpc computes it, start and
+/// flexmpc's solution) of `p` to `dir`.
+fn export(p: &Problem, s: &Solved, settings: &SqpSettings, dir: &Path) -> Result<()> {
+    let int = &settings.integrator;
+    if int.kind != IntegratorKind::LawsonRk4 || int.adaptive.is_some() {
+        bail!("the CasADi peer reproduces Lawson RK4 with fixed substeps, found {:?}", int);
+    }
+    p.rom.export(dir).with_context(|| format!("exporting the model to {}", dir.display()))?;
+    let l = p.model.linear_part().context("the model has no linear part")?;
+    let h = p.ocp.interval() / int.substeps as f64;
+    let e = (&l * (0.5 * h)).exp();
+    let o = &p.ocp;
+    let json = serde_json::json!({
+        "scene": p.scene,
+        "omega0": p.omega0,
+        "nx": o.nx(),
+        "nu": o.nu(),
+        "intervals": o.intervals,
+        "interval": o.interval(),
+        "substeps": int.substeps,
+        "q": rows(&o.q),
+        "r": rows(&o.r),
+        "terminal": rows(&o.terminal),
+        "x_ref": o.x_ref.iter().copied().collect::<Vec<_>>(),
+        "u_ref": o.u_ref.iter().copied().collect::<Vec<_>>(),
+        "u_min": o.u_min.iter().copied().collect::<Vec<_>>(),
+        "u_max": o.u_max.iter().copied().collect::<Vec<_>>(),
+        "x0": p.x0,
+        "linear_part": rows(&l),
+        "lawson_e": rows(&e),
+        "start_states": plan(&s.start.0),
+        "start_controls": plan(&s.start.1),
+        "flexmpc_states": plan(&s.solution.0),
+        "flexmpc_controls": plan(&s.solution.1),
+        "flexmpc_cost": s.stats.cost,
+    });
+    std::fs::write(dir.join("problem.json"), serde_json::to_string(&json)?)
+        .with_context(|| format!("writing {}/problem.json", dir.display()))?;
+    Ok(())
+}
+
+/// The Python to run the CasADi peer with, or why there is none.
+fn find_python(explicit: Option<PathBuf>) -> std::result::Result<PathBuf, String> {
+    let py = explicit.unwrap_or_else(|| PathBuf::from("python3"));
+    match std::process::Command::new(&py)
+        .args(["-c", "import casadi; print(casadi.__version__)"])
+        .output()
+    {
+        Ok(o) if o.status.success() => Ok(py),
+        Ok(o) => Err(format!(
+            "`{} -c 'import casadi'` failed: {}",
+            py.display(),
+            String::from_utf8_lossy(&o.stderr).lines().last().unwrap_or("")
+        )),
+        Err(e) => Err(format!("cannot run `{}`: {e}", py.display())),
+    }
+}
+
+/// Runs the CasADi peer on an exported problem; returns its JSON report.
+fn run_casadi(py: &Path, script: &Path, dir: &Path) -> Result<serde_json::Value> {
+    let o = std::process::Command::new(py)
+        .arg(script)
+        .arg(dir)
+        .output()
+        .with_context(|| format!("running {}", py.display()))?;
+    if !o.status.success() {
+        bail!("{} failed: {}", script.display(), String::from_utf8_lossy(&o.stderr));
+    }
+    let out = String::from_utf8_lossy(&o.stdout);
+    let line = out.lines().rev().find(|l| l.starts_with('{')).context("no JSON line")?;
+    Ok(serde_json::from_str(line)?)
 }
 
 /// `cargo xtask bench peers`.
@@ -192,6 +309,8 @@ pub fn main(args: &[String]) -> Result<()> {
     let mut variants: Vec<String> = Vec::new();
     let mut scenes: Vec<&'static str> = Vec::new();
     let mut omegas: Vec<f64> = Vec::new();
+    let mut python: Option<PathBuf> = None;
+    let mut casadi = true;
     let mut it = args.iter();
     while let Some(a) = it.next() {
         match a.as_str() {
@@ -205,6 +324,8 @@ pub fn main(args: &[String]) -> Result<()> {
                 let v = it.next().context("--omega0 needs a value")?;
                 omegas.push(v.parse().with_context(|| format!("--omega0 {v}"))?);
             }
+            "--python" => python = Some(it.next().context("--python needs a path")?.into()),
+            "--no-casadi" => casadi = false,
             "-h" | "--help" => {
                 println!("{USAGE}");
                 return Ok(());
@@ -213,12 +334,25 @@ pub fn main(args: &[String]) -> Result<()> {
         }
     }
     if variants.is_empty() {
-        variants.push("merit".into());
+        variants.push("converge".into());
     }
     if scenes.is_empty() {
         scenes = vec!["2d", "3d"];
     }
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("peers/casadi_peers.py");
+    let python = if casadi {
+        match find_python(python) {
+            Ok(p) => Some(p),
+            Err(why) => {
+                println!("casadi not found: {why}; skipping the IPOPT column");
+                None
+            }
+        }
+    } else {
+        None
+    };
+    let mut peers: Vec<String> = Vec::new();
     println!("| scene | ω0 | variant | status | iterations | KKT | J* | CPU s/solve | CPU ms/iteration | integration / condensing / QP ms/it | trial passes/it |");
     println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for scene in scenes {
@@ -232,8 +366,10 @@ pub fn main(args: &[String]) -> Result<()> {
         for &w in &list {
             let p = problem(&root, scene, w)?;
             debug_assert!(p.scene == scene && p.omega0 == w);
-            for v in &variants {
-                let (st, cpu, _) = solve(&p, settings(v, &p)?)?;
+            for (vi, v) in variants.iter().enumerate() {
+                let set = settings(v, &p)?;
+                let sol = solve(&p, set.clone())?;
+                let (st, cpu) = (&sol.stats, sol.cpu);
                 let per = 1e3 / st.iterations.max(1) as f64;
                 println!(
                     "| {scene} | {w} | {v} | {:?} | {} | {:.1e} | {:.10e} | {:.3} | {:.1} | {:.1} / {:.1} / {:.1} | {:.1} |",
@@ -252,8 +388,55 @@ pub fn main(args: &[String]) -> Result<()> {
                         - (st.iterations + 1) as f64)
                         / st.iterations.max(1) as f64,
                 );
+                if let (0, Some(py)) = (vi, &python) {
+                    let dir = std::env::temp_dir()
+                        .join(format!("flexmpc-peers-{}-{scene}-{w}", std::process::id()));
+                    export(&p, &sol, &set, &dir)?;
+                    let r = run_casadi(py, &script, &dir)?;
+                    let _ = std::fs::remove_dir_all(&dir);
+                    peers.push(peer_row(scene, w, v, st, cpu, &r));
+                }
             }
         }
     }
+    if !peers.is_empty() {
+        println!();
+        println!("| scene | ω0 | NLP check: J rel. diff / max defect at flexmpc's optimum | flexmpc J* | IPOPT J* | rel. diff | iterations flexmpc / IPOPT | IPOPT status, inf_pr / inf_du | CPU s/solve flexmpc / IPOPT | ms/iteration flexmpc / IPOPT | time ratio IPOPT / flexmpc |");
+        println!("|---|---|---|---|---|---|---|---|---|---|---|");
+        for r in &peers {
+            println!("{r}");
+        }
+    }
     Ok(())
+}
+
+/// One row of the comparison table.
+fn peer_row(
+    scene: &str,
+    w: f64,
+    v: &str,
+    st: &SqpStats,
+    cpu: f64,
+    r: &serde_json::Value,
+) -> String {
+    let f = |k: &str| r[k].as_f64().unwrap_or(f64::NAN);
+    let ip = &r["ipopt"];
+    let g = |k: &str| ip[k].as_f64().unwrap_or(f64::NAN);
+    let it = ip["iterations"].as_u64().unwrap_or(0);
+    let j = g("cost");
+    let t = g("cpu_s");
+    format!(
+        "| {scene} | {w} | {:.1e} / {:.1e} | {:.10e} ({v}) | {j:.10e} | {:.1e} | {} / {it} | {} {:.1e} / {:.1e} | {cpu:.3} / {t:.3} | {:.1} / {:.1} | {:.2} |",
+        f("check_cost_rel"),
+        f("check_defect"),
+        st.cost,
+        (st.cost - j) / j.abs(),
+        st.iterations,
+        ip["status"].as_str().unwrap_or("?"),
+        g("inf_pr"),
+        g("inf_du"),
+        1e3 * cpu / st.iterations.max(1) as f64,
+        1e3 * t / it.max(1) as f64,
+        t / cpu,
+    )
 }
