@@ -75,18 +75,16 @@ pub fn problem(root: &Path, scene: &'static str, omega0: f64) -> Result<Problem>
     })
 }
 
-/// CPU time of the calling thread (s), from `/proc/thread-self/schedstat`; wall time if absent.
-fn cpu_now() -> f64 {
-    std::fs::read_to_string("/proc/thread-self/schedstat")
-        .ok()
-        .and_then(|s| s.split_whitespace().next()?.parse::<f64>().ok())
-        .map(|ns| ns * 1e-9)
-        .unwrap_or_else(|| {
-            std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map(|d| d.as_secs_f64())
-                .unwrap_or(0.0)
-        })
+/// CPU seconds of the calling thread spent in `f` (wall seconds where the thread clock is
+/// unavailable).
+fn cpu_timed<R>(f: impl FnOnce() -> R) -> (f64, R) {
+    let (c0, w0) = (ocp_transcription::thread_cpu_time(), std::time::Instant::now());
+    let r = f();
+    let t = match (c0, ocp_transcription::thread_cpu_time()) {
+        (Some(a), Some(b)) => b - a,
+        _ => w0.elapsed().as_secs_f64(),
+    };
+    (t, r)
 }
 
 /// The SQP settings of a named variant.
@@ -197,9 +195,8 @@ pub fn solve(p: &Problem, settings: SqpSettings) -> Result<Solved> {
     for (d, s) in nmpc.controls_mut().iter_mut().zip(lmpc.controls()) {
         d.copy_from(s);
     }
-    let c0 = cpu_now();
-    let (st, _) = nmpc.solve_with_fallback_starts(&p.x0)?;
-    let cpu = cpu_now() - c0;
+    let (cpu, solved) = cpu_timed(|| nmpc.solve_with_fallback_starts(&p.x0));
+    let (st, _) = solved?;
     if std::env::var_os("PEERS_LOG").is_some() {
         for l in nmpc.log() {
             eprintln!(
