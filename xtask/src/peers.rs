@@ -14,12 +14,13 @@ use std::path::{Path, PathBuf};
 
 const USAGE: &str = "\
 usage: cargo xtask bench peers [--variant NAME]... [--scene 2d|3d] [--omega0 W]...
-                               [--python PATH | --no-casadi]
+                               [--python PATH | --no-casadi] [--log]
 
 Solves the first sample's problem of scenes/paper-2d-mpc.toml (ω0 = 0.5, 1, 2, 2.5) and
 scenes/paper-3d-mpc.toml (ω0 = 0.5, 1, 1.5) to convergence (KKT tolerance 1e-8) from the
 linear MPC plan and prints status, iterations, KKT, cost J*, CPU time per solve and per
-iteration. --variant picks the globalisation (converge (default), merit, full, exact).
+iteration. --variant picks the globalisation (converge (default), merit, full, exact);
+--log prints flexmpc's iteration log (cost, KKT, violation, step) to stderr.
 
 When --python PATH is given, or `python3` can `import casadi`, each problem is exported to a
 temporary directory (modal model, `problem.json` with the OCP data, the Lawson propagator,
@@ -178,7 +179,7 @@ pub struct Solved {
 
 /// Solves `p` from the linear MPC plan (the controller's first-sample initial guess) with
 /// `settings`.
-pub fn solve(p: &Problem, settings: SqpSettings) -> Result<Solved> {
+pub fn solve(p: &Problem, settings: SqpSettings, log: bool) -> Result<Solved> {
     let lq = SqpSettings {
         mode: SqpMode::LinearQuadratic,
         globalisation: Globalisation::FullStep,
@@ -197,7 +198,7 @@ pub fn solve(p: &Problem, settings: SqpSettings) -> Result<Solved> {
     }
     let (cpu, solved) = cpu_timed(|| nmpc.solve_with_fallback_starts(&p.x0));
     let (st, _) = solved?;
-    if std::env::var_os("PEERS_LOG").is_some() {
+    if log {
         for l in nmpc.log() {
             eprintln!(
                 "{:4} J {:.10e} kkt {:.2e} viol {:.2e} |dw| {:.2e} t {:.3e} qp {}",
@@ -308,6 +309,7 @@ pub fn main(args: &[String]) -> Result<()> {
     let mut omegas: Vec<f64> = Vec::new();
     let mut python: Option<PathBuf> = None;
     let mut casadi = true;
+    let mut log = false;
     let mut it = args.iter();
     while let Some(a) = it.next() {
         match a.as_str() {
@@ -323,6 +325,7 @@ pub fn main(args: &[String]) -> Result<()> {
             }
             "--python" => python = Some(it.next().context("--python needs a path")?.into()),
             "--no-casadi" => casadi = false,
+            "--log" => log = true,
             "-h" | "--help" => {
                 println!("{USAGE}");
                 return Ok(());
@@ -365,7 +368,7 @@ pub fn main(args: &[String]) -> Result<()> {
             debug_assert!(p.scene == scene && p.omega0 == w);
             for (vi, v) in variants.iter().enumerate() {
                 let set = settings(v, &p)?;
-                let sol = solve(&p, set.clone())?;
+                let sol = solve(&p, set.clone(), log)?;
                 let (st, cpu) = (&sol.stats, sol.cpu);
                 let per = 1e3 / st.iterations.max(1) as f64;
                 println!(
