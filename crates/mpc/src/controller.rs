@@ -302,7 +302,11 @@ pub struct SampleReport {
     pub strategy: Strategy,
     /// SQP iterations over all attempts (QPs for the LMPC).
     pub iterations: usize,
-    /// Wall time of the whole sample's solve (all attempts) (s).
+    /// CPU time the calling thread spent on the whole sample's solve (all attempts) (s), from
+    /// [`ocp_transcription::thread_cpu_time`]: not inflated by other processes sharing the
+    /// cores. The controller runs every solve on the calling thread (its SQP settings keep
+    /// `parallel_intervals` off), so this is all the solve's CPU time. Wall time where the
+    /// thread clock is unavailable (no `/proc/thread-self/schedstat`).
     pub solve_time: f64,
     /// Optimal cost of the accepted plan.
     pub cost: f64,
@@ -558,7 +562,7 @@ impl<D: Dynamics + Clone> Controller<D> {
             None => 0.0,
         };
         self.last_start = Some(start);
-        let clock = Instant::now();
+        let (clock, cpu) = (Instant::now(), ocp_transcription::thread_cpu_time());
         self.apply_schedule(start)?;
         let report = match self.settings.kind {
             ControllerKind::Lmpc => {
@@ -568,7 +572,11 @@ impl<D: Dynamics + Clone> Controller<D> {
             ControllerKind::Nmpc => self.step_nmpc(t, start, x0, shift)?,
         };
         self.samples += 1;
-        Ok(SampleReport { solve_time: clock.elapsed().as_secs_f64(), ..report })
+        let solve_time = match (cpu, ocp_transcription::thread_cpu_time()) {
+            (Some(a), Some(b)) => b - a,
+            _ => clock.elapsed().as_secs_f64(),
+        };
+        Ok(SampleReport { solve_time, ..report })
     }
 
     fn step_nmpc(&mut self, t: f64, start: f64, x0: &[f64], shift: f64) -> Result<SampleReport> {

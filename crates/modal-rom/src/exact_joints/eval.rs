@@ -89,6 +89,8 @@ pub(crate) struct Workspace {
     pub(super) colp: Vec<f64>,
     pub(super) tj: Vec<f64>,
     pub(super) dxd: Vec<Vector4<f64>>,
+    /// `U(ω_b) − Ū(ω_a)` per joint.
+    pub(super) mjs: Vec<Matrix4<f64>>,
     pub(super) aac: Vec<f64>,
     pub(super) x1tmp: Vec<f64>,
     pub(super) phitmp: Vec<f64>,
@@ -193,6 +195,7 @@ impl Workspace {
             colp: zeros(m),
             tj: zeros(rmax),
             dxd: vec![Vector4::zeros(); joints.len()],
+            mjs: vec![Matrix4::zeros(); joints.len()],
             aac: zeros(r * rmax),
             x1tmp: zeros(kk * rmax),
             phitmp: zeros(2 * r * rmax),
