@@ -20,7 +20,10 @@ usage: cargo xtask bench peers [--variant NAME]... [--scene 2d|3d] [--omega0 W].
 Solves the first sample's problem of scenes/paper-2d-mpc.toml (ω0 = 0.5, 1, 2, 2.5) and
 scenes/paper-3d-mpc.toml (ω0 = 0.5, 1, 1.5) to convergence (KKT tolerance 1e-8) from the
 linear MPC plan and prints status, iterations, KKT, cost J*, CPU time per solve and per
-iteration. --variant picks the globalisation (converge (default), merit, full, exact);
+iteration. --variant picks the globalisation (converge (default), merit, full, exact, ...);
+continuation-K solves along x0(α) = x_ref + α(x0 − x_ref), α = 1/K, 2/K, …, 1 with the
+converge settings, each stage from the last one's solution (the first from the linear MPC
+plan at x0(1/K)), and reports the summed iterations and the last stage's result;
 --log prints flexmpc's iteration log (cost, KKT, violation, step) to stderr.
 
 When --python PATH is given, or `python3` can `import casadi`, each problem is exported to a
@@ -153,6 +156,7 @@ fn settings(variant: &str, p: &Problem) -> Result<SqpSettings> {
             globalisation: Globalisation::FullStep,
             ..SqpSettings::converge(base.integrator.clone())
         },
+        v if v.starts_with("continuation-") => SqpSettings::converge(base.integrator.clone()),
         v if v.starts_with("hybrid-") => {
             let (glob, tol) = match v.strip_prefix("hybrid-filter-") {
                 Some(t) => (Globalisation::filter(), t),
@@ -190,6 +194,7 @@ pub fn solve(
     settings: SqpSettings,
     log: bool,
     start_from: Option<&Path>,
+    continuation: Option<usize>,
 ) -> Result<Solved> {
     let lq = SqpSettings {
         mode: SqpMode::LinearQuadratic,
@@ -213,6 +218,39 @@ pub fn solve(
         nmpc.controls_mut().clone_from_slice(&u);
     }
     let mut start = (nmpc.states().to_vec(), nmpc.controls().to_vec());
+    if let Some(stages) = continuation {
+        // homotopy in the initial state: x0(α) = x_ref + α(x0 − x_ref), each stage from the last
+        let mut total = 0.0;
+        let mut its = 0;
+        for i in 1..=stages {
+            let a = i as f64 / stages as f64;
+            let xa: Vec<f64> =
+                p.x0.iter().zip(p.ocp.x_ref.iter()).map(|(x, r)| r + a * (x - r)).collect();
+            if i == 1 {
+                let mut l =
+                    SqpSolver::new(p.model.clone(), p.ocp.clone(), lmpc.settings().clone())?;
+                l.solve(&xa)?;
+                nmpc.states_mut().clone_from_slice(l.states());
+                nmpc.controls_mut().clone_from_slice(l.controls());
+            }
+            let (cpu, st) = cpu_timed(|| nmpc.solve_with_fallback_starts(&xa));
+            let (st, _) = st?;
+            total += cpu;
+            its += st.iterations;
+            eprintln!(
+                "continuation stage {i}/{stages}: {:?} it {} kkt {:.1e} J {:.10e}",
+                st.status, st.iterations, st.kkt, st.cost
+            );
+        }
+        let mut st = *nmpc.stats();
+        st.iterations = its;
+        return Ok(Solved {
+            stats: st,
+            cpu: total,
+            start: start.clone(),
+            solution: (nmpc.states().to_vec(), nmpc.controls().to_vec()),
+        });
+    }
     let (cpu, solved) = cpu_timed(|| nmpc.solve_with_fallback_starts(&p.x0));
     let (st, used) = solved?;
     if used != Start::Given {
@@ -444,7 +482,8 @@ pub fn main(args: &[String]) -> Result<()> {
                 let from = start_from
                     .as_ref()
                     .map(|d| d.join(format!("{scene}-{w}")).join("ipopt_solution.json"));
-                let sol = solve(&p, set.clone(), log, from.as_deref())?;
+                let cont = v.strip_prefix("continuation-").and_then(|k| k.parse().ok());
+                let sol = solve(&p, set.clone(), log, from.as_deref(), cont)?;
                 let (st, cpu) = (&sol.stats, sol.cpu);
                 let per = 1e3 / st.iterations.max(1) as f64;
                 println!(
