@@ -24,6 +24,7 @@ iteration. --variant picks the globalisation (converge (default), merit, full, e
 continuation-K solves along x0(α) = x_ref + α(x0 − x_ref), α = 1/K, 2/K, …, 1 with the
 converge settings, each stage from the last one's solution (the first from the linear MPC
 plan at x0(1/K)), and reports the summed iterations and the last stage's result;
+converge-rollout / converge-filter-rollout start from the plan's controls rolled out from x0;
 --log prints flexmpc's iteration log (cost, KKT, violation, step) to stderr.
 
 When --python PATH is given, or `python3` can `import casadi`, each problem is exported to a
@@ -156,6 +157,8 @@ fn settings(variant: &str, p: &Problem) -> Result<SqpSettings> {
             globalisation: Globalisation::FullStep,
             ..SqpSettings::converge(base.integrator.clone())
         },
+        "converge-rollout" => SqpSettings::converge(base.integrator.clone()),
+        "converge-filter-rollout" => SqpSettings::converge_filter(base.integrator.clone()),
         v if v.starts_with("continuation-") => SqpSettings::converge(base.integrator.clone()),
         v if v.starts_with("hybrid-") => {
             let (glob, tol) = match v.strip_prefix("hybrid-filter-") {
@@ -195,6 +198,7 @@ pub fn solve(
     log: bool,
     start_from: Option<&Path>,
     continuation: Option<usize>,
+    rollout: bool,
 ) -> Result<Solved> {
     let lq = SqpSettings {
         mode: SqpMode::LinearQuadratic,
@@ -216,6 +220,9 @@ pub fn solve(
         let (s, u) = read_solution(file, p)?;
         nmpc.states_mut().clone_from_slice(&s);
         nmpc.controls_mut().clone_from_slice(&u);
+    }
+    if rollout {
+        nmpc.initialize_by_rollout(&p.x0)?;
     }
     let mut start = (nmpc.states().to_vec(), nmpc.controls().to_vec());
     if let Some(stages) = continuation {
@@ -483,7 +490,8 @@ pub fn main(args: &[String]) -> Result<()> {
                     .as_ref()
                     .map(|d| d.join(format!("{scene}-{w}")).join("ipopt_solution.json"));
                 let cont = v.strip_prefix("continuation-").and_then(|k| k.parse().ok());
-                let sol = solve(&p, set.clone(), log, from.as_deref(), cont)?;
+                let rollout = v.ends_with("-rollout");
+                let sol = solve(&p, set.clone(), log, from.as_deref(), cont, rollout)?;
                 let (st, cpu) = (&sol.stats, sol.cpu);
                 let per = 1e3 / st.iterations.max(1) as f64;
                 println!(
