@@ -23,6 +23,9 @@ bounds u_min <= u_k <= u_max; cost
   J = sum_k c_k dt 1/2 |s_k - x_ref|_Q^2 + 1/2 |s_Nc - x_ref|_P^2
       + sum_k dt 1/2 |u_k - u_ref|_R^2,  c_0 = c_Nc = 1/2, else 1.
 
+IPOPT's primal solution is written to DIR/ipopt_solution.json (states: Nc + 1 node vectors,
+controls: Nc vectors, cost), the format `cargo xtask bench peers --start-from` reads.
+
 Output: one JSON line on stdout with
   check_cost_rel: |J(flexmpc optimum) - flexmpc_cost| / |flexmpc_cost| (this NLP's objective
                   at flexmpc's solution against flexmpc's own cost),
@@ -176,6 +179,18 @@ def main():
     cpu, wall = time.process_time() - c0, time.perf_counter() - t0
     st = solver.stats()
     its = st.get("iterations", {})
+    wopt = np.array(sol["x"]).ravel()
+    nx, nu, nc = prob["nx"], prob["nu"], prob["intervals"]
+    states, controls, i = [], [], 0
+    for k in range(nc + 1):
+        states.append(wopt[i:i + nx].tolist())
+        i += nx
+        if k < nc:
+            controls.append(wopt[i:i + nu].tolist())
+            i += nu
+    with open(os.path.join(d, "ipopt_solution.json"), "w") as f:
+        json.dump({"states": states, "controls": controls, "cost": float(sol["f"]),
+                   "status": st["return_status"]}, f)
     out = {
         "check_cost": jf,
         "check_cost_rel": check_cost,

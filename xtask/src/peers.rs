@@ -8,24 +8,34 @@ use anyhow::{bail, Context, Result};
 use mpc::RomDynamics;
 use nalgebra::{DMatrix, DVector};
 use ocp_transcription::{
-    Dynamics, Globalisation, IntegratorKind, Ocp, SqpMode, SqpSettings, SqpSolver, SqpStats,
+    Dynamics, Globalisation, IntegratorKind, Ocp, SqpMode, SqpSettings, SqpSolver, SqpStats, Start,
 };
 use std::path::{Path, PathBuf};
 
 const USAGE: &str = "\
 usage: cargo xtask bench peers [--variant NAME]... [--scene 2d|3d] [--omega0 W]...
                                [--python PATH | --no-casadi] [--log]
+                               [--keep DIR] [--start-from DIR]
 
 Solves the first sample's problem of scenes/paper-2d-mpc.toml (ω0 = 0.5, 1, 2, 2.5) and
 scenes/paper-3d-mpc.toml (ω0 = 0.5, 1, 1.5) to convergence (KKT tolerance 1e-8) from the
 linear MPC plan and prints status, iterations, KKT, cost J*, CPU time per solve and per
-iteration. --variant picks the globalisation (converge (default), merit, full, exact);
+iteration. --variant picks the globalisation (converge (default), merit, full, exact, ...);
+continuation-K solves along x0(α) = x_ref + α(x0 − x_ref), α = 1/K, 2/K, …, 1 with the
+converge settings, each stage from the last one's solution (the first from the linear MPC
+plan at x0(1/K)), and reports the summed iterations and the last stage's result;
+converge-rollout / converge-filter-rollout start from the plan's controls rolled out from x0;
 --log prints flexmpc's iteration log (cost, KKT, violation, step) to stderr.
 
 When --python PATH is given, or `python3` can `import casadi`, each problem is exported to a
 temporary directory (modal model, `problem.json` with the OCP data, the Lawson propagator,
 the start and flexmpc's solution) and solved by xtask/peers/casadi_peers.py with IPOPT
-(exact Hessian) from the same start; a second table compares both (the first --variant).";
+(exact Hessian) from the same start; a second table compares both (the first --variant).
+--keep DIR writes each problem's export to DIR/SCENE-W and keeps it (with --no-casadi
+only the export is written; `python casadi_peers.py DIR/SCENE-W` then runs the peer alone
+and writes its solution to DIR/SCENE-W/ipopt_solution.json). --start-from DIR starts flexmpc
+from DIR/SCENE-W/ipopt_solution.json instead of the linear MPC plan (does the optimum the
+peer found stay a KKT point of flexmpc's NLP?).";
 
 /// One first-sample problem: the model, the OCP and the initial state.
 pub struct Problem {
@@ -147,6 +157,9 @@ fn settings(variant: &str, p: &Problem) -> Result<SqpSettings> {
             globalisation: Globalisation::FullStep,
             ..SqpSettings::converge(base.integrator.clone())
         },
+        "converge-rollout" => SqpSettings::converge(base.integrator.clone()),
+        "converge-filter-rollout" => SqpSettings::converge_filter(base.integrator.clone()),
+        v if v.starts_with("continuation-") => SqpSettings::converge(base.integrator.clone()),
         v if v.starts_with("hybrid-") => {
             let (glob, tol) = match v.strip_prefix("hybrid-filter-") {
                 Some(t) => (Globalisation::filter(), t),
@@ -179,7 +192,14 @@ pub struct Solved {
 
 /// Solves `p` from the linear MPC plan (the controller's first-sample initial guess) with
 /// `settings`.
-pub fn solve(p: &Problem, settings: SqpSettings, log: bool) -> Result<Solved> {
+pub fn solve(
+    p: &Problem,
+    settings: SqpSettings,
+    log: bool,
+    start_from: Option<&Path>,
+    continuation: Option<usize>,
+    rollout: bool,
+) -> Result<Solved> {
     let lq = SqpSettings {
         mode: SqpMode::LinearQuadratic,
         globalisation: Globalisation::FullStep,
@@ -196,8 +216,62 @@ pub fn solve(p: &Problem, settings: SqpSettings, log: bool) -> Result<Solved> {
     for (d, s) in nmpc.controls_mut().iter_mut().zip(lmpc.controls()) {
         d.copy_from(s);
     }
+    if let Some(file) = start_from {
+        let (s, u) = read_solution(file, p)?;
+        nmpc.states_mut().clone_from_slice(&s);
+        nmpc.controls_mut().clone_from_slice(&u);
+    }
+    if rollout {
+        nmpc.initialize_by_rollout(&p.x0)?;
+    }
+    let mut start = (nmpc.states().to_vec(), nmpc.controls().to_vec());
+    if let Some(stages) = continuation {
+        // homotopy in the initial state: x0(α) = x_ref + α(x0 − x_ref), each stage from the last
+        let mut total = 0.0;
+        let mut its = 0;
+        for i in 1..=stages {
+            let a = i as f64 / stages as f64;
+            let xa: Vec<f64> =
+                p.x0.iter().zip(p.ocp.x_ref.iter()).map(|(x, r)| r + a * (x - r)).collect();
+            if i == 1 {
+                let mut l =
+                    SqpSolver::new(p.model.clone(), p.ocp.clone(), lmpc.settings().clone())?;
+                l.solve(&xa)?;
+                nmpc.states_mut().clone_from_slice(l.states());
+                nmpc.controls_mut().clone_from_slice(l.controls());
+            }
+            let (cpu, st) = cpu_timed(|| nmpc.solve_with_fallback_starts(&xa));
+            let (st, _) = st?;
+            total += cpu;
+            its += st.iterations;
+            eprintln!(
+                "continuation stage {i}/{stages}: {:?} it {} kkt {:.1e} J {:.10e}",
+                st.status, st.iterations, st.kkt, st.cost
+            );
+        }
+        let mut st = *nmpc.stats();
+        st.iterations = its;
+        return Ok(Solved {
+            stats: st,
+            cpu: total,
+            start: start.clone(),
+            solution: (nmpc.states().to_vec(), nmpc.controls().to_vec()),
+        });
+    }
     let (cpu, solved) = cpu_timed(|| nmpc.solve_with_fallback_starts(&p.x0));
-    let (st, _) = solved?;
+    let (st, used) = solved?;
+    if used != Start::Given {
+        // the start the SQP actually iterated from: the rollout the fallback made
+        let mut roll = SqpSolver::new(p.model.clone(), p.ocp.clone(), settings_of(&nmpc))?;
+        if used == Start::RolledOutReference {
+            let u = p.ocp.u_ref.clone();
+            roll.initialize_constant(&p.x0, u.as_slice())?;
+        } else {
+            roll.controls_mut().clone_from_slice(&start.1);
+        }
+        roll.initialize_by_rollout(&p.x0)?;
+        start = (roll.states().to_vec(), roll.controls().to_vec());
+    }
     if log {
         for l in nmpc.log() {
             eprintln!(
@@ -215,9 +289,47 @@ pub fn solve(p: &Problem, settings: SqpSettings, log: bool) -> Result<Solved> {
     Ok(Solved {
         stats: st,
         cpu,
-        start: (lmpc.states().to_vec(), lmpc.controls().to_vec()),
+        start,
         solution: (nmpc.states().to_vec(), nmpc.controls().to_vec()),
     })
+}
+
+fn settings_of(s: &SqpSolver<RomDynamics>) -> SqpSettings {
+    s.settings().clone()
+}
+
+/// Reads a primal point (`states`: `Nc + 1` vectors, `controls`: `Nc` vectors) written by
+/// casadi_peers.py.
+fn read_solution(file: &Path, p: &Problem) -> Result<(Vec<DVector<f64>>, Vec<DVector<f64>>)> {
+    let text =
+        std::fs::read_to_string(file).with_context(|| format!("reading {}", file.display()))?;
+    let v: serde_json::Value = serde_json::from_str(&text)?;
+    let read = |key: &str, count: usize, len: usize| -> Result<Vec<DVector<f64>>> {
+        let rows = v[key].as_array().with_context(|| format!("{}: no `{key}`", file.display()))?;
+        if rows.len() != count {
+            bail!("{}: `{key}` has {} rows, expected {count}", file.display(), rows.len());
+        }
+        rows.iter()
+            .map(|r| {
+                let x: Vec<f64> = r
+                    .as_array()
+                    .with_context(|| format!("{}: `{key}` row is not an array", file.display()))?
+                    .iter()
+                    .map(|x| x.as_f64().unwrap_or(f64::NAN))
+                    .collect();
+                if x.len() != len || x.iter().any(|x| !x.is_finite()) {
+                    bail!(
+                        "{}: `{key}` row of length {} (expected {len}) or not finite",
+                        file.display(),
+                        x.len()
+                    );
+                }
+                Ok(DVector::from_vec(x))
+            })
+            .collect()
+    };
+    let n = p.ocp.intervals;
+    Ok((read("states", n + 1, p.ocp.nx())?, read("controls", n, p.ocp.nu())?))
 }
 
 fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
@@ -310,6 +422,8 @@ pub fn main(args: &[String]) -> Result<()> {
     let mut python: Option<PathBuf> = None;
     let mut casadi = true;
     let mut log = false;
+    let mut keep: Option<PathBuf> = None;
+    let mut start_from: Option<PathBuf> = None;
     let mut it = args.iter();
     while let Some(a) = it.next() {
         match a.as_str() {
@@ -326,6 +440,10 @@ pub fn main(args: &[String]) -> Result<()> {
             "--python" => python = Some(it.next().context("--python needs a path")?.into()),
             "--no-casadi" => casadi = false,
             "--log" => log = true,
+            "--keep" => keep = Some(it.next().context("--keep needs a directory")?.into()),
+            "--start-from" => {
+                start_from = Some(it.next().context("--start-from needs a directory")?.into())
+            }
             "-h" | "--help" => {
                 println!("{USAGE}");
                 return Ok(());
@@ -368,7 +486,12 @@ pub fn main(args: &[String]) -> Result<()> {
             debug_assert!(p.scene == scene && p.omega0 == w);
             for (vi, v) in variants.iter().enumerate() {
                 let set = settings(v, &p)?;
-                let sol = solve(&p, set.clone(), log)?;
+                let from = start_from
+                    .as_ref()
+                    .map(|d| d.join(format!("{scene}-{w}")).join("ipopt_solution.json"));
+                let cont = v.strip_prefix("continuation-").and_then(|k| k.parse().ok());
+                let rollout = v.ends_with("-rollout");
+                let sol = solve(&p, set.clone(), log, from.as_deref(), cont, rollout)?;
                 let (st, cpu) = (&sol.stats, sol.cpu);
                 let per = 1e3 / st.iterations.max(1) as f64;
                 println!(
@@ -388,13 +511,22 @@ pub fn main(args: &[String]) -> Result<()> {
                         - (st.iterations + 1) as f64)
                         / st.iterations.max(1) as f64,
                 );
-                if let (0, Some(py)) = (vi, &python) {
-                    let dir = std::env::temp_dir()
-                        .join(format!("flexmpc-peers-{}-{scene}-{w}", std::process::id()));
+                if vi == 0 && (python.is_some() || keep.is_some()) {
+                    let dir = match &keep {
+                        Some(k) => k.join(format!("{scene}-{w}")),
+                        None => std::env::temp_dir()
+                            .join(format!("flexmpc-peers-{}-{scene}-{w}", std::process::id())),
+                    };
+                    std::fs::create_dir_all(&dir)
+                        .with_context(|| format!("creating {}", dir.display()))?;
                     export(&p, &sol, &set, &dir)?;
-                    let r = run_casadi(py, &script, &dir)?;
-                    let _ = std::fs::remove_dir_all(&dir);
-                    peers.push(peer_row(scene, w, v, st, cpu, &r));
+                    if let Some(py) = &python {
+                        let r = run_casadi(py, &script, &dir)?;
+                        peers.push(peer_row(scene, w, v, st, cpu, &r));
+                    }
+                    if keep.is_none() {
+                        let _ = std::fs::remove_dir_all(&dir);
+                    }
                 }
             }
         }

@@ -1,8 +1,9 @@
 //! Criterion benches of the SQP on a model with the modal ROM's structure, plus the tables
 //! of docs/ocp-transcription.md (integrator error against cost, QP forms, time per iteration
 //! against nx and Nc). Run: `cargo bench -p ocp-transcription` (tables are printed first;
-//! `OCP_BENCH_TABLES=int,qp,sweep,criterion` selects parts, `OCP_BENCH_TABLES=0` runs only
-//! the criterion benches).
+//! `OCP_BENCH_TABLES=int,qp,sweep,iter3d,criterion` selects parts, `OCP_BENCH_TABLES=0`
+//! runs only the criterion benches; `cargo bench -p ocp-transcription -- sqp_iteration_3d`
+//! runs the 3D-sized iteration with line search on one and two threads, timed in CPU time).
 
 use criterion::Criterion;
 use nalgebra::{DMatrix, DVector};
@@ -415,6 +416,149 @@ fn adaptive_table() {
     }
 }
 
+/// CPU seconds of every thread of this process so far (sum of
+/// `/proc/self/task/*/schedstat`), `None` where unavailable: the work of an iteration that
+/// runs on a thread pool.
+fn process_cpu_time() -> Option<f64> {
+    let mut ns = 0.0;
+    for e in std::fs::read_dir("/proc/self/task").ok()? {
+        let s = std::fs::read_to_string(e.ok()?.path().join("schedstat")).ok()?;
+        ns += s.split_whitespace().next()?.parse::<f64>().ok()?;
+    }
+    Some(ns * 1e-9)
+}
+
+/// The 3D-sized problem of the paper (nx = 53 = the real 3D ROM's size, nu = 5, Nc = 24,
+/// τp = 6 s, Lawson × 16) on the ROM-structured sample, and a plan from the rotating state
+/// of ω0 = 1 (40 full-step SQP iterations, sparse QP) to iterate from: the solver (settings
+/// `settings`), the initial state and the plan.
+#[allow(clippy::type_complexity)]
+fn plan_3d(
+    settings: SqpSettings,
+) -> (SqpSolver<ModalLike>, Vec<f64>, Vec<DVector<f64>>, Vec<DVector<f64>>) {
+    let (nx, nc) = (53, 24);
+    let m = model(nx);
+    let x = m.rotating_state(1.0).expect("rom-like");
+    let mut o = ocp(nx, nc);
+    let (mm, nq2, _) = m.rom_blocks().expect("rom-like");
+    o.x_ref[mm + nq2] = 1.0;
+    let plan = SqpSettings {
+        qp_form: QpForm::SparseClarabel,
+        globalisation: Globalisation::FullStep,
+        integrator: integrator(IntegratorKind::LawsonRk4, 16),
+        max_iterations: 40,
+        ..SqpSettings::default()
+    };
+    let mut p = SqpSolver::new(m.clone(), o.clone(), plan).expect("valid");
+    p.initialize_by_simulation(&x, &[0.0; 5]).expect("finite");
+    p.solve(&x).expect("valid x0");
+    // one real-time iteration from a perturbed plan: the merit line search has work to do
+    let states: Vec<DVector<f64>> =
+        p.states().iter().map(|s| s.map(|v| v * 1.02)).collect::<Vec<_>>();
+    let controls: Vec<DVector<f64>> = p.controls().iter().map(|u| u.map(|v| 0.9 * v)).collect();
+    let s = SqpSolver::new(m, o, settings).expect("valid");
+    (s, x, states, controls)
+}
+
+/// One SQP iteration of the 3D-sized problem as the closed loop's full SQP takes it:
+/// Gauss–Newton linearisation (24 intervals with sensitivities), condensing, dense QP, merit
+/// line search (its trial integrations included), step.
+fn iteration_3d_settings(parallel: bool) -> SqpSettings {
+    SqpSettings {
+        mode: SqpMode::RealTimeIteration,
+        integrator: integrator(IntegratorKind::LawsonRk4, 16),
+        globalisation: Globalisation::merit(),
+        qp_form: QpForm::CondensedDense,
+        parallel_intervals: parallel,
+        ..SqpSettings::default()
+    }
+}
+
+/// Table: CPU ms of one 3D-sized iteration (see [`iteration_3d_settings`]) on one thread and
+/// on a pool of two, with the split integration (linearisation and line-search trials) /
+/// condensing / QP (wall-clock shares of the solver's timers scaled to the CPU total) and the
+/// trial passes of the line search.
+fn iteration_3d_table() {
+    println!(
+        "\n## One SQP iteration with merit line search, nx = 53, nu = 5, Nc = 24, Lawson × 16, \
+         from a plan of ω0 = 1 (ms CPU; two threads: all threads' CPU)"
+    );
+    println!("| threads | CPU total | CPU per thread | integration | condensing | QP | line-search trials |");
+    println!("|---|---|---|---|---|---|---|");
+    for threads in [1usize, 2] {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("pool");
+        pool.install(|| {
+            let (mut s, x, states, controls) = plan_3d(iteration_3d_settings(threads > 1));
+            let (mut cpu, mut wall, mut ti, mut tc, mut tq, mut trials, mut runs) =
+                (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0usize);
+            while cpu < 1.0 || runs < 10 {
+                s.states_mut().clone_from_slice(&states);
+                s.controls_mut().clone_from_slice(&controls);
+                let c0 = process_cpu_time().unwrap_or(0.0);
+                let st = s.solve(&x).expect("valid x0");
+                cpu += process_cpu_time().unwrap_or(0.0) - c0;
+                wall += st.time_total;
+                ti += st.time_integration;
+                tc += st.time_condensing;
+                tq += st.time_qp;
+                trials += st.integrator_calls as f64 / 24.0 - 1.0;
+                runs += 1;
+            }
+            let per = 1e3 / runs as f64;
+            let f = cpu / wall;
+            println!(
+                "| {threads} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} |",
+                cpu * per,
+                cpu * per / threads as f64,
+                f * ti * per,
+                f * tc * per,
+                f * tq * per,
+                trials / runs as f64
+            );
+        });
+    }
+}
+
+/// Criterion: the 3D-sized iteration, one thread (thread CPU) and two threads (CPU of all
+/// threads of the process: the work; per thread it is half when the pool is balanced).
+fn bench_iteration_3d(c: &mut Criterion) {
+    let mut g = c.benchmark_group("sqp_iteration_3d_nx53_nu5_nc24_lawson16");
+    g.sample_size(20);
+    for threads in [1usize, 2] {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("pool");
+        let (mut s, x, states, controls) = plan_3d(iteration_3d_settings(threads > 1));
+        let name = if threads == 1 { "1thread_thread_cpu" } else { "2threads_process_cpu" };
+        g.bench_function(name, |b| {
+            b.iter_custom(|iters| {
+                pool.install(|| {
+                    let clock = if threads == 1 {
+                        ocp_transcription::thread_cpu_time
+                    } else {
+                        process_cpu_time
+                    };
+                    let (mut cpu, w0) = (0.0, Instant::now());
+                    for _ in 0..iters {
+                        s.states_mut().clone_from_slice(&states);
+                        s.controls_mut().clone_from_slice(&controls);
+                        let c0 = clock();
+                        std::hint::black_box(s.solve(&x).expect("valid x0"));
+                        cpu += match (c0, clock()) {
+                            (Some(a), Some(b)) => b - a,
+                            _ => f64::NAN,
+                        };
+                    }
+                    if cpu.is_finite() {
+                        std::time::Duration::from_secs_f64(cpu)
+                    } else {
+                        w0.elapsed()
+                    }
+                })
+            })
+        });
+    }
+    g.finish();
+}
+
 fn bench_sqp(c: &mut Criterion) {
     let mut g = c.benchmark_group("sqp_iteration_nx61_nu5_nc24");
     g.sample_size(20);
@@ -468,6 +612,7 @@ fn bench_sqp(c: &mut Criterion) {
 /// Runs the criterion benches.
 fn benches() {
     let mut c = Criterion::default().configure_from_args();
+    bench_iteration_3d(&mut c);
     bench_sqp(&mut c);
     c.final_summary();
 }
@@ -485,6 +630,9 @@ fn main() {
     }
     if tables == "all" || tables.contains("sweep") {
         sweep_table();
+    }
+    if tables == "all" || tables.contains("iter3d") {
+        iteration_3d_table();
     }
     if tables == "all" || tables == "0" || tables.contains("criterion") {
         benches();
