@@ -76,18 +76,6 @@ pub fn problem(root: &Path, scene: &'static str, omega0: f64) -> Result<Problem>
     })
 }
 
-/// CPU seconds of the calling thread spent in `f` (wall seconds where the thread clock is
-/// unavailable).
-fn cpu_timed<R>(f: impl FnOnce() -> R) -> (f64, R) {
-    let (c0, w0) = (ocp_transcription::thread_cpu_time(), std::time::Instant::now());
-    let r = f();
-    let t = match (c0, ocp_transcription::thread_cpu_time()) {
-        (Some(a), Some(b)) => b - a,
-        _ => w0.elapsed().as_secs_f64(),
-    };
-    (t, r)
-}
-
 /// The SQP settings of a named variant.
 fn settings(variant: &str, p: &Problem) -> Result<SqpSettings> {
     let base = SqpSettings {
@@ -196,7 +184,8 @@ pub fn solve(p: &Problem, settings: SqpSettings, log: bool) -> Result<Solved> {
     for (d, s) in nmpc.controls_mut().iter_mut().zip(lmpc.controls()) {
         d.copy_from(s);
     }
-    let (cpu, solved) = cpu_timed(|| nmpc.solve_with_fallback_starts(&p.x0));
+    let (cpu, solved) =
+        ocp_transcription::thread_cpu_timed(|| nmpc.solve_with_fallback_starts(&p.x0));
     let (st, _) = solved?;
     if log {
         for l in nmpc.log() {

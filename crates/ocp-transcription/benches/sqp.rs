@@ -11,7 +11,6 @@ use ocp_transcription::{
     interval_error, AdaptiveSubsteps, Dynamics, Globalisation, Integrator, IntegratorKind,
     IntegratorSettings, Ocp, QpForm, SqpMode, SqpSettings, SqpSolver, SqpStatus,
 };
-use std::time::Instant;
 
 /// A random state with entries in [−a, a] and controls in [−1, 1].
 fn operating_point(nx: usize, nu: usize, a: f64) -> (Vec<f64>, Vec<f64>) {
@@ -52,24 +51,13 @@ fn integrator(kind: IntegratorKind, substeps: usize) -> IntegratorSettings {
     IntegratorSettings::new(kind, substeps)
 }
 
-/// Runs `f` and returns its CPU seconds (wall seconds when unavailable).
-fn timed<R>(f: impl FnOnce() -> R) -> (f64, R) {
-    let (c0, w0) = (ocp_transcription::thread_cpu_time(), Instant::now());
-    let r = f();
-    let t = match (c0, ocp_transcription::thread_cpu_time()) {
-        (Some(a), Some(b)) => b - a,
-        _ => w0.elapsed().as_secs_f64(),
-    };
-    (t, r)
-}
-
 /// Mean CPU seconds of `f`: batches of runs until at least 0.3 s of CPU time has been
 /// accumulated (the scheduler's CPU clock ticks coarsely), at least `reps` runs.
 fn median_time(reps: usize, mut f: impl FnMut()) -> f64 {
     f();
     let (mut total, mut runs) = (0.0, 0usize);
     while total < 0.3 || runs < reps {
-        total += timed(&mut f).0;
+        total += ocp_transcription::thread_cpu_timed(&mut f).0;
         runs += 1;
     }
     total / runs as f64
@@ -165,7 +153,7 @@ fn time_iteration(
     while cpu < 0.3 || runs < reps {
         s.states_mut().clone_from_slice(&states);
         s.controls_mut().clone_from_slice(&controls);
-        let (c, st) = timed(|| s.solve(&x).expect("valid x0"));
+        let (c, st) = ocp_transcription::thread_cpu_timed(|| s.solve(&x).expect("valid x0"));
         cpu += c;
         wall += st.time_total;
         ti += st.time_integration;
@@ -390,7 +378,8 @@ fn adaptive_table() {
                 while cpu < 0.5 || runs < 5 {
                     s.states_mut().clone_from_slice(&states);
                     s.controls_mut().clone_from_slice(&controls);
-                    let (c, st) = timed(|| s.solve(&x).expect("valid x0"));
+                    let (c, st) =
+                        ocp_transcription::thread_cpu_timed(|| s.solve(&x).expect("valid x0"));
                     cpu += c;
                     wall += st.time_total;
                     ti += st.time_integration;
