@@ -2,7 +2,6 @@
 //! 2D and 3D two-links (§5.2–5.3) against the stabilisation criterion of docs/mpc.md, solve times,
 //! and reproducibility.
 
-use crate::thread_cpu;
 use crate::{Case, CaseOutcome, Metric, Tier};
 use mpc::{
     run, sweep, ControllerKind, ControllerSettings, PlantKind, RunSummary, Scenario, Setup,
@@ -376,12 +375,8 @@ fn real_time() -> CaseOutcome {
         let tag = if three_d { "3D" } else { "2D" };
         let (mut worst, mut cpu) = (0.0f64, 0.0f64);
         for &w in omegas {
-            let c0 = thread_cpu();
-            let r = run(&setup, w, &c, PlantKind::Fe).map_err(err)?;
-            let t = match (c0, thread_cpu()) {
-                (Some(a), Some(b)) => b - a,
-                _ => r.wall_time_s,
-            };
+            let (t, r) = ocp_transcription::thread_cpu_timed(|| run(&setup, w, &c, PlantKind::Fe));
+            let r = r.map_err(err)?;
             criterion(&r.summary, &mut out);
             cpu = cpu.max(t);
             worst = worst.max(r.summary.solve_time_worst_s);

@@ -86,18 +86,6 @@ pub fn problem(root: &Path, scene: &'static str, omega0: f64) -> Result<Problem>
     })
 }
 
-/// CPU seconds of the calling thread spent in `f` (wall seconds where the thread clock is
-/// unavailable).
-fn cpu_timed<R>(f: impl FnOnce() -> R) -> (f64, R) {
-    let (c0, w0) = (ocp_transcription::thread_cpu_time(), std::time::Instant::now());
-    let r = f();
-    let t = match (c0, ocp_transcription::thread_cpu_time()) {
-        (Some(a), Some(b)) => b - a,
-        _ => w0.elapsed().as_secs_f64(),
-    };
-    (t, r)
-}
-
 /// The SQP settings of a named variant.
 fn settings(variant: &str, p: &Problem) -> Result<SqpSettings> {
     let base = SqpSettings {
@@ -240,7 +228,7 @@ pub fn solve(
                 nmpc.states_mut().clone_from_slice(l.states());
                 nmpc.controls_mut().clone_from_slice(l.controls());
             }
-            let (cpu, st) = cpu_timed(|| nmpc.solve_with_fallback_starts(&xa));
+            let (cpu, st) = ocp_transcription::thread_cpu_timed(|| nmpc.solve_with_fallback_starts(&xa));
             let (st, _) = st?;
             total += cpu;
             its += st.iterations;
@@ -258,7 +246,7 @@ pub fn solve(
             solution: (nmpc.states().to_vec(), nmpc.controls().to_vec()),
         });
     }
-    let (cpu, solved) = cpu_timed(|| nmpc.solve_with_fallback_starts(&p.x0));
+    let (cpu, solved) = ocp_transcription::thread_cpu_timed(|| nmpc.solve_with_fallback_starts(&p.x0));
     let (st, used) = solved?;
     if used != Start::Given {
         // the start the SQP actually iterated from: the rollout the fallback made

@@ -18,20 +18,14 @@ use modal_rom::{
 };
 use std::hint::black_box;
 
-/// CPU time of the calling thread (s): Linux `/proc/thread-self/schedstat` (ns on CPU).
-fn thread_cpu() -> Option<f64> {
-    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
-    s.split_whitespace().next()?.parse::<f64>().ok().map(|ns| ns * 1e-9)
-}
-
 /// Prints the thread CPU time per call of `f` over `calls` calls (criterion's figures are
 /// wall times, inflated when other jobs share the cores; thread CPU time is not).
 fn cpu_report(label: &str, calls: usize, mut f: impl FnMut()) {
-    let Some(c0) = thread_cpu() else { return };
+    let Some(c0) = ocp_transcription::thread_cpu_time() else { return };
     for _ in 0..calls {
         f();
     }
-    let Some(c1) = thread_cpu() else { return };
+    let Some(c1) = ocp_transcription::thread_cpu_time() else { return };
     eprintln!("{label}: thread CPU {:.3e} s/call over {calls} calls", (c1 - c0) / calls as f64);
 }
 
