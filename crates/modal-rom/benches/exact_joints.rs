@@ -151,6 +151,12 @@ fn bench_pair(c: &mut Criterion, name: &str, spatial: bool, elastic: Option<usiz
             .rhs_and_jacobian(black_box(&q), black_box(&u), &mut fp, &mut jp, &mut jup)
             .expect("paper")
     });
+    cpu_report(&format!("{name}/exact_rhs"), 2_000, || {
+        exact.rhs(black_box(&x), black_box(&u), &mut f).expect("exact")
+    });
+    cpu_report(&format!("{name}/paper_rhs"), 20_000, || {
+        paper.rhs(black_box(&q), black_box(&u), &mut fp).expect("paper")
+    });
     let mut group = c.benchmark_group("exact_joints");
     group.bench_function(format!("{name}/exact_rhs_and_jacobian"), |b| {
         b.iter(|| {
@@ -168,6 +174,9 @@ fn bench_pair(c: &mut Criterion, name: &str, spatial: bool, elastic: Option<usiz
     });
     group.bench_function(format!("{name}/exact_rhs"), |b| {
         b.iter(|| exact.rhs(black_box(&x), black_box(&u), &mut f).expect("exact"))
+    });
+    group.bench_function(format!("{name}/paper_rhs"), |b| {
+        b.iter(|| paper.rhs(black_box(&q), black_box(&u), &mut fp).expect("paper"))
     });
     group.finish();
 }

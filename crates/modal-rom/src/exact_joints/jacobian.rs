@@ -226,8 +226,7 @@ impl ExactJointsRom {
         let rj = r - rs;
         let nj = self.n_joints();
         let p = &x[..m];
-        // A f1, G A f1, P f1, E_j P f1, W p, ȦAᵀ
-        self.rows_times(&ws.c, &ws.f1, &mut ws.af1, &mut ws.ktmp);
+        // G A f1 (A f1 from the right-hand side), P f1, E_j P f1, W p, ȦAᵀ
         gemv(&mut ws.gf, false, &ws.g, r, &ws.af1, 1.0);
         ws.zc.copy_from_slice(&ws.f1);
         self.rows_t_times(&ws.c, &ws.gf, -1.0, &mut ws.zc, &mut ws.ktmp);
