@@ -162,8 +162,10 @@ fn settings(variant: &str, p: &Problem) -> Result<SqpSettings> {
         v if v.starts_with("continuation-") => SqpSettings::converge(base.integrator.clone()),
         v if v.starts_with("hybridmerit-") => {
             // the closed loops' merit (penalty only grows, no second-order correction)
-            let switch_kkt: f64 =
-                v["hybridmerit-".len()..].trim_end_matches("-200").parse().with_context(|| format!("variant {v}"))?;
+            let switch_kkt: f64 = v["hybridmerit-".len()..]
+                .trim_end_matches("-200")
+                .parse()
+                .with_context(|| format!("variant {v}"))?;
             SqpSettings {
                 hessian: ocp_transcription::HessianApproximation::GaussNewtonThenExact {
                     switch_kkt,
