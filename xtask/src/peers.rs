@@ -148,6 +148,21 @@ fn settings(variant: &str, p: &Problem) -> Result<SqpSettings> {
         "converge-rollout" => SqpSettings::converge(base.integrator.clone()),
         "converge-filter-rollout" => SqpSettings::converge_filter(base.integrator.clone()),
         v if v.starts_with("continuation-") => SqpSettings::converge(base.integrator.clone()),
+        v if v.starts_with("hybridmerit-") => {
+            // the closed loops' merit (penalty only grows, no second-order correction)
+            let switch_kkt: f64 = v["hybridmerit-".len()..]
+                .trim_end_matches("-200")
+                .parse()
+                .with_context(|| format!("variant {v}"))?;
+            SqpSettings {
+                hessian: ocp_transcription::HessianApproximation::GaussNewtonThenExact {
+                    switch_kkt,
+                },
+                globalisation: Globalisation::merit(),
+                max_iterations: if v.ends_with("-200") { 200 } else { 60 },
+                ..SqpSettings::converge(base.integrator.clone())
+            }
+        }
         v if v.starts_with("hybrid-") => {
             let (glob, tol) = match v.strip_prefix("hybrid-filter-") {
                 Some(t) => (Globalisation::filter(), t),
