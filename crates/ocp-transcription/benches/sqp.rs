@@ -526,7 +526,7 @@ fn bench_iteration_3d(c: &mut Criterion) {
                     } else {
                         process_cpu_time
                     };
-                    let (mut cpu, w0) = (0.0, Instant::now());
+                    let (mut cpu, w0) = (0.0, std::time::Instant::now());
                     for _ in 0..iters {
                         s.states_mut().clone_from_slice(&states);
                         s.controls_mut().clone_from_slice(&controls);
