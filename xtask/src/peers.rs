@@ -243,7 +243,8 @@ pub fn solve(
                 nmpc.states_mut().clone_from_slice(l.states());
                 nmpc.controls_mut().clone_from_slice(l.controls());
             }
-            let (cpu, st) = ocp_transcription::thread_cpu_timed(|| nmpc.solve_with_fallback_starts(&xa));
+            let (cpu, st) =
+                ocp_transcription::thread_cpu_timed(|| nmpc.solve_with_fallback_starts(&xa));
             let (st, _) = st?;
             total += cpu;
             its += st.iterations;
@@ -261,7 +262,8 @@ pub fn solve(
             solution: (nmpc.states().to_vec(), nmpc.controls().to_vec()),
         });
     }
-    let (cpu, solved) = ocp_transcription::thread_cpu_timed(|| nmpc.solve_with_fallback_starts(&p.x0));
+    let (cpu, solved) =
+        ocp_transcription::thread_cpu_timed(|| nmpc.solve_with_fallback_starts(&p.x0));
     let (st, used) = solved?;
     if used != Start::Given {
         // the start the SQP actually iterated from: the rollout the fallback made
