@@ -181,6 +181,9 @@ fn settings(variant: &str, p: &Problem) -> Result<SqpSettings> {
     })
 }
 
+/// A primal point: shooting nodes `s_0 … s_Nc` and controls `u_0 … u_{Nc−1}`.
+pub type Trajectory = (Vec<DVector<f64>>, Vec<DVector<f64>>);
+
 /// A solve of one problem: the statistics, the start and the solution.
 pub struct Solved {
     /// SQP statistics.
@@ -188,9 +191,9 @@ pub struct Solved {
     /// Thread CPU seconds of the SQP solve (the linear MPC start excluded).
     pub cpu: f64,
     /// Start: the linear MPC plan's nodes `s_0 … s_Nc` and controls `u_0 … u_{Nc−1}`.
-    pub start: (Vec<DVector<f64>>, Vec<DVector<f64>>),
+    pub start: Trajectory,
     /// Solution nodes and controls.
-    pub solution: (Vec<DVector<f64>>, Vec<DVector<f64>>),
+    pub solution: Trajectory,
 }
 
 /// Solves `p` from the linear MPC plan (the controller's first-sample initial guess) with
@@ -305,7 +308,7 @@ fn settings_of(s: &SqpSolver<RomDynamics>) -> SqpSettings {
 
 /// Reads a primal point (`states`: `Nc + 1` vectors, `controls`: `Nc` vectors) written by
 /// casadi_peers.py.
-fn read_solution(file: &Path, p: &Problem) -> Result<(Vec<DVector<f64>>, Vec<DVector<f64>>)> {
+fn read_solution(file: &Path, p: &Problem) -> Result<Trajectory> {
     let text =
         std::fs::read_to_string(file).with_context(|| format!("reading {}", file.display()))?;
     let v: serde_json::Value = serde_json::from_str(&text)?;
