@@ -146,15 +146,8 @@ pub fn simulate_with(scene: Scene, out: &Path, quiet: bool, vtk: bool) -> Result
         }
     }
     bar.finish_and_clear();
-    csv.flush().with_context(|| format!("writing {}", csv_path.display()))?;
     let seconds = start.elapsed().as_secs_f64();
-    let plot = if scene.plot.is_empty() {
-        None
-    } else {
-        let path = out.join("plot.svg");
-        crate::plot::time_series(&path, &scene.title, &cols, &table, &scene.plot)?;
-        Some(path)
-    };
+    let plot = finish(csv, &csv_path, &scene, out, &scene.title, &cols, &table)?;
     let vtk = frames.map(crate::vtk::Collection::finish).transpose()?;
     Ok(RunSummary {
         csv: csv_path,
@@ -308,16 +301,9 @@ pub fn simulate_model(
         }
     }
     bar.finish_and_clear();
-    csv.flush().with_context(|| format!("writing {}", csv_path.display()))?;
     let seconds = start.elapsed().as_secs_f64();
-    let plot = if scene.plot.is_empty() {
-        None
-    } else {
-        let path = out.join("plot.svg");
-        let title = format!("{} ({} model)", scene.title, model.name());
-        crate::plot::time_series(&path, &title, &cols, &table, &scene.plot)?;
-        Some(path)
-    };
+    let title = format!("{} ({} model)", scene.title, model.name());
+    let plot = finish(csv, &csv_path, &scene, out, &title, &cols, &table)?;
     Ok(RunSummary {
         csv: csv_path,
         plot,
@@ -327,6 +313,26 @@ pub fn simulate_model(
         total_energy: (total0, total_end),
         velocity_violation: 0.0,
     })
+}
+
+/// Flushes a run's `timeseries.csv` and writes `<out>/plot.svg` of the scene's `[output] plot`
+/// columns (`None` when it names none).
+fn finish(
+    mut csv: csv::Writer<std::fs::File>,
+    csv_path: &Path,
+    scene: &Scene,
+    out: &Path,
+    title: &str,
+    cols: &[String],
+    table: &[Vec<f64>],
+) -> Result<Option<PathBuf>> {
+    csv.flush().with_context(|| format!("writing {}", csv_path.display()))?;
+    if scene.plot.is_empty() {
+        return Ok(None);
+    }
+    let path = out.join("plot.svg");
+    crate::plot::time_series(&path, title, cols, table, &scene.plot)?;
+    Ok(Some(path))
 }
 
 fn fmt_row(r: &[f64]) -> Vec<String> {
