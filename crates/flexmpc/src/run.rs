@@ -96,12 +96,7 @@ pub fn simulate(scene: Scene, out: &Path, quiet: bool) -> Result<RunSummary> {
 /// collection `vtk/simulate.pvd` ([`crate::vtk`]).
 pub fn simulate_with(scene: Scene, out: &Path, quiet: bool, vtk: bool) -> Result<RunSummary> {
     let mut plant = scene.plant()?;
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let csv_path = out.join("timeseries.csv");
-    let mut csv = csv::Writer::from_path(&csv_path)
-        .with_context(|| format!("creating {}", csv_path.display()))?;
-    let cols = columns(&scene);
-    csv.write_record(&cols)?;
+    let (mut csv, csv_path, cols) = start_csv(&scene, out)?;
     let mut table: Vec<Vec<f64>> = Vec::new();
     let mut frames =
         if vtk { Some(crate::vtk::Collection::new(&out.join("vtk"), "simulate")?) } else { None };
@@ -251,12 +246,7 @@ pub fn simulate_model(
         plant.kinematics(),
     )
     .with_context(|| format!("reduced model of {}", scene.file.display()))?;
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let csv_path = out.join("timeseries.csv");
-    let mut csv = csv::Writer::from_path(&csv_path)
-        .with_context(|| format!("creating {}", csv_path.display()))?;
-    let cols = columns(&scene);
-    csv.write_record(&cols)?;
+    let (mut csv, csv_path, cols) = start_csv(&scene, out)?;
     let n_reactions = 6 * scene.structure.joints().iter().filter(|j| j.ground).count();
     let row = |rom: &mpc::ModalPlant, iterations: usize| -> Result<Vec<f64>> {
         let kin = rom.kinematics()?;
@@ -313,6 +303,21 @@ pub fn simulate_model(
         total_energy: (total0, total_end),
         velocity_violation: 0.0,
     })
+}
+
+/// Creates `out` and `<out>/timeseries.csv` with the scene's header row: the writer, its
+/// path and the column names.
+fn start_csv(
+    scene: &Scene,
+    out: &Path,
+) -> Result<(csv::Writer<std::fs::File>, PathBuf, Vec<String>)> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let csv_path = out.join("timeseries.csv");
+    let mut csv = csv::Writer::from_path(&csv_path)
+        .with_context(|| format!("creating {}", csv_path.display()))?;
+    let cols = columns(scene);
+    csv.write_record(&cols)?;
+    Ok((csv, csv_path, cols))
 }
 
 /// Flushes a run's `timeseries.csv` and writes `<out>/plot.svg` of the scene's `[output] plot`
