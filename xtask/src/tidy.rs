@@ -104,21 +104,26 @@ fn is_path_char(c: char) -> bool {
     is_name_char(c) || c == '.' || c == '/'
 }
 
-/// The `(page, section numbers)` cited in one line: `page.md §N`, `page.md §N–M`,
-/// `page.md §N, §M`, the page name optionally in backquotes and with a `docs/` prefix.
-fn section_citations(line: &str) -> Vec<(String, Vec<u32>)> {
-    let mut out = Vec::new();
-    let mut from = 0;
-    while let Some(k) = line[from..].find(".md") {
-        let end = from + k + 3;
-        from = end;
-        // the page name before `.md`, with an optional `docs/` prefix
-        let head = &line[..end - 3];
-        let start = head
+/// Byte ranges `start..end` of the path-like names ending in `.md` in one line (`end` just
+/// after `.md`; the name runs back over path characters).
+fn md_names(line: &str) -> impl Iterator<Item = (usize, usize)> + '_ {
+    line.match_indices(".md").map(move |(k, _)| {
+        let end = k + 3;
+        let start = line[..k]
             .char_indices()
             .rev()
             .find(|&(_, c)| !is_path_char(c))
             .map_or(0, |(i, c)| i + c.len_utf8());
+        (start, end)
+    })
+}
+
+/// The `(page, section numbers)` cited in one line: `page.md §N`, `page.md §N–M`,
+/// `page.md §N, §M`, the page name optionally in backquotes and with a `docs/` prefix.
+fn section_citations(line: &str) -> Vec<(String, Vec<u32>)> {
+    let mut out = Vec::new();
+    for (start, end) in md_names(line) {
+        // the page name with `.md`, with an optional `docs/` prefix
         let page = &line[start..end];
         if page.len() <= 3 {
             continue;
@@ -287,16 +292,7 @@ pub fn check_references(root: &Path) -> Vec<String> {
 /// Bare upper-case page names (`ARCHITECTURE.md`, `LAYOUT.md`) in a line.
 fn upper_case_pages(line: &str) -> Vec<&str> {
     let mut out = Vec::new();
-    let mut from = 0;
-    while let Some(k) = line[from..].find(".md") {
-        let end = from + k + 3;
-        from = end;
-        let head = &line[..end - 3];
-        let start = head
-            .char_indices()
-            .rev()
-            .find(|&(_, c)| !is_path_char(c))
-            .map_or(0, |(i, c)| i + c.len_utf8());
+    for (start, end) in md_names(line) {
         let name = &line[start..end - 3];
         let followed = line[end..].chars().next().is_some_and(is_name_char);
         if !followed

@@ -96,12 +96,7 @@ pub fn simulate(scene: Scene, out: &Path, quiet: bool) -> Result<RunSummary> {
 /// collection `vtk/simulate.pvd` ([`crate::vtk`]).
 pub fn simulate_with(scene: Scene, out: &Path, quiet: bool, vtk: bool) -> Result<RunSummary> {
     let mut plant = scene.plant()?;
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let csv_path = out.join("timeseries.csv");
-    let mut csv = csv::Writer::from_path(&csv_path)
-        .with_context(|| format!("creating {}", csv_path.display()))?;
-    let cols = columns(&scene);
-    csv.write_record(&cols)?;
+    let (mut csv, csv_path, cols) = start_csv(&scene, out)?;
     let mut table: Vec<Vec<f64>> = Vec::new();
     let mut frames =
         if vtk { Some(crate::vtk::Collection::new(&out.join("vtk"), "simulate")?) } else { None };
@@ -146,15 +141,8 @@ pub fn simulate_with(scene: Scene, out: &Path, quiet: bool, vtk: bool) -> Result
         }
     }
     bar.finish_and_clear();
-    csv.flush().with_context(|| format!("writing {}", csv_path.display()))?;
     let seconds = start.elapsed().as_secs_f64();
-    let plot = if scene.plot.is_empty() {
-        None
-    } else {
-        let path = out.join("plot.svg");
-        crate::plot::time_series(&path, &scene.title, &cols, &table, &scene.plot)?;
-        Some(path)
-    };
+    let plot = finish(csv, &csv_path, &scene, out, &scene.title, &cols, &table)?;
     let vtk = frames.map(crate::vtk::Collection::finish).transpose()?;
     Ok(RunSummary {
         csv: csv_path,
@@ -258,12 +246,7 @@ pub fn simulate_model(
         plant.kinematics(),
     )
     .with_context(|| format!("reduced model of {}", scene.file.display()))?;
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let csv_path = out.join("timeseries.csv");
-    let mut csv = csv::Writer::from_path(&csv_path)
-        .with_context(|| format!("creating {}", csv_path.display()))?;
-    let cols = columns(&scene);
-    csv.write_record(&cols)?;
+    let (mut csv, csv_path, cols) = start_csv(&scene, out)?;
     let n_reactions = 6 * scene.structure.joints().iter().filter(|j| j.ground).count();
     let row = |rom: &mpc::ModalPlant, iterations: usize| -> Result<Vec<f64>> {
         let kin = rom.kinematics()?;
@@ -308,16 +291,9 @@ pub fn simulate_model(
         }
     }
     bar.finish_and_clear();
-    csv.flush().with_context(|| format!("writing {}", csv_path.display()))?;
     let seconds = start.elapsed().as_secs_f64();
-    let plot = if scene.plot.is_empty() {
-        None
-    } else {
-        let path = out.join("plot.svg");
-        let title = format!("{} ({} model)", scene.title, model.name());
-        crate::plot::time_series(&path, &title, &cols, &table, &scene.plot)?;
-        Some(path)
-    };
+    let title = format!("{} ({} model)", scene.title, model.name());
+    let plot = finish(csv, &csv_path, &scene, out, &title, &cols, &table)?;
     Ok(RunSummary {
         csv: csv_path,
         plot,
@@ -327,6 +303,41 @@ pub fn simulate_model(
         total_energy: (total0, total_end),
         velocity_violation: 0.0,
     })
+}
+
+/// Creates `out` and `<out>/timeseries.csv` with the scene's header row: the writer, its
+/// path and the column names.
+fn start_csv(
+    scene: &Scene,
+    out: &Path,
+) -> Result<(csv::Writer<std::fs::File>, PathBuf, Vec<String>)> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let csv_path = out.join("timeseries.csv");
+    let mut csv = csv::Writer::from_path(&csv_path)
+        .with_context(|| format!("creating {}", csv_path.display()))?;
+    let cols = columns(scene);
+    csv.write_record(&cols)?;
+    Ok((csv, csv_path, cols))
+}
+
+/// Flushes a run's `timeseries.csv` and writes `<out>/plot.svg` of the scene's `[output] plot`
+/// columns (`None` when it names none).
+fn finish(
+    mut csv: csv::Writer<std::fs::File>,
+    csv_path: &Path,
+    scene: &Scene,
+    out: &Path,
+    title: &str,
+    cols: &[String],
+    table: &[Vec<f64>],
+) -> Result<Option<PathBuf>> {
+    csv.flush().with_context(|| format!("writing {}", csv_path.display()))?;
+    if scene.plot.is_empty() {
+        return Ok(None);
+    }
+    let path = out.join("plot.svg");
+    crate::plot::time_series(&path, title, cols, table, &scene.plot)?;
+    Ok(Some(path))
 }
 
 fn fmt_row(r: &[f64]) -> Vec<String> {

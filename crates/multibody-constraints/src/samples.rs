@@ -15,11 +15,22 @@ use crate::structure::{Placement, Structure, StructureBeam, StructureSettings};
 /// elbow hinge, both about e2; planar components. Beams `link1`, `link2`; support `root`;
 /// joint `elbow`.
 pub fn paper_2d(section: Section, n_elements: usize, joint_angle: f64) -> Result<Structure> {
+    hinged_two_link(section, n_elements, joint_angle, Components::Planar)
+}
+
+/// [`paper_2d`]'s hinged two-link on either kind of components (on spatial components the
+/// hinges about e2 leave the same planar motion possible).
+pub fn hinged_two_link(
+    section: Section,
+    n_elements: usize,
+    joint_angle: f64,
+    components: Components,
+) -> Result<Structure> {
     two_link(
         section,
         n_elements,
         joint_angle,
-        Components::Planar,
+        components,
         JointKind::hinge_global([0.0, 1.0, 0.0]),
         JointKind::hinge_on_first([0.0, 1.0, 0.0]),
     )

@@ -2,10 +2,13 @@
 //! model with the modal ROM's structure `ẋ = Wx + N(x)x + Bu`.
 
 use crate::dynamics::Dynamics;
+use crate::error::OcpError;
 use crate::error::{check_dim, invalid, Result};
 use crate::integrator::Integrator;
+use crate::integrator::IntegratorSettings;
+use crate::ocp::Ocp;
 use crate::quadratic::QuadraticTerms;
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, DVector};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::ops::{Add, Div, Mul, Neg, Sub};
@@ -271,6 +274,57 @@ impl Dynamics for CartPole {
             }
         }
     }
+}
+
+/// States `x_0 … x_N` and controls `u_0 … u_{N−1}` of a plan.
+pub type Trajectory = (Vec<DVector<f64>>, Vec<DVector<f64>>);
+
+/// The oracle of the linear-quadratic problems: the discrete-time Riccati recursion on the
+/// integrator's own `A = ∂Φ/∂x`, `B = ∂Φ/∂u` of one interval (at `x = 0`, `u = 0`, exact
+/// for a linear `model`) with the OCP's trapezoidal node weights (`½Δt Q` at the first node,
+/// `Δt Q` inside, `Q_N` at the end, `Δt R`), and the closed-loop plan from `x0` under its
+/// gains. Without bounds this is the exact minimiser of the transcribed problem, so the SQP
+/// must reproduce it to solver precision.
+pub fn riccati_plan<D: Dynamics + ?Sized>(
+    model: &D,
+    ocp: &Ocp,
+    settings: &IntegratorSettings,
+    x0: &DVector<f64>,
+) -> Result<Trajectory> {
+    let (nx, nu, n, dt) = (ocp.nx(), ocp.nu(), ocp.intervals, ocp.interval());
+    check_dim("x0", nx, x0.len())?;
+    let mut int = Integrator::new(model, settings, dt)?;
+    let (mut a, mut b, mut xe) = (DMatrix::zeros(nx, nx), DMatrix::zeros(nx, nu), vec![0.0; nx]);
+    int.integrate_with_sensitivities(
+        model,
+        &vec![0.0; nx],
+        &vec![0.0; nu],
+        &mut xe,
+        &mut a,
+        &mut b,
+    )?;
+    let rd = &ocp.r * dt;
+    let mut p = &ocp.q * (0.5 * dt) + &ocp.terminal;
+    let mut gains = vec![DMatrix::zeros(nu, nx); n];
+    for k in (0..n).rev() {
+        let btp = b.transpose() * &p;
+        let gain = (&rd + &btp * &b)
+            .cholesky()
+            .ok_or(OcpError::Singular { what: "the Riccati recursion's R + BᵀPB" })?
+            .solve(&(&btp * &a));
+        let qk = &ocp.q * if k == 0 { 0.5 * dt } else { dt };
+        p = qk + a.transpose() * &p * (&a - &b * &gain);
+        p = 0.5 * (&p + p.transpose());
+        gains[k] = gain;
+    }
+    let mut xs = vec![x0.clone()];
+    let mut us = Vec::new();
+    for gain in &gains {
+        let u = -gain * xs.last().expect("x0 is the first state");
+        xs.push(&a * xs.last().expect("x0 is the first state") + &b * &u);
+        us.push(u);
+    }
+    Ok((xs, us))
 }
 
 /// Largest relative deviation `|FD − exact| / (1 + |exact|)` of an integrator pass's

@@ -376,34 +376,7 @@ fn redundant_constraints_are_found_by_rank() {
 #[test]
 fn planar_and_spatial_two_links_agree() {
     let run = |components: Components| {
-        let beam =
-            Beam::new(Section::paper_2d(), Mesh::uniform(1.0, 8).unwrap(), components).unwrap();
-        let structure = Structure::new(
-            vec![
-                StructureBeam::new("link1", beam.clone(), Placement::origin()),
-                StructureBeam::new(
-                    "link2",
-                    beam,
-                    Placement::Attached {
-                        joint: "elbow".into(),
-                        axis: [0.0, 1.0, 0.0],
-                        angle: 0.4,
-                    },
-                ),
-            ],
-            vec![Joint {
-                name: "elbow".into(),
-                ends: vec![EndRef::new("link1", End::End), EndRef::new("link2", End::Start)],
-                kind: JointKind::hinge_on_first([0.0, 1.0, 0.0]),
-            }],
-            vec![Support {
-                name: "root".into(),
-                end: EndRef::new("link1", End::Start),
-                kind: JointKind::hinge_global([0.0, 1.0, 0.0]),
-            }],
-            StructureSettings::default(),
-        )
-        .unwrap();
+        let structure = samples::hinged_two_link(Section::paper_2d(), 8, 0.4, components).unwrap();
         let x = structure.rigid_rotation_state(Vector3::new(0.0, 1.5, 0.0), Vector3::zeros());
         let settings = PlantSettings { dt: 2e-3, newton_tolerance: 1e-14, ..Default::default() };
         let mut plant = Plant::new(structure, settings).unwrap();

@@ -1,7 +1,8 @@
 //! Per-node state references (`Ocp::x_ref_nodes`): a reference that moves over the horizon.
 
-use crate::sqp::{lqr_problem, riccati};
+use crate::sqp::lqr_problem;
 use nalgebra::DVector;
+use ocp_transcription::samples::riccati_plan;
 use ocp_transcription::{Integrator, QpForm, SqpMode, SqpSettings, SqpSolver, SqpStatus};
 
 /// Per-node references equal to `x_r` at every node give the constant-reference solve, bit
@@ -65,7 +66,7 @@ fn moving_reference_is_tracked_exactly_on_a_linear_model() {
         // from x0: reference + Riccati deviation
         let x0 = DVector::from_vec(vec![0.5, -0.3, 0.2, 0.0, 0.4, -0.1]);
         let dev = &x0 - DVector::from_column_slice(&y[0]);
-        let (xs, us) = riccati(&model, &ocp, &settings.integrator, &dev);
+        let (xs, us) = riccati_plan(&model, &ocp, &settings.integrator, &dev).unwrap();
         let st = solver.solve(x0.as_slice()).unwrap();
         assert_eq!(st.status, SqpStatus::Solved, "{form:?}");
         let mut err = 0.0_f64;

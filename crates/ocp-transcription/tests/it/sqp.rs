@@ -2,10 +2,10 @@
 //! and the failure statuses.
 
 use nalgebra::{DMatrix, DVector};
-use ocp_transcription::samples::{CartPole, Fragile, LinearModel};
+use ocp_transcription::samples::{self, CartPole, Fragile, LinearModel};
 use ocp_transcription::{
-    Dynamics, Globalisation, HessianApproximation, Integrator, IntegratorKind, IntegratorSettings,
-    Ocp, QpForm, SqpMode, SqpSettings, SqpSolver, SqpStatus,
+    Dynamics, Globalisation, HessianApproximation, IntegratorKind, IntegratorSettings, Ocp, QpForm,
+    SqpMode, SqpSettings, SqpSolver, SqpStatus,
 };
 
 pub(crate) fn lqr_problem() -> (LinearModel, Ocp) {
@@ -16,42 +16,6 @@ pub(crate) fn lqr_problem() -> (LinearModel, Ocp) {
     (model, ocp)
 }
 
-/// Discrete-time Riccati recursion on the integrator's own `A`, `B` with the OCP's
-/// trapezoidal node weights; returns the closed-loop states and controls from `x0`.
-pub(crate) fn riccati(
-    model: &LinearModel,
-    ocp: &Ocp,
-    settings: &IntegratorSettings,
-    x0: &DVector<f64>,
-) -> (Vec<DVector<f64>>, Vec<DVector<f64>>) {
-    let (nx, nu, n) = (6, 2, ocp.intervals);
-    let dt = ocp.interval();
-    let mut int = Integrator::new(model, settings, dt).unwrap();
-    let mut a = DMatrix::zeros(nx, nx);
-    let mut b = DMatrix::zeros(nx, nu);
-    let mut xe = vec![0.0; nx];
-    int.integrate_with_sensitivities(model, &[0.0; 6], &[0.0; 2], &mut xe, &mut a, &mut b).unwrap();
-    let rd = &ocp.r * dt;
-    let mut p = &ocp.q * (0.5 * dt) + &ocp.terminal;
-    let mut gains = vec![DMatrix::zeros(nu, nx); n];
-    for k in (0..n).rev() {
-        let btp = b.transpose() * &p;
-        let k_gain = (&rd + &btp * &b).cholesky().unwrap().solve(&(&btp * &a));
-        let qk = &ocp.q * if k == 0 { 0.5 * dt } else { dt };
-        p = qk + a.transpose() * &p * (&a - &b * &k_gain);
-        p = 0.5 * (&p + p.transpose());
-        gains[k] = k_gain;
-    }
-    let mut xs = vec![x0.clone()];
-    let mut us = Vec::new();
-    for k in 0..n {
-        let u = -&gains[k] * &xs[k];
-        xs.push(&a * &xs[k] + &b * &u);
-        us.push(u);
-    }
-    (xs, us)
-}
-
 #[test]
 fn lq_problem_equals_riccati_in_one_iteration() {
     let (model, ocp) = lqr_problem();
@@ -59,7 +23,7 @@ fn lq_problem_equals_riccati_in_one_iteration() {
     for form in [QpForm::Auto, QpForm::CondensedClarabel, QpForm::SparseClarabel] {
         for mode in [SqpMode::Sqp, SqpMode::LinearQuadratic] {
             let settings = SqpSettings { qp_form: form, mode, ..SqpSettings::default() };
-            let (xs, us) = riccati(&model, &ocp, &settings.integrator, &x0);
+            let (xs, us) = samples::riccati_plan(&model, &ocp, &settings.integrator, &x0).unwrap();
             let mut solver = SqpSolver::new(&model, ocp.clone(), settings).unwrap();
             let stats = solver.solve(x0.as_slice()).unwrap();
             assert_eq!(stats.status, SqpStatus::Solved, "{form:?} {mode:?}");
