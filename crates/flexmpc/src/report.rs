@@ -377,7 +377,7 @@ pub fn write(
     if timings {
         let _ = writeln!(
             h,
-            r#"<p>Measured wall-clock times (they change from run to run, so they are kept in their own files: <a href="timings.json">timings.json</a> has the median and worst solve time and the loop's wall time, <a href="timings.csv">timings.csv</a> each sample's; every other file of this folder is reproducible).</p>"#
+            r#"<p>Measured times: per-sample solve times are the solving thread's CPU time, the loop time is wall-clock (they change from run to run, so they are kept in their own files: <a href="timings.json">timings.json</a> has the median and worst solve time and the loop's wall time, <a href="timings.csv">timings.csv</a> each sample's; every other file of this folder is reproducible).</p>"#
         );
         figure(
             &mut h,

@@ -93,9 +93,9 @@ fn header(sampling: f64) -> Map<String, Value> {
     m.insert(
         "note".into(),
         json!(
-            "measured wall-clock times: they differ from run to run (every other output file \
-               is reproducible); solve_time_s is the wall time of the whole sample's solve, all \
-               attempts included"
+            "measured times: they differ from run to run (every other output file is \
+               reproducible); solve_time_s is the CPU time of the solving thread for the whole \
+               sample's solve, all attempts included"
         ),
     );
     m.insert("sampling_s".into(), json!(sampling));

@@ -229,8 +229,8 @@ pub(super) fn joint_rate_matrix(rom: &ExactJointsRom, e: &[f64]) -> Matrix4<f64>
 
 impl ExactJointsRom {
     /// The factors of `Z(ξ)` into `ws` for the joint rotations in `x` (theory.md §10.4), and
-    /// with `with_z` the `na × m` matrix `Z` itself (the Jacobian's projections need it; the
-    /// right-hand side applies it through its factors, [`ExactJointsRom::apply_z`]).
+    /// with `with_z` the `na × m` matrix `Z` itself and `B = C0 L⁻ᵀ` (the Jacobian needs them;
+    /// the right-hand side applies `Z` through its factors, [`ExactJointsRom::apply_z`]).
     pub(crate) fn frame_into(&self, ws: &mut Workspace, x: &[f64], with_z: bool) -> Result<()> {
         let (na, m) = (self.basis.n1(), self.n_p());
         let r = self.cons.n_rows();
@@ -364,8 +364,11 @@ impl ExactJointsRom {
             "null-space basis Z(ξ)",
             "the joint rotation is outside the range of the fields (ZᵀP Z0 singular)",
         )?;
-        ws.b.copy_from_slice(&ws.c0);
-        right_solve_lt(&ws.l, m, &mut ws.b, r);
+        if with_z {
+            // B = C0 L⁻ᵀ, only the Jacobian's ∂W needs it
+            ws.b.copy_from_slice(&ws.c0);
+            right_solve_lt(&ws.l, m, &mut ws.b, r);
+        }
         ws.w.copy_from_slice(&ws.h);
         right_solve_lt(&ws.l, m, &mut ws.w, r);
         // T Z = (T Z0 − T Aᵀ H) L⁻ᵀ
