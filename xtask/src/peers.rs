@@ -193,6 +193,9 @@ fn settings(variant: &str, p: &Problem) -> Result<SqpSettings> {
     })
 }
 
+/// Nodes `s_0 … s_Nc` and controls `u_0 … u_{Nc−1}`.
+type Plan = (Vec<DVector<f64>>, Vec<DVector<f64>>);
+
 /// A solve of one problem: the statistics, the start and the solution.
 pub struct Solved {
     /// SQP statistics.
@@ -315,7 +318,7 @@ fn settings_of(s: &SqpSolver<RomDynamics>) -> SqpSettings {
 
 /// Reads a primal point (`states`: `Nc + 1` vectors, `controls`: `Nc` vectors) written by
 /// casadi_peers.py.
-fn read_solution(file: &Path, p: &Problem) -> Result<(Vec<DVector<f64>>, Vec<DVector<f64>>)> {
+fn read_solution(file: &Path, p: &Problem) -> Result<Plan> {
     let text =
         std::fs::read_to_string(file).with_context(|| format!("reading {}", file.display()))?;
     let v: serde_json::Value = serde_json::from_str(&text)?;
