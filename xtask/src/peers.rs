@@ -202,10 +202,11 @@ pub struct Solved {
     pub stats: SqpStats,
     /// Thread CPU seconds of the SQP solve (the linear MPC start excluded).
     pub cpu: f64,
-    /// Start: the linear MPC plan's nodes `s_0 … s_Nc` and controls `u_0 … u_{Nc−1}`.
-    pub start: (Vec<DVector<f64>>, Vec<DVector<f64>>),
+    /// Start the SQP iterated from: the linear MPC plan (or the `--start-from` point, or the
+    /// rollout the fallback made when the dynamics were not finite at the plan's nodes).
+    pub start: Plan,
     /// Solution nodes and controls.
-    pub solution: (Vec<DVector<f64>>, Vec<DVector<f64>>),
+    pub solution: Plan,
 }
 
 /// Solves `p` from the linear MPC plan (the controller's first-sample initial guess) with
