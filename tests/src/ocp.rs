@@ -2,11 +2,12 @@
 
 use crate::{Case, CaseOutcome, Metric, Tier};
 use nalgebra::{DMatrix, DVector};
-use ocp_transcription::samples::{self, CartPole, Fragile, LinearModel, ModalLike, SplitMix64};
+use ocp_transcription::samples::{self, seeded, CartPole, Fragile, LinearModel, ModalLike};
 use ocp_transcription::{
     interval_error, AdaptiveSubsteps, Dynamics, Globalisation, HessianApproximation, Integrator,
     IntegratorKind, IntegratorSettings, Ocp, QpForm, SqpSettings, SqpSolver, SqpStatus,
 };
+use rand::Rng;
 
 /// The cases of `ocp-transcription`.
 pub fn cases() -> Vec<Case> {
@@ -56,13 +57,13 @@ fn fd_error<D: Dynamics>(
 
 fn sensitivities() -> CaseOutcome {
     let model = ModalLike::new(10, 2, 30.0, 1.0, 5).map_err(err)?;
-    let mut rng = SplitMix64::new(42);
+    let mut rng = seeded(42);
     let mut out = Vec::new();
     for kind in [IntegratorKind::Rk4, IntegratorKind::ImplicitMidpoint, IntegratorKind::LawsonRk4] {
         let mut e = 0.0_f64;
         for _ in 0..16 {
-            let x: Vec<f64> = (0..10).map(|_| rng.uniform(-1.0, 1.0)).collect();
-            let u: Vec<f64> = (0..2).map(|_| rng.uniform(-1.0, 1.0)).collect();
+            let x: Vec<f64> = (0..10).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let u: Vec<f64> = (0..2).map(|_| rng.random_range(-1.0..1.0)).collect();
             e = e.max(fd_error(&model, kind, &x, &u)?);
         }
         // central differences: truncation ~1e-12, round-off ~1e-10
@@ -77,8 +78,8 @@ fn sensitivities() -> CaseOutcome {
     let rom = ModalLike::rom_like(24, 3, 60.0, 0.5, 5).map_err(err)?;
     let mut e = 0.0_f64;
     for _ in 0..8 {
-        let x: Vec<f64> = (0..24).map(|_| rng.uniform(-0.5, 0.5)).collect();
-        let u: Vec<f64> = (0..3).map(|_| rng.uniform(-1.0, 1.0)).collect();
+        let x: Vec<f64> = (0..24).map(|_| rng.random_range(-0.5..0.5)).collect();
+        let u: Vec<f64> = (0..3).map(|_| rng.random_range(-1.0..1.0)).collect();
         e = e.max(fd_error(&rom, IntegratorKind::LawsonRk4, &x, &u)?);
     }
     out.push(Metric::at_most("LawsonRk4, ROM-structured nx = 24: max rel. deviation", e, 1e-6));
@@ -473,17 +474,17 @@ fn adaptive_substeps() -> CaseOutcome {
     let mut reference =
         Integrator::new(&m, &IntegratorSettings::new(IntegratorKind::LawsonRk4, 512), 0.25)
             .map_err(err)?;
-    let mut rng = SplitMix64::new(2026);
+    let mut rng = seeded(2026);
     let (mut xr, mut xe) = (vec![0.0; nx], vec![0.0; nx]);
     let (mut worst, mut lo, mut hi, mut total) = (0.0_f64, usize::MAX, 0usize, 0usize);
     let samples = 32;
     for _ in 0..samples {
-        let mut x = m.rotating_state(rng.uniform(0.0, 2.2)).ok_or("rom-like model")?;
-        let amp = rng.uniform(0.0, 0.1);
+        let mut x = m.rotating_state(rng.random_range(0.0..2.2)).ok_or("rom-like model")?;
+        let amp = rng.random_range(0.0..0.1);
         for v in x.iter_mut().skip(2) {
-            *v += amp * rng.uniform(-1.0, 1.0);
+            *v += amp * rng.random_range(-1.0..1.0);
         }
-        let u: Vec<f64> = (0..5).map(|_| rng.uniform(-5.0, 5.0)).collect();
+        let u: Vec<f64> = (0..5).map(|_| rng.random_range(-5.0..5.0)).collect();
         reference.integrate(&m, &x, &u, &mut xr).map_err(err)?;
         let n = int.choose_substeps(&m, &x, &u, Some(&xr));
         int.set_substeps(n).map_err(err)?;

@@ -1151,7 +1151,7 @@ pub fn cases() -> Vec<Case> {
 // Scene-parser fuzzing
 
 /// Fuzzing of the scene parser and loader (`flexmpc::scene::parse_str` / `load_str`):
-/// deterministic inputs (a SplitMix64 stream per case index, so any case can be replayed
+/// deterministic inputs (a seeded stream per case index, so any case can be replayed
 /// alone and parallel runs give the same counts), each run inside `catch_unwind`.
 ///
 /// Inputs: (a) arbitrary text (random bytes, lossily decoded), (b) TOML-like token soup from
@@ -1183,25 +1183,25 @@ pub mod scene_fuzz {
     /// [`Class::OverCap`] and not loaded.
     pub const MAX_ELEMENTS: usize = 1000;
 
-    /// The fuzzer's draws on the shared seeded generator
-    /// ([`ocp_transcription::samples::SplitMix64`]).
+    /// The fuzzer's draws on the workspace's seeded generator
+    /// ([`intrinsic_beam::samples::random::seeded`], ChaCha8).
     #[derive(Clone, Debug)]
-    pub struct SplitMix(ocp_transcription::samples::SplitMix64);
+    pub struct Draws(rand_chacha::ChaCha8Rng);
 
-    impl SplitMix {
+    impl Draws {
         /// Seeded stream.
         pub fn new(seed: u64) -> Self {
-            Self(ocp_transcription::samples::SplitMix64::new(seed))
+            Self(intrinsic_beam::samples::random::seeded(seed))
         }
 
         /// Next 64 random bits.
         pub fn next_u64(&mut self) -> u64 {
-            self.0.next_u64()
+            rand::RngCore::next_u64(&mut self.0)
         }
 
         /// Uniform in `0..n` (`n = 0` is treated as 1).
         pub fn below(&mut self, n: usize) -> usize {
-            self.0.index(n.max(1))
+            rand::Rng::random_range(&mut self.0, 0..n.max(1))
         }
 
         /// One element of a non-empty slice.
@@ -1365,7 +1365,7 @@ pub mod scene_fuzz {
 
     /// The input of case `index` of the stream `seed`.
     pub fn generate(seed: u64, index: u64) -> (Source, String) {
-        let mut rng = SplitMix::new(seed ^ index.wrapping_mul(0xD1B5_4A32_D192_ED03));
+        let mut rng = Draws::new(seed ^ index.wrapping_mul(0xD1B5_4A32_D192_ED03));
         rng.next_u64();
         match rng.below(10) {
             0 => {
@@ -1435,7 +1435,7 @@ pub mod scene_fuzz {
     }
 
     /// One random mutation of `text`.
-    pub fn mutate(rng: &mut SplitMix, text: &str) -> String {
+    pub fn mutate(rng: &mut Draws, text: &str) -> String {
         let lines: Vec<&str> = text.lines().collect();
         let mut lines: Vec<String> = lines.iter().map(|l| l.to_string()).collect();
         let n = lines.len().max(1);

@@ -96,22 +96,6 @@ impl Ctx {
     }
 }
 
-/// Process CPU time (user + system) in seconds, from `/proc/self/stat` (0 where unavailable).
-pub(crate) fn process_cpu_seconds() -> f64 {
-    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
-        return 0.0;
-    };
-    // fields after the parenthesised command name; utime and stime are fields 14 and 15
-    let Some(rest) = stat.rfind(')').map(|i| &stat[i + 2..]) else {
-        return 0.0;
-    };
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    let ticks = |i: usize| f.get(i).and_then(|s| s.parse::<f64>().ok()).unwrap_or(0.0);
-    // `rest` starts at field 3 (state), so field n is index n − 3; clock ticks are 100 Hz on
-    // Linux (USER_HZ)
-    (ticks(11) + ticks(12)) / 100.0
-}
-
 /// The 1-, 5- and 15-minute load averages.
 pub(crate) fn load_average() -> String {
     std::fs::read_to_string("/proc/loadavg")
@@ -193,7 +177,7 @@ pub fn main(args: &[String]) -> Result<()> {
     for (name, _, runner) in STUDIES.iter().filter(|(n, _, _)| which.contains(n)) {
         ctx.start_study(name);
         let load0 = load_average();
-        let (cpu0, t0) = (process_cpu_seconds(), Instant::now());
+        let (cpu0, t0) = (ocp_transcription::process_cpu_time().unwrap_or(0.0), Instant::now());
         let mut study = runner(&mut ctx).with_context(|| format!("study `{name}`"))?;
         let wall = t0.elapsed().as_secs_f64();
         study.header = report::Header {
@@ -202,7 +186,8 @@ pub fn main(args: &[String]) -> Result<()> {
             load_start: load0,
             load_end: load_average(),
             wall_s: wall,
-            cpu_over_wall: (process_cpu_seconds() - cpu0) / wall.max(1e-9),
+            cpu_over_wall: (ocp_transcription::process_cpu_time().unwrap_or(0.0) - cpu0)
+                / wall.max(1e-9),
             quick,
         };
         study.write(&dir)?;

@@ -181,7 +181,7 @@ fn verify(args: &[String]) -> Result<()> {
             failed,
             n,
             hms(started.elapsed().as_secs_f64()),
-            cpu_seconds().unwrap_or(f64::NAN),
+            ocp_transcription::process_cpu_time().unwrap_or(f64::NAN),
             dir.display()
         );
     }
@@ -205,18 +205,6 @@ struct RunInfo {
 fn hms(seconds: f64) -> String {
     let s = seconds.max(0.0).round() as u64;
     format!("{}:{:02}:{:02}", s / 3600, (s / 60) % 60, s % 60)
-}
-
-/// CPU time (user + system, all threads) of this process so far, from `/proc/self/stat`
-/// (Linux; clock ticks of 1/100 s, the kernel's `USER_HZ`).
-fn cpu_seconds() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
-    // fields after the command name `(…)`: state is field 3, utime 14, stime 15
-    let rest = stat.rsplit_once(')')?.1;
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    let utime: f64 = f.get(11)?.parse().ok()?;
-    let stime: f64 = f.get(12)?.parse().ok()?;
-    Some((utime + stime) / 100.0)
 }
 
 fn date_utc() -> String {
@@ -258,7 +246,7 @@ fn write_reports(
     complete: bool,
 ) -> Result<()> {
     let failed = rows.iter().filter(|r| !r.metric.pass()).count();
-    let cpu = cpu_seconds();
+    let cpu = ocp_transcription::process_cpu_time();
     let load = std::fs::read_to_string("/proc/loadavg")
         .ok()
         .and_then(|l| l.split_whitespace().next().map(str::to_string))
@@ -442,14 +430,6 @@ mod tests {
         assert_eq!(hms(59.6), "0:01:00");
         assert_eq!(hms(3725.4), "1:02:05");
         assert_eq!(hms(-3.0), "0:00:00");
-    }
-
-    #[test]
-    fn cpu_time_is_read_on_linux() {
-        if cfg!(target_os = "linux") {
-            let c = cpu_seconds().expect("/proc/self/stat parses");
-            assert!(c.is_finite() && c >= 0.0, "{c}");
-        }
     }
 
     #[test]

@@ -86,18 +86,6 @@ pub fn problem(root: &Path, scene: &'static str, omega0: f64) -> Result<Problem>
     })
 }
 
-/// CPU seconds of the calling thread spent in `f` (wall seconds where the thread clock is
-/// unavailable).
-fn cpu_timed<R>(f: impl FnOnce() -> R) -> (f64, R) {
-    let (c0, w0) = (ocp_transcription::thread_cpu_time(), std::time::Instant::now());
-    let r = f();
-    let t = match (c0, ocp_transcription::thread_cpu_time()) {
-        (Some(a), Some(b)) => b - a,
-        _ => w0.elapsed().as_secs_f64(),
-    };
-    (t, r)
-}
-
 /// The SQP settings of a named variant.
 fn settings(variant: &str, p: &Problem) -> Result<SqpSettings> {
     let base = SqpSettings {
@@ -193,8 +181,8 @@ fn settings(variant: &str, p: &Problem) -> Result<SqpSettings> {
     })
 }
 
-/// Nodes `s_0 … s_Nc` and controls `u_0 … u_{Nc−1}`.
-type Plan = (Vec<DVector<f64>>, Vec<DVector<f64>>);
+/// A primal point: shooting nodes `s_0 … s_Nc` and controls `u_0 … u_{Nc−1}`.
+pub type Trajectory = (Vec<DVector<f64>>, Vec<DVector<f64>>);
 
 /// A solve of one problem: the statistics, the start and the solution.
 pub struct Solved {
@@ -204,9 +192,9 @@ pub struct Solved {
     pub cpu: f64,
     /// Start the SQP iterated from: the linear MPC plan (or the `--start-from` point, or the
     /// rollout the fallback made when the dynamics were not finite at the plan's nodes).
-    pub start: Plan,
+    pub start: Trajectory,
     /// Solution nodes and controls.
-    pub solution: Plan,
+    pub solution: Trajectory,
 }
 
 /// Solves `p` from the linear MPC plan (the controller's first-sample initial guess) with
@@ -259,7 +247,8 @@ pub fn solve(
                 nmpc.states_mut().clone_from_slice(l.states());
                 nmpc.controls_mut().clone_from_slice(l.controls());
             }
-            let (cpu, st) = cpu_timed(|| nmpc.solve_with_fallback_starts(&xa));
+            let (cpu, st) =
+                ocp_transcription::thread_cpu_timed(|| nmpc.solve_with_fallback_starts(&xa));
             let (st, _) = st?;
             total += cpu;
             its += st.iterations;
@@ -277,7 +266,8 @@ pub fn solve(
             solution: (nmpc.states().to_vec(), nmpc.controls().to_vec()),
         });
     }
-    let (cpu, solved) = cpu_timed(|| nmpc.solve_with_fallback_starts(&p.x0));
+    let (cpu, solved) =
+        ocp_transcription::thread_cpu_timed(|| nmpc.solve_with_fallback_starts(&p.x0));
     let (st, used) = solved?;
     if used != Start::Given {
         // the start the SQP actually iterated from: the rollout the fallback made
@@ -319,7 +309,7 @@ fn settings_of(s: &SqpSolver<RomDynamics>) -> SqpSettings {
 
 /// Reads a primal point (`states`: `Nc + 1` vectors, `controls`: `Nc` vectors) written by
 /// casadi_peers.py.
-fn read_solution(file: &Path, p: &Problem) -> Result<Plan> {
+fn read_solution(file: &Path, p: &Problem) -> Result<Trajectory> {
     let text =
         std::fs::read_to_string(file).with_context(|| format!("reading {}", file.display()))?;
     let v: serde_json::Value = serde_json::from_str(&text)?;

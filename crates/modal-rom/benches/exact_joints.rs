@@ -1,31 +1,31 @@
 //! Criterion benches: right-hand side plus exact Jacobian of the exact-joints model
-//! (theory.md §10) against the paper's modal model at (nearly) the same state count, 2D
-//! (per-link rigid + 4 elastic modes per link) and 3D (per-link rigid + 16).
+//! (theory.md §10) against the paper's modal model, 2D and 3D, in two pairings:
+//!
+//! * `*_rigid+N`: the controller's default exact-joints basis (per-link rigid motions + the
+//!   lowest `N` constrained modes split per link, 4 in 2D, 16 in 3D) against the paper's model
+//!   on the lowest constrained modes whose state count is closest;
+//! * `*_paper_basis`: both models on the paper's own mode set (the exact-joints model by
+//!   [`paper_reduction`]: same velocity and force coordinates, plus 4 quaternion entries for the
+//!   root and each joint, against the paper model's quaternion states).
 
 #![allow(missing_docs)] // criterion's macros generate undocumented items
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use modal_rom::exact_joints::{from_fields, ExactJointsRom};
+use modal_rom::exact_joints::{from_fields, paper_reduction, ExactJointsRom};
 use modal_rom::samples;
 use modal_rom::{
     BasisSettings, LinkBasisSettings, ModalRom, ModeSelection, RomOptions, StructureModel,
 };
 use std::hint::black_box;
 
-/// CPU time of the calling thread (s): Linux `/proc/thread-self/schedstat` (ns on CPU).
-fn thread_cpu() -> Option<f64> {
-    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
-    s.split_whitespace().next()?.parse::<f64>().ok().map(|ns| ns * 1e-9)
-}
-
 /// Prints the thread CPU time per call of `f` over `calls` calls (criterion's figures are
 /// wall times, inflated when other jobs share the cores; thread CPU time is not).
 fn cpu_report(label: &str, calls: usize, mut f: impl FnMut()) {
-    let Some(c0) = thread_cpu() else { return };
+    let Some(c0) = ocp_transcription::thread_cpu_time() else { return };
     for _ in 0..calls {
         f();
     }
-    let Some(c1) = thread_cpu() else { return };
+    let Some(c1) = ocp_transcription::thread_cpu_time() else { return };
     eprintln!("{label}: thread CPU {:.3e} s/call over {calls} calls", (c1 - c0) / calls as f64);
 }
 
@@ -99,8 +99,35 @@ fn exact_state(rom: &ExactJointsRom) -> Vec<f64> {
     x
 }
 
-fn bench_pair(c: &mut Criterion, name: &str, spatial: bool, elastic: usize) {
-    let (exact, paper) = models(spatial, 20, elastic);
+/// Both models on the paper's mode set of the 2D / 3D scene.
+fn paper_basis_models(spatial: bool, elements: usize) -> (ExactJointsRom, ModalRom) {
+    let opts = RomOptions::default();
+    let s = if spatial {
+        samples::paper_3d(elements, 0.0, true, &samples::paper_3d_selection(), &opts)
+    } else {
+        samples::paper_2d(elements, 0.0, true, &samples::paper_2d_selection(), &opts)
+    }
+    .expect("paper sample");
+    let inputs = if spatial {
+        samples::inputs_3d(&s.structure, &s.model)
+    } else {
+        samples::inputs_2d(&s.structure, &s.model)
+    }
+    .expect("inputs");
+    let selection =
+        if spatial { samples::paper_3d_selection() } else { samples::paper_2d_selection() };
+    let modes = s.basis.select(&selection).expect("select");
+    let exact = paper_reduction(&s.structure, &s.model, &modes, Some(&s.model.damping), &inputs)
+        .expect("exact-joints model on the paper basis");
+    let paper = ModalRom::new(&modes, Some(&s.model.damping), &inputs, &opts).expect("paper");
+    (exact, paper)
+}
+
+fn bench_pair(c: &mut Criterion, name: &str, spatial: bool, elastic: Option<usize>) {
+    let (exact, paper) = match elastic {
+        Some(e) => models(spatial, 20, e),
+        None => paper_basis_models(spatial, 20),
+    };
     let x = exact_state(&exact);
     let (n, nu) = (exact.n_state(), exact.n_inputs());
     let u: Vec<f64> = (0..nu).map(|i| 0.3 * (i as f64 + 1.0)).collect();
@@ -124,6 +151,12 @@ fn bench_pair(c: &mut Criterion, name: &str, spatial: bool, elastic: usize) {
             .rhs_and_jacobian(black_box(&q), black_box(&u), &mut fp, &mut jp, &mut jup)
             .expect("paper")
     });
+    cpu_report(&format!("{name}/exact_rhs"), 2_000, || {
+        exact.rhs(black_box(&x), black_box(&u), &mut f).expect("exact")
+    });
+    cpu_report(&format!("{name}/paper_rhs"), 20_000, || {
+        paper.rhs(black_box(&q), black_box(&u), &mut fp).expect("paper")
+    });
     let mut group = c.benchmark_group("exact_joints");
     group.bench_function(format!("{name}/exact_rhs_and_jacobian"), |b| {
         b.iter(|| {
@@ -142,12 +175,17 @@ fn bench_pair(c: &mut Criterion, name: &str, spatial: bool, elastic: usize) {
     group.bench_function(format!("{name}/exact_rhs"), |b| {
         b.iter(|| exact.rhs(black_box(&x), black_box(&u), &mut f).expect("exact"))
     });
+    group.bench_function(format!("{name}/paper_rhs"), |b| {
+        b.iter(|| paper.rhs(black_box(&q), black_box(&u), &mut fp).expect("paper"))
+    });
     group.finish();
 }
 
 fn exact_joints(c: &mut Criterion) {
-    bench_pair(c, "2d_rigid+4", false, 4);
-    bench_pair(c, "3d_rigid+16", true, 16);
+    bench_pair(c, "2d_rigid+4", false, Some(4));
+    bench_pair(c, "3d_rigid+16", true, Some(16));
+    bench_pair(c, "2d_paper_basis", false, None);
+    bench_pair(c, "3d_paper_basis", true, None);
 }
 
 criterion_group!(benches, exact_joints);

@@ -9,22 +9,6 @@ use modal_rom::{BasisSettings, ModeSelection, RomOptions, StructureModel};
 use std::hint::black_box;
 use std::time::Instant;
 
-/// CPU time of the calling thread (s): Linux `/proc/thread-self/schedstat` (ns on CPU).
-fn thread_cpu() -> Option<f64> {
-    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
-    s.split_whitespace().next()?.parse::<f64>().ok().map(|ns| ns * 1e-9)
-}
-
-/// CPU time of the whole process (s, all threads: faer may use rayon): `utime + stime` of
-/// Linux `/proc/self/stat`, in clock ticks of 10 ms.
-fn process_cpu() -> Option<f64> {
-    let s = std::fs::read_to_string("/proc/self/stat").ok()?;
-    let rest = &s[s.rfind(')')? + 2..];
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    let ticks = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
-    Some(ticks * 0.01)
-}
-
 /// Prints CPU and wall time per call of `f` over `calls` calls (criterion's figures are wall
 /// times, inflated when other jobs share the cores; CPU time is not).
 fn cpu_report(label: &str, calls: usize, clock: fn() -> Option<f64>, mut f: impl FnMut()) {
@@ -57,10 +41,15 @@ fn rhs_jacobian(c: &mut Criterion) {
         rom.gamma2().fill(),
         rom.quaternion().map_or(0.0, |q| q.gamma_xi_scaled.fill())
     );
-    cpu_report("rom3d_rhs_and_jacobian_fused (thread CPU)", 20_000, thread_cpu, || {
-        rom.rhs_and_jacobian(black_box(&q), black_box(&u), &mut f, &mut jq, &mut ju)
-            .expect("rhs and jacobian")
-    });
+    cpu_report(
+        "rom3d_rhs_and_jacobian_fused (thread CPU)",
+        20_000,
+        ocp_transcription::thread_cpu_time,
+        || {
+            rom.rhs_and_jacobian(black_box(&q), black_box(&u), &mut f, &mut jq, &mut ju)
+                .expect("rhs and jacobian")
+        },
+    );
     c.bench_function("rom3d_rhs_and_jacobian_fused", |b| {
         b.iter(|| {
             rom.rhs_and_jacobian(black_box(&q), black_box(&u), &mut f, &mut jq, &mut ju)
@@ -80,10 +69,15 @@ fn modes(c: &mut Criterion) {
         multibody_constraints::samples::paper_3d(intrinsic_beam::Section::paper_3d(), 50, 0.0)
             .expect("paper 3D structure");
     let model = StructureModel::new(&structure).expect("model");
-    cpu_report("modes3d_2x50 constrained_modes_first20 (process CPU)", 20, process_cpu, || {
-        let basis = model.modes(&BasisSettings::default()).expect("modes");
-        black_box(basis.select(&ModeSelection::Lowest(20)).expect("select"));
-    });
+    cpu_report(
+        "modes3d_2x50 constrained_modes_first20 (process CPU)",
+        20,
+        ocp_transcription::process_cpu_time,
+        || {
+            let basis = model.modes(&BasisSettings::default()).expect("modes");
+            black_box(basis.select(&ModeSelection::Lowest(20)).expect("select"));
+        },
+    );
     let mut group = c.benchmark_group("modes3d_2x50");
     group.sample_size(10);
     group.bench_function("constrained_modes_first20", |b| {

@@ -126,8 +126,10 @@ impl BasisSettings {
     }
 }
 
-/// How many modes of each kind to keep (the lowest of each kind).
+/// How many modes of each kind to keep (the lowest of each kind); absent kinds are 0 when
+/// deserialised (a scene's `[modes] kinds = { rigid = 2, axial = 4, bending_e2 = 4 }`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct KindCounts {
     /// Rigid-body modes.
     pub rigid: usize,

@@ -497,10 +497,6 @@ pub fn solve_sparse(
                 solve_component(problem, c, &ops, &exact, sigma, nev, settings)?;
             deflated = restricted;
             steps += s;
-            if std::env::var_os("FLEXMPC_SPARSE_DEBUG").is_some() {
-                let worst = pairs.iter().map(|p| p.residual).fold(0.0f64, f64::max);
-                eprintln!("component {ci}: σ = {sigma:.3e}, {s} steps, converged {converged}, worst residual {worst:.2e}");
-            }
             let low = pairs
                 .iter()
                 .map(|p| p.lambda)

@@ -243,15 +243,16 @@ mod tests {
     /// round-off ≤ 1e-11 relative to the largest entry; a missing or doubled term is O(1).
     #[test]
     fn remainder_and_jacobians_match_rhs_and_jacobians_minus_w() {
+        use intrinsic_beam::samples::random::random_vec;
         for scenario in [Scenario::paper_3d(10).unwrap(), Scenario::paper_2d(10).unwrap()] {
             let setup = Setup::new(&scenario).unwrap();
             let d = RomDynamics::new(&setup.rom).unwrap();
             let (n, nu) = (d.nx(), d.nu());
             let w = d.linear_part().unwrap();
-            let mut rng = ocp_transcription::samples::SplitMix64::new(17);
+            let mut rng = intrinsic_beam::samples::random::seeded(17);
             for _ in 0..8 {
-                let q: Vec<f64> = (0..n).map(|_| rng.uniform(-2.0, 2.0)).collect();
-                let u: Vec<f64> = (0..nu).map(|_| rng.uniform(-5.0, 5.0)).collect();
+                let q: Vec<f64> = random_vec(&mut rng, n).iter().map(|v| 2.0 * v).collect();
+                let u: Vec<f64> = random_vec(&mut rng, nu).iter().map(|v| 5.0 * v).collect();
                 let (mut f, mut g) = (vec![0.0; n], vec![f64::NAN; n]);
                 let (mut fx, mut fu) = (DMatrix::zeros(n, n), DMatrix::zeros(n, nu));
                 let (mut gx, mut gu) =

@@ -7,18 +7,18 @@
 
 use criterion::Criterion;
 use nalgebra::{DMatrix, DVector};
-use ocp_transcription::samples::{ModalLike, SplitMix64};
+use ocp_transcription::samples::{seeded, ModalLike};
 use ocp_transcription::{
     interval_error, AdaptiveSubsteps, Dynamics, Globalisation, Integrator, IntegratorKind,
     IntegratorSettings, Ocp, QpForm, SqpMode, SqpSettings, SqpSolver, SqpStatus,
 };
-use std::time::Instant;
+use rand::Rng;
 
 /// A random state with entries in [−a, a] and controls in [−1, 1].
 fn operating_point(nx: usize, nu: usize, a: f64) -> (Vec<f64>, Vec<f64>) {
-    let mut rng = SplitMix64::new(2024);
-    let x = (0..nx).map(|_| rng.uniform(-a, a)).collect();
-    let u = (0..nu).map(|_| rng.uniform(-1.0, 1.0)).collect();
+    let mut rng = seeded(2024);
+    let x = (0..nx).map(|_| rng.random_range(-a..a)).collect();
+    let u = (0..nu).map(|_| rng.random_range(-1.0..1.0)).collect();
     (x, u)
 }
 
@@ -53,24 +53,13 @@ fn integrator(kind: IntegratorKind, substeps: usize) -> IntegratorSettings {
     IntegratorSettings::new(kind, substeps)
 }
 
-/// Runs `f` and returns its CPU seconds (wall seconds when unavailable).
-fn timed<R>(f: impl FnOnce() -> R) -> (f64, R) {
-    let (c0, w0) = (ocp_transcription::thread_cpu_time(), Instant::now());
-    let r = f();
-    let t = match (c0, ocp_transcription::thread_cpu_time()) {
-        (Some(a), Some(b)) => b - a,
-        _ => w0.elapsed().as_secs_f64(),
-    };
-    (t, r)
-}
-
 /// Mean CPU seconds of `f`: batches of runs until at least 0.3 s of CPU time has been
 /// accumulated (the scheduler's CPU clock ticks coarsely), at least `reps` runs.
 fn median_time(reps: usize, mut f: impl FnMut()) -> f64 {
     f();
     let (mut total, mut runs) = (0.0, 0usize);
     while total < 0.3 || runs < reps {
-        total += timed(&mut f).0;
+        total += ocp_transcription::thread_cpu_timed(&mut f).0;
         runs += 1;
     }
     total / runs as f64
@@ -80,8 +69,8 @@ fn integrator_table() {
     let m = model(61);
     let dt = 0.25;
     println!("\n## One-interval error (Δt = 0.25 s) against cost, nx = 61, nu = 5, ω ≤ 175 rad/s");
-    let mut rng = SplitMix64::new(99);
-    let u_rand: Vec<f64> = (0..5).map(|_| rng.uniform(-1.0, 1.0)).collect();
+    let mut rng = seeded(99);
+    let u_rand: Vec<f64> = (0..5).map(|_| rng.random_range(-1.0..1.0)).collect();
     let states: Vec<(String, Vec<f64>, Vec<f64>)> = vec![
         ("rotating ω0 = 1, u = 0".into(), m.rotating_state(1.0).unwrap(), vec![0.0; 5]),
         ("rotating ω0 = 2, u = 0".into(), m.rotating_state(2.0).unwrap(), vec![0.0; 5]),
@@ -166,7 +155,7 @@ fn time_iteration(
     while cpu < 0.3 || runs < reps {
         s.states_mut().clone_from_slice(&states);
         s.controls_mut().clone_from_slice(&controls);
-        let (c, st) = timed(|| s.solve(&x).expect("valid x0"));
+        let (c, st) = ocp_transcription::thread_cpu_timed(|| s.solve(&x).expect("valid x0"));
         cpu += c;
         wall += st.time_total;
         ti += st.time_integration;
@@ -391,7 +380,8 @@ fn adaptive_table() {
                 while cpu < 0.5 || runs < 5 {
                     s.states_mut().clone_from_slice(&states);
                     s.controls_mut().clone_from_slice(&controls);
-                    let (c, st) = timed(|| s.solve(&x).expect("valid x0"));
+                    let (c, st) =
+                        ocp_transcription::thread_cpu_timed(|| s.solve(&x).expect("valid x0"));
                     cpu += c;
                     wall += st.time_total;
                     ti += st.time_integration;
@@ -536,7 +526,7 @@ fn bench_iteration_3d(c: &mut Criterion) {
                     } else {
                         process_cpu_time
                     };
-                    let (mut cpu, w0) = (0.0, Instant::now());
+                    let (mut cpu, w0) = (0.0, std::time::Instant::now());
                     for _ in 0..iters {
                         s.states_mut().clone_from_slice(&states);
                         s.controls_mut().clone_from_slice(&controls);

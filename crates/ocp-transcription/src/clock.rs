@@ -18,3 +18,62 @@ pub fn thread_cpu_time() -> Option<f64> {
     let ns: f64 = s.split_whitespace().next()?.parse().ok()?;
     Some(ns * 1e-9)
 }
+
+/// Runs `f` and returns the CPU seconds of the calling thread it took ([`thread_cpu_time`]),
+/// or its wall seconds where the thread clock is unavailable, with `f`'s result.
+///
+/// ```
+/// let (seconds, x) = ocp_transcription::thread_cpu_timed(|| (0..1000).sum::<u64>());
+/// assert!(seconds >= 0.0 && x == 499_500);
+/// ```
+pub fn thread_cpu_timed<R>(f: impl FnOnce() -> R) -> (f64, R) {
+    let (c0, w0) = (thread_cpu_time(), std::time::Instant::now());
+    let r = f();
+    let t = match (c0, thread_cpu_time()) {
+        (Some(a), Some(b)) => b - a,
+        _ => w0.elapsed().as_secs_f64(),
+    };
+    (t, r)
+}
+
+/// CPU time (s, user + system, all threads) the whole process has run so far, from Linux's
+/// `/proc/self/stat` (`utime + stime`, in clock ticks of 1/100 s, the kernel's `USER_HZ`);
+/// `None` where that file does not exist. The measure for work spread over threads (faer's or
+/// rayon's), which [`thread_cpu_time`] does not see.
+///
+/// ```
+/// let t0 = ocp_transcription::process_cpu_time();
+/// let x: f64 = (0..100_000).map(|i| (i as f64).sqrt()).sum();
+/// if let (Some(a), Some(b)) = (t0, ocp_transcription::process_cpu_time()) {
+///     assert!(b >= a && x > 0.0);
+/// }
+/// ```
+pub fn process_cpu_time() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // the fields after the command name `(…)`: state is field 3, utime 14, stime 15
+    let rest = stat.rsplit_once(')')?.1;
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let utime: f64 = f.get(11)?.parse().ok()?;
+    let stime: f64 = f.get(12)?.parse().ok()?;
+    Some((utime + stime) / 100.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn clocks_read_and_advance_on_linux() {
+        if !std::path::Path::new("/proc/self/stat").exists() {
+            return;
+        }
+        let (t0, p0) =
+            (thread_cpu_time().expect("thread clock"), process_cpu_time().expect("process clock"));
+        let mut x = 0.0f64;
+        for i in 0..3_000_000 {
+            x += (i as f64).sqrt();
+        }
+        let (t1, p1) = (thread_cpu_time().unwrap(), process_cpu_time().unwrap());
+        assert!(x > 0.0 && t1 > t0 && p1 >= p0 && p0 >= 0.0);
+    }
+}

@@ -650,22 +650,23 @@ fn block_apply(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::Rng;
 
     /// A Jacobian with the modal ROM's zero blocks (dense-ish, > 30 % nonzero) goes through
     /// the block-range path and gives the dense product, scattered zeros and all.
     #[test]
     fn block_range_product_matches_dense() {
         let n = 30;
-        let mut rng = crate::samples::SplitMix64::new(5);
+        let mut rng = crate::samples::seeded(5);
         let j = DMatrix::from_fn(n, n, |r, c| {
             let inside = if r < 18 { c < 18 } else { !(7..18).contains(&c) };
-            if inside && rng.uniform(0.0, 1.0) < 0.8 {
-                rng.uniform(-1.0, 1.0)
+            if inside && rng.random_range(0.0..1.0) < 0.8 {
+                rng.random_range(-1.0..1.0)
             } else {
                 0.0
             }
         });
-        let src = DMatrix::from_fn(35, n, |_, _| rng.uniform(-1.0, 1.0));
+        let src = DMatrix::from_fn(35, n, |_, _| rng.random_range(-1.0..1.0));
         let mut rows = SparseRows::with_capacity(n);
         let mut dst = DMatrix::from_element(35, n, f64::NAN);
         mul_right_t(&mut dst, &src, &j, &mut rows);
@@ -679,20 +680,20 @@ mod tests {
     #[test]
     fn operator_storages_agree() {
         let n = 11;
-        let mut rng = crate::samples::SplitMix64::new(1);
+        let mut rng = crate::samples::seeded(1);
         let mut bd = DMatrix::zeros(n, n);
         for p in 0..n / 2 {
             for r in 0..2 {
                 for c in 0..2 {
-                    bd[(2 * p + r, 2 * p + c)] = rng.uniform(-1.0, 1.0);
+                    bd[(2 * p + r, 2 * p + c)] = rng.random_range(-1.0..1.0);
                 }
             }
         }
         bd[(n - 1, n - 1)] = 0.7;
         let mut sp = bd.clone();
         sp[(0, n - 1)] = 0.3; // couples first and last: one big block, still sparse
-        let dense = DMatrix::from_fn(n, n, |_, _| rng.uniform(-1.0, 1.0));
-        let src = DMatrix::from_fn(n, 3, |_, _| rng.uniform(-1.0, 1.0));
+        let dense = DMatrix::from_fn(n, n, |_, _| rng.random_range(-1.0..1.0));
+        let src = DMatrix::from_fn(n, 3, |_, _| rng.random_range(-1.0..1.0));
         for (m, kind) in [(bd, 0), (sp, 1), (dense, 2)] {
             let op = Operator::new(m.clone());
             match (kind, &op) {

@@ -77,7 +77,7 @@ mod quadratic;
 pub mod samples;
 mod sqp;
 
-pub use clock::thread_cpu_time;
+pub use clock::{process_cpu_time, thread_cpu_time, thread_cpu_timed};
 pub use dynamics::Dynamics;
 pub use error::{OcpError, Result};
 pub use integrator::{

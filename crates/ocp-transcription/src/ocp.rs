@@ -11,9 +11,15 @@ use nalgebra::{DMatrix, DVector};
 ///
 /// **Cost discretisation.** The control part is integrated exactly (piecewise constant);
 /// the state part by the trapezoidal rule on the shooting nodes `s_k = x(kΔt)`:
-/// `J = Σ_{k=0}^{Nc−1} Δt ½(u_k − u_r)ᵀR(u_k − u_r) + Σ_{k=0}^{Nc} c_k Δt ½(s_k − x_r)ᵀQ(s_k − x_r)
-///      + ½(s_Nc − x_r)ᵀ P (s_Nc − x_r)`, `c_0 = c_Nc = ½`, `c_k = 1` otherwise
+/// `J = Σ_{k=0}^{Nc−1} Δt ½(u_k − u_r)ᵀR(u_k − u_r) + Σ_{k=0}^{Nc} c_k Δt ½(s_k − x_r,k)ᵀQ(s_k − x_r,k)
+///      + ½(s_Nc − x_r,Nc)ᵀ P (s_Nc − x_r,Nc)`, `c_0 = c_Nc = ½`, `c_k = 1` otherwise
 /// (second order in `Δt`; `P` an optional extra terminal weight, zero by default).
+///
+/// **Reference profile.** `x_r,k = x_r` at every node unless per-node references
+/// ([`Ocp::x_ref_nodes`]) are given: then `x_r,k` is the reference at the node's time `kΔt`
+/// (a reference that moves over the horizon). The cost stays quadratic in the nodes, so
+/// nothing else changes; with no per-node references the problem is the constant-reference
+/// one, operation for operation.
 /// The cost is then exactly quadratic in the shooting variables, so the Gauss–Newton
 /// Hessian is the cost Hessian and needs no integrator work.
 #[derive(Clone, Debug, PartialEq)]
@@ -30,6 +36,9 @@ pub struct Ocp {
     pub terminal: DMatrix<f64>,
     /// State reference `x_r`. Default zero.
     pub x_ref: DVector<f64>,
+    /// Per-node state references `x_r,0 … x_r,Nc` (each `nx`); empty (default): `x_r` at
+    /// every node.
+    pub x_ref_nodes: Vec<DVector<f64>>,
     /// Control reference `u_r`. Default zero.
     pub u_ref: DVector<f64>,
     /// Lower control bounds (may be `-∞`). Default `-∞`.
@@ -52,6 +61,7 @@ impl Ocp {
             r: DMatrix::identity(nu, nu),
             terminal: DMatrix::zeros(nx, nx),
             x_ref: DVector::zeros(nx),
+            x_ref_nodes: Vec::new(),
             u_ref: DVector::zeros(nu),
             u_min: DVector::from_element(nu, f64::NEG_INFINITY),
             u_max: DVector::from_element(nu, f64::INFINITY),
@@ -121,6 +131,19 @@ impl Ocp {
                 return Err(invalid(name, "non-finite entry", "references must be finite"));
             }
         }
+        if !self.x_ref_nodes.is_empty() {
+            check_dim("x_ref_nodes", self.intervals + 1, self.x_ref_nodes.len())?;
+            for (k, r) in self.x_ref_nodes.iter().enumerate() {
+                check_dim("x_ref_nodes entry", nx, r.len())?;
+                if !r.iter().all(|v| v.is_finite()) {
+                    return Err(invalid(
+                        "x_ref_nodes",
+                        format!("non-finite entry at node {k}"),
+                        "references must be finite",
+                    ));
+                }
+            }
+        }
         for i in 0..nu {
             if self.u_min[i].is_nan() || self.u_max[i].is_nan() || self.u_min[i] > self.u_max[i] {
                 return Err(invalid(
@@ -150,7 +173,7 @@ impl Ocp {
         let mut j = 0.0;
         for (k, sk) in s.iter().enumerate() {
             check_dim("node", self.nx(), sk.len())?;
-            let e = sk - &self.x_ref;
+            let e = sk - self.node_reference(k);
             j += 0.5 * self.node_weight(k) * e.dot(&(&self.q * &e));
             if k == self.intervals {
                 j += 0.5 * e.dot(&(&self.terminal * &e));
@@ -162,6 +185,11 @@ impl Ocp {
             j += 0.5 * self.interval() * e.dot(&(&self.r * &e));
         }
         Ok(j)
+    }
+
+    /// The state reference `x_r,k` of node `k` (the per-node one if given, else `x_r`).
+    pub fn node_reference(&self, k: usize) -> &DVector<f64> {
+        self.x_ref_nodes.get(k).unwrap_or(&self.x_ref)
     }
 
     /// Weight `c_k Δt` of node `k` in the trapezoidal state cost.

@@ -6,34 +6,23 @@ use crate::error::{check_dim, invalid, Result};
 use crate::integrator::Integrator;
 use crate::quadratic::QuadraticTerms;
 use nalgebra::DMatrix;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
-/// A small deterministic generator (SplitMix64) for reproducible samples, tests and benches.
-#[derive(Clone, Debug)]
-pub struct SplitMix64(u64);
-
-impl SplitMix64 {
-    /// Seeded generator.
-    pub fn new(seed: u64) -> Self {
-        Self(seed)
-    }
-    /// Next raw 64-bit value.
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in `[lo, hi)`.
-    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        let v = (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
-        lo + (hi - lo) * v
-    }
-    /// Uniform index in `0..n` (`n > 0`).
-    pub fn index(&mut self, n: usize) -> usize {
-        (self.next_u64() % n as u64) as usize
-    }
+/// The seeded generator of the samples, tests and benches: `rand_chacha`'s ChaCha8 from a
+/// 64-bit seed, the workspace's one generator (the same as `intrinsic_beam`'s
+/// `samples::random::seeded`; this crate depends on no other crate of the workspace). Its
+/// stream is fixed by the seed alone, on every platform and in every release of the crate.
+///
+/// ```
+/// use ocp_transcription::samples::seeded;
+/// use rand::Rng;
+/// let draw = |seed| seeded(seed).random_range(-1.0..1.0);
+/// assert_eq!(draw(7), draw(7));
+/// ```
+pub fn seeded(seed: u64) -> ChaCha8Rng {
+    ChaCha8Rng::seed_from_u64(seed)
 }
 
 /// Linear time-invariant model `ẋ = A x + B u`.
@@ -391,7 +380,7 @@ impl ModalLike {
         if !(omega_max > 0.0 && omega_max.is_finite()) {
             return Err(invalid("omega_max", omega_max, "must be positive and finite"));
         }
-        let mut rng = SplitMix64::new(seed);
+        let mut rng = seeded(seed);
         let pairs = nx / 2;
         let mut w = DMatrix::zeros(nx, nx);
         for p in 0..pairs {
@@ -405,17 +394,17 @@ impl ModalLike {
         let mut gamma = Vec::new();
         for l in 0..nx {
             for _ in 0..3 {
-                let i = rng.index(nx);
-                let mut j = rng.index(nx);
+                let i = rng.random_range(0..nx);
+                let mut j = rng.random_range(0..nx);
                 if j == i {
                     j = (i + 1) % nx;
                 }
-                let v = gamma_scale * rng.uniform(-1.0, 1.0);
+                let v = gamma_scale * rng.random_range(-1.0..1.0);
                 gamma.push((i, l, j, v));
                 gamma.push((j, l, i, -v));
             }
         }
-        let b = DMatrix::from_fn(nx, nu, |_, _| rng.uniform(-1.0, 1.0));
+        let b = DMatrix::from_fn(nx, nu, |_, _| rng.random_range(-1.0..1.0));
         Ok(Self {
             w_entries: entries_of(&w),
             quad: QuadraticTerms::new(nx, &gamma)?,
@@ -472,17 +461,17 @@ impl ModalLike {
         let m = (nx - nxi + 4) / 2;
         let nq2 = m - 4;
         let (o2, ox) = (m, m + nq2);
-        let mut rng = SplitMix64::new(seed);
+        let mut rng = seeded(seed);
         // symmetry classes: rigid modes one each, the rest random; q2_p shares its mode's class
         let mut class = vec![0usize; nx];
         for j in 0..m {
-            class[j] = if j < 4 { j } else { rng.index(4) };
+            class[j] = if j < 4 { j } else { rng.random_range(0..4) };
         }
         for p in 0..nq2 {
             class[o2 + p] = class[4 + p];
         }
         for i in 0..nxi {
-            class[ox + i] = if i == 0 { 0 } else { rng.index(4) };
+            class[ox + i] = if i == 0 { 0 } else { rng.random_range(0..4) };
         }
         let mut w = DMatrix::zeros(nx, nx);
         for j in 0..m {
@@ -499,16 +488,16 @@ impl ModalLike {
         }
         for i in 0..m {
             for j in i + 1..m {
-                if class[i] == class[j] && rng.uniform(0.0, 1.0) < 0.5 {
-                    let v = 1e-4 * rng.uniform(-1.0, 1.0);
+                if class[i] == class[j] && rng.random_range(0.0..1.0) < 0.5 {
+                    let v = 1e-4 * rng.random_range(-1.0..1.0);
                     w[(i, j)] = v;
                     w[(j, i)] = v;
                 }
             }
         }
-        let value = |rng: &mut SplitMix64| {
-            let sign = if rng.index(2) == 0 { -1.0 } else { 1.0 };
-            sign * gamma_scale * 10f64.powf(rng.uniform(-1.5, 1.5))
+        let value = |rng: &mut ChaCha8Rng| {
+            let sign = if rng.random_range(0..2) == 0 { -1.0 } else { 1.0 };
+            sign * gamma_scale * 10f64.powf(rng.random_range(-1.5..1.5))
         };
         let allowed = |a: usize, b: usize, c: usize| class[a] ^ class[b] ^ class[c] == 0;
         let mut gamma = Vec::new();
@@ -516,7 +505,7 @@ impl ModalLike {
         for i in 0..m {
             for j in i + 1..m {
                 for l in 0..m {
-                    if allowed(i, j, l) && rng.uniform(0.0, 1.0) < 0.9 {
+                    if allowed(i, j, l) && rng.random_range(0.0..1.0) < 0.9 {
                         let v = value(&mut rng);
                         gamma.push((i, j, l, -v));
                         gamma.push((j, i, l, v));
@@ -528,7 +517,7 @@ impl ModalLike {
         for i in 0..m {
             for j in 0..nq2 {
                 for l in 0..nq2 {
-                    if allowed(i, o2 + j, o2 + l) && rng.uniform(0.0, 1.0) < 0.8 {
+                    if allowed(i, o2 + j, o2 + l) && rng.random_range(0.0..1.0) < 0.8 {
                         let v = value(&mut rng);
                         gamma.push((i, o2 + j, o2 + l, -v));
                         gamma.push((o2 + j, i, o2 + l, v));
@@ -540,7 +529,7 @@ impl ModalLike {
         for i in 0..nxi {
             for l in i + 1..nxi {
                 for j in 0..m {
-                    if allowed(ox + i, j, ox + l) && rng.uniform(0.0, 1.0) < 0.76 {
+                    if allowed(ox + i, j, ox + l) && rng.random_range(0.0..1.0) < 0.76 {
                         let v = value(&mut rng);
                         gamma.push((ox + i, j, ox + l, v));
                         gamma.push((ox + l, j, ox + i, -v));
@@ -551,7 +540,7 @@ impl ModalLike {
         let mut b = DMatrix::zeros(nx, nu);
         for i in 0..m {
             for _ in 0..2.min(nu) {
-                b[(i, rng.index(nu))] = rng.uniform(-1.0, 1.0);
+                b[(i, rng.random_range(0..nu))] = rng.random_range(-1.0..1.0);
             }
         }
         Ok(Self {
@@ -590,18 +579,19 @@ impl ModalLike {
     /// [−1, 1] and u = ±5, each input vector of length `nu`. `None` for
     /// [`ModalLike::new`] models.
     pub fn calibration_samples(&self, nu: usize) -> Option<Vec<(Vec<f64>, Vec<f64>)>> {
-        let mut rng = SplitMix64::new(4242);
+        let mut rng = seeded(4242);
         let mut out = Vec::new();
         for w in [0.25, 0.5, 1.0, 1.5, 2.0] {
             let x = self.rotating_state(w)?;
             let mut xp = x.clone();
             for v in xp.iter_mut().skip(2) {
-                *v += rng.uniform(-0.1, 0.1);
+                *v += rng.random_range(-0.1..0.1);
             }
             for state in [x, xp] {
                 out.push((state.clone(), vec![0.0; nu]));
-                out.push((state.clone(), (0..nu).map(|_| rng.uniform(-1.0, 1.0)).collect()));
-                let sat = (0..nu).map(|_| if rng.index(2) == 0 { -5.0 } else { 5.0 }).collect();
+                out.push((state.clone(), (0..nu).map(|_| rng.random_range(-1.0..1.0)).collect()));
+                let sat =
+                    (0..nu).map(|_| if rng.random_range(0..2) == 0 { -5.0 } else { 5.0 }).collect();
                 out.push((state, sat));
             }
         }

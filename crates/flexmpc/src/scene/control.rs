@@ -37,7 +37,7 @@ pub(super) fn modes_of(ctx: &Ctx<'_>, spec: &SceneSpec) -> Result<(usize, Vec<f6
 
 /// The controller model's mode set of `[modes]` (exactly one of its four forms).
 fn selection_of(ctx: &Ctx<'_>, spec: &SceneSpec) -> Result<modal_rom::ModeSelection, SceneError> {
-    use modal_rom::{KindCounts, ModeSelection};
+    use modal_rom::ModeSelection;
     const NEED: &str = "the controller model needs a mode set in [modes]: one of \
                         `selection = \"paper-2d\"|\"paper-3d\"`, `kinds = { rigid = 2, axial = 4, \
                         bending_e2 = 4 }`, `lowest = n` or `indices = [..]`";
@@ -68,14 +68,7 @@ fn selection_of(ctx: &Ctx<'_>, spec: &SceneSpec) -> Result<modal_rom::ModeSelect
         if total == 0 {
             return ctx.err(span, "modes.kinds", "select at least one mode");
         }
-        return Ok(ModeSelection::ByKind(KindCounts {
-            rigid: k.rigid,
-            axial: k.axial,
-            torsion: k.torsion,
-            bending_e2: k.bending_e2,
-            bending_e3: k.bending_e3,
-            mixed: k.mixed,
-        }));
+        return Ok(ModeSelection::ByKind(k));
     }
     if let Some(n) = ms.lowest {
         if n == 0 {

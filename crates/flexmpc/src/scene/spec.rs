@@ -213,30 +213,6 @@ pub struct OutputSpec {
     pub title: Option<String>,
 }
 
-/// The paper's mode counts per kind (a `[modes] kinds = { .. }` table); absent kinds are 0.
-#[derive(Debug, Deserialize, Clone, Copy, Default)]
-#[serde(deny_unknown_fields)]
-pub struct KindsSpec {
-    /// Rigid-body modes (2D two-link: 2; 3D: 4).
-    #[serde(default)]
-    pub rigid: usize,
-    /// Axial modes.
-    #[serde(default)]
-    pub axial: usize,
-    /// Torsion modes.
-    #[serde(default)]
-    pub torsion: usize,
-    /// Bending modes about e2 (the planar bending).
-    #[serde(default)]
-    pub bending_e2: usize,
-    /// Bending modes about e3.
-    #[serde(default)]
-    pub bending_e3: usize,
-    /// Mixed modes (axial and bending together, e.g. at 45°).
-    #[serde(default)]
-    pub mixed: usize,
-}
-
 /// `[modes]`: what `flexmpc modes` lists and the mode set of the controller's reduced model.
 ///
 /// The controller's set is given by at most one of `selection`, `kinds`, `lowest`,
@@ -254,8 +230,9 @@ pub struct ModesSpec {
     /// Controller model: a named set, `paper-2d` (2 rigid + 4 axial + 4 bending, §5.2) or
     /// `paper-3d` (4 rigid + 4 axial + 4 torsion + 4 + 4 bending, §5.3).
     pub selection: Option<ModeSet>,
-    /// Controller model: the lowest modes of each kind (counts, each ≥ 0, total ≥ 1).
-    pub kinds: Option<KindsSpec>,
+    /// Controller model: the lowest modes of each kind (counts `rigid`, `axial`, `torsion`,
+    /// `bending_e2`, `bending_e3`, `mixed`; absent ones 0; total ≥ 1).
+    pub kinds: Option<modal_rom::KindCounts>,
     /// Controller model: the lowest `n` modes (rigid first), n ≥ 1.
     pub lowest: Option<usize>,
     /// Controller model: explicit mode indices (0-based, basis order: rigid first, then by

@@ -354,6 +354,7 @@ fn shipped_mpc_scenes_match_the_mpc_presets() {
     for (file, preset) in [
         ("paper-2d-mpc.toml", mpc::Scenario::paper_2d(50).unwrap()),
         ("paper-3d-mpc.toml", mpc::Scenario::paper_3d(50).unwrap()),
+        ("paper-3d-mpc-paper-model.toml", mpc::Scenario::paper_3d(50).unwrap()),
         ("paper-3d-mpc-ku1.toml", {
             let mut p = mpc::Scenario::paper_3d(50).unwrap();
             p.mpc.ku = mpc::SPATIAL_INPUT_WEIGHT;
@@ -386,6 +387,12 @@ fn shipped_mpc_scenes_match_the_mpc_presets() {
         assert_eq!((c.plant, c.omega0), (mpc::PlantKind::Fe, 1.0));
         if file == "paper-3d-mpc-ku1.toml" {
             assert_eq!(c.controller, mpc::ControllerSettings::real_time_spatial());
+        }
+        if file == "paper-3d-mpc.toml" {
+            assert_eq!(c.controller, mpc::ControllerSettings::exact_joints());
+        }
+        if file == "paper-3d-mpc-paper-model.toml" {
+            assert_eq!(c.controller.model, mpc::ModelKind::Paper);
         }
     }
 }

@@ -138,12 +138,28 @@ struct SpecStruct {
     fields: Vec<(String, String)>,
 }
 
-/// The spec structs of crates/flexmpc/src/scene/spec.rs (by a simple parse of `pub name: Type,`
-/// lines between `pub struct XxxSpec {` and the closing `}`; `#[serde(rename = "…")]` and
-/// `rename_all = "kebab-case"` are honoured).
+/// Library settings types that the scene deserialises directly (the type's last path segment,
+/// as spec.rs writes it, and its source file relative to this crate).
+const LIBRARY_TYPES: [(&str, &str); 1] = [("KindCounts", "../modal-rom/src/basis.rs")];
+
+/// The spec structs of crates/flexmpc/src/scene/spec.rs and the [`LIBRARY_TYPES`] (by a simple
+/// parse of `pub name: Type,` lines between `pub struct XxxSpec {` (or `pub struct KindCounts {`)
+/// and the closing `}`; `#[serde(rename = "…")]` and `rename_all = "kebab-case"` are honoured).
 fn spec_structs() -> BTreeMap<String, SpecStruct> {
-    let src = std::fs::read_to_string(manifest_dir().join("src/scene/spec.rs")).unwrap();
     let mut out = BTreeMap::new();
+    let src = std::fs::read_to_string(manifest_dir().join("src/scene/spec.rs")).unwrap();
+    parse_structs(&src, |name| name.ends_with("Spec"), &mut out);
+    for (name, file) in LIBRARY_TYPES {
+        let src = std::fs::read_to_string(manifest_dir().join(file)).unwrap();
+        parse_structs(&src, |n| n == name, &mut out);
+        assert!(out.contains_key(name), "{file} has no `pub struct {name} {{`");
+    }
+    assert!(out.contains_key("SceneSpec"), "scene/spec.rs has no `pub struct SceneSpec {{`");
+    out
+}
+
+/// The `pub struct`s of `src` whose names pass `wanted`, into `out`.
+fn parse_structs(src: &str, wanted: impl Fn(&str) -> bool, out: &mut BTreeMap<String, SpecStruct>) {
     let mut current: Option<(String, SpecStruct, bool)> = None;
     let mut kebab_next = false;
     let mut rename: Option<String> = None;
@@ -156,7 +172,7 @@ fn spec_structs() -> BTreeMap<String, SpecStruct> {
             if let Some(rest) = t.strip_prefix("pub struct ") {
                 let name: String =
                     rest.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
-                if name.ends_with("Spec") && t.ends_with('{') {
+                if wanted(&name) && t.ends_with('{') {
                     current = Some((name, SpecStruct { fields: Vec::new() }, kebab_next));
                 }
                 kebab_next = false;
@@ -185,8 +201,6 @@ fn spec_structs() -> BTreeMap<String, SpecStruct> {
             }
         }
     }
-    assert!(out.contains_key("SceneSpec"), "scene/spec.rs has no `pub struct SceneSpec {{`");
-    out
 }
 
 /// Every field path the parser accepts (leaves and nested tables), walking the spec structs

@@ -182,7 +182,7 @@ fn simulate_3d_ribbons_match_the_csv() {
     assert!(turned > 1e-3, "the tip section's e2 axis leaves the y direction: {turned}");
 }
 
-/// The 3D closed loop (`paper-3d-mpc.toml` on 8 elements per link, 0.6 s) under `mpc --vtk`,
+/// The 3D closed loop (`paper-3d-mpc-paper-model.toml` on 8 elements per link, 0.6 s) under `mpc --vtk`,
 /// on the FE plant and on the ROM plant: one `.vtu` per snapshot with its time; ribbons of
 /// two points per node and one quad per element whose centreline is the snapshot's node
 /// positions (`snapshots.json`) and whose last node is the CSV's `tip` at that time; the
@@ -199,7 +199,8 @@ fn mpc_3d_ribbons_match_the_csv() {
 
 fn mpc_3d_ribbons(plant: &str) {
     let dir = scratch(&format!("mpc-3d-{plant}"));
-    let text = std::fs::read_to_string(root().join("scenes/paper-3d-mpc.toml")).unwrap();
+    let text =
+        std::fs::read_to_string(root().join("scenes/paper-3d-mpc-paper-model.toml")).unwrap();
     assert_eq!(text.matches("elements = 50").count(), 2);
     let scene = dir.join("small-3d.toml");
     std::fs::write(&scene, text.replace("elements = 50", "elements = 8")).unwrap();
@@ -253,49 +254,47 @@ fn mpc_3d_ribbons(plant: &str) {
             let p = mid(nodes - 1)[k];
             assert!((p - c).abs() <= 1e-9 * (1.0 + c.abs()), "{file}: {x} = {p} vs CSV {c}");
         }
-        // one width; e2 across the tangent of each element (shear strains are small)
+        // one width
         let norm = |a: [f64; 3]| a.iter().map(|x| x * x).sum::<f64>().sqrt();
         let w0 = norm(half(0));
         assert!(w0 > 0.0);
+        for n in 0..nodes {
+            assert!(close(norm(half(n)), w0), "{plant}: width at node {n}");
+        }
+        // e2 is the second column of T(ξ) of the snapshot's node quaternions
+        let xi: Vec<[f64; 4]> = s["orientations"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|b| b.as_array().unwrap().iter())
+            .map(|q| std::array::from_fn(|k| q[k].as_f64().unwrap()))
+            .collect();
+        assert_eq!(xi.len(), nodes);
+        for (n, &[w, x, y, z]) in xi.iter().enumerate() {
+            let e2 = [2.0 * (x * y - w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + w * x)];
+            let h = half(n);
+            assert!((0..3).all(|k| (h[k] - w0 * e2[k]).abs() < 1e-9), "{plant}: e2 at node {n}");
+        }
+        // e2 of each element's midpoint frame (the normalised sum of its nodes' quaternions)
+        // stays across the element's chord: the chord is T(ξ_mid)(e1 + γ) up to the plant's
+        // kinematic mismatch (theory.md §2, "Kinematics")
         for link in 0..2 {
             for e in 0..8 {
                 let n = 9 * link + e;
                 let (a, b) = (json[n], json[n + 1]);
                 let tan: [f64; 3] = std::array::from_fn(|k| b[k] - a[k]);
-                assert!(close(norm(half(n)), w0), "{plant}: width at node {n}");
-                // the element's e2: the mean of its nodes' (the chord is T(ξ_mid)(e1 + γ))
-                let e2: [f64; 3] = std::array::from_fn(|k| half(n)[k] + half(n + 1)[k]);
-                let c = (0..3).map(|k| tan[k] * e2[k]).sum::<f64>() / (norm(tan) * norm(e2));
+                let sign = if (0..4).map(|k| xi[n][k] * xi[n + 1][k]).sum::<f64>() < 0.0 {
+                    -1.0
+                } else {
+                    1.0
+                };
+                let q: [f64; 4] = std::array::from_fn(|k| xi[n][k] + sign * xi[n + 1][k]);
+                let [w, x, y, z] = q.map(|c| c / q.iter().map(|c| c * c).sum::<f64>().sqrt());
+                let e2 =
+                    [2.0 * (x * y - w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + w * x)];
+                let c = (0..3).map(|k| tan[k] * e2[k]).sum::<f64>() / norm(tan);
                 worst = worst.max(c.abs());
             }
-        }
-        // e2 is the second column of T(ξ) of the snapshot's node quaternions
-        let xi: Vec<[f64; 4]> = s["orientations"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .flat_map(|b| b.as_array().unwrap().iter())
-            .map(|q| std::array::from_fn(|k| q[k].as_f64().unwrap()))
-            .collect();
-        assert_eq!(xi.len(), nodes);
-        for (n, &[w, x, y, z]) in xi.iter().enumerate() {
-            let e2 = [2.0 * (x * y - w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + w * x)];
-            let h = half(n);
-            assert!((0..3).all(|k| (h[k] - w0 * e2[k]).abs() < 1e-9), "{plant}: e2 at node {n}");
-        }
-        // e2 is the second column of T(ξ) of the snapshot's node quaternions
-        let xi: Vec<[f64; 4]> = s["orientations"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .flat_map(|b| b.as_array().unwrap().iter())
-            .map(|q| std::array::from_fn(|k| q[k].as_f64().unwrap()))
-            .collect();
-        assert_eq!(xi.len(), nodes);
-        for (n, &[w, x, y, z]) in xi.iter().enumerate() {
-            let e2 = [2.0 * (x * y - w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + w * x)];
-            let h = half(n);
-            assert!((0..3).all(|k| (h[k] - w0 * e2[k]).abs() < 1e-9), "{plant}: e2 at node {n}");
         }
         let tip = half(nodes - 1);
         turned = turned.max(((tip[0] / w0).powi(2) + (tip[2] / w0).powi(2)).sqrt());
@@ -318,10 +317,13 @@ fn mpc_3d_ribbons(plant: &str) {
             }
         }
     }
-    // the plant's node positions and orientations are integrated side by side, so they agree
-    // to its discretisation (measured on this 8-element mesh: ≤ 2e-2); a wrong axis, node or
-    // beam would be O(1)
-    assert!(worst < 0.05, "{plant}: e2 · chord = {worst}");
+    // The ROM plant rebuilds its configuration from the strains: e2 · chord is a shear strain
+    // (measured 7.1e-5). The FE plant integrates node positions and orientations side by side;
+    // they agree with the strains to the spatial scheme's second-order mismatch (measured
+    // 1.8e-2 on this 8-element mesh, 4.9e-3 on 16, 1.3e-3 on 32; the verification case
+    // `intrinsic-beam/kinematic-compatibility`). A wrong axis, node or beam would be O(1).
+    let bound = if plant == "rom" { 1e-3 } else { 0.03 };
+    assert!(worst < bound, "{plant}: e2 · chord = {worst}");
     assert!(turned > 1e-3, "{plant}: the tip section's e2 leaves the y direction: {turned}");
     assert!(largest_force > 0.0, "{plant}: the sectional loads are recorded");
 }

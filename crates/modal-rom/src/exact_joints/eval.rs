@@ -89,6 +89,11 @@ pub(crate) struct Workspace {
     pub(super) colp: Vec<f64>,
     pub(super) tj: Vec<f64>,
     pub(super) dxd: Vec<Vector4<f64>>,
+    /// `y = L⁻ᵀ p` (`m`) and `H y` (`r`) of [`ExactJointsRom::apply_z`].
+    pub(super) py: Vec<f64>,
+    pub(super) hy: Vec<f64>,
+    /// `U(ω_b) − Ū(ω_a)` per joint.
+    pub(super) mjs: Vec<Matrix4<f64>>,
     pub(super) aac: Vec<f64>,
     pub(super) x1tmp: Vec<f64>,
     pub(super) phitmp: Vec<f64>,
@@ -193,6 +198,9 @@ impl Workspace {
             colp: zeros(m),
             tj: zeros(rmax),
             dxd: vec![Vector4::zeros(); joints.len()],
+            mjs: vec![Matrix4::zeros(); joints.len()],
+            py: zeros(m),
+            hy: zeros(r),
             aac: zeros(r * rmax),
             x1tmp: zeros(kk * rmax),
             phitmp: zeros(2 * r * rmax),
@@ -220,8 +228,10 @@ pub(super) fn joint_rate_matrix(rom: &ExactJointsRom, e: &[f64]) -> Matrix4<f64>
 }
 
 impl ExactJointsRom {
-    /// `Z(ξ)` and its factors into `ws` for the joint rotations in `x` (theory.md §10.4).
-    pub(crate) fn frame_into(&self, ws: &mut Workspace, x: &[f64]) -> Result<()> {
+    /// The factors of `Z(ξ)` into `ws` for the joint rotations in `x` (theory.md §10.4), and
+    /// with `with_z` the `na × m` matrix `Z` itself (the Jacobian's projections need it; the
+    /// right-hand side applies it through its factors, [`ExactJointsRom::apply_z`]).
+    pub(crate) fn frame_into(&self, ws: &mut Workspace, x: &[f64], with_z: bool) -> Result<()> {
         let (na, m) = (self.basis.n1(), self.n_p());
         let r = self.cons.n_rows();
         let rs = self.cons.support.nrows();
@@ -372,7 +382,7 @@ impl ExactJointsRom {
             right_solve_lt(&ws.l, m, &mut ws.tz[t], nt);
         }
         // Z = (Z0 − AᵀH) L⁻ᵀ, AᵀH = SᵀH_s + Σ E_jᵀ C_jᵀ H_j
-        {
+        if with_z {
             ws.z.copy_from_slice(self.z0_flat());
             let hv = view(&ws.h, r, m);
             gemm(
@@ -449,6 +459,39 @@ impl ExactJointsRom {
         }
     }
 
+    /// `q1 = Z p = Z0 y − Aᵀ(H y)` with `y = L⁻ᵀ p` (theory.md §10.4), from the factors of
+    /// [`ExactJointsRom::frame_into`]: `O(na m + m²)` without forming `Z`.
+    fn apply_z(&self, ws: &mut Workspace, p: &[f64]) {
+        let (na, m, r) = (self.basis.n1(), self.n_p(), self.cons.n_rows());
+        // Lᵀ y = p, back substitution (column i of L holds L_ki, k ≥ i)
+        let y = &mut ws.py;
+        y.copy_from_slice(p);
+        for i in (0..m).rev() {
+            let col = &ws.l[i * m..(i + 1) * m];
+            let s: f64 = col[i + 1..].iter().zip(&y[i + 1..]).map(|(a, b)| a * b).sum();
+            y[i] = (y[i] - s) / col[i];
+        }
+        gemv(&mut ws.hy, false, &ws.h, r, y, 1.0);
+        gemv(&mut ws.q1, false, self.z0_flat(), na, y, 1.0);
+        self.rows_t_times(&ws.c, &ws.hy, -1.0, &mut ws.q1, &mut ws.ktmp);
+    }
+
+    /// `Zᵀf1 = L⁻¹ (Z0ᵀ f1 − Hᵀ(A f1))` into `ws.ztf` (and `A f1` into `ws.af1`).
+    fn apply_z_t(&self, ws: &mut Workspace) {
+        let (na, m, r) = (self.basis.n1(), self.n_p(), self.cons.n_rows());
+        self.rows_times(&ws.c, &ws.f1, &mut ws.af1, &mut ws.ktmp);
+        let t = &mut ws.ztf;
+        gemv_t(t, false, self.z0_flat(), na, &ws.f1, 1.0);
+        gemv_t(t, true, &ws.h, r, &ws.af1, -1.0);
+        // L t = ·, forward substitution by columns
+        for k in 0..m {
+            let col = &ws.l[k * m..(k + 1) * m];
+            t[k] /= col[k];
+            let tk = t[k];
+            t[k + 1..].iter_mut().zip(&col[k + 1..]).for_each(|(a, b)| *a -= b * tk);
+        }
+    }
+
     /// Right-hand side into `f`, and with `jac = Some((jx, ju))` the exact Jacobians
     /// (theory.md §10.5); the state and input are checked by the caller.
     pub(crate) fn eval_into(
@@ -459,15 +502,15 @@ impl ExactJointsRom {
         f: &mut [f64],
         jac: Option<(&mut [f64], &mut [f64])>,
     ) -> Result<()> {
-        let (na, nb, m, m2) = (self.basis.n1(), self.basis.n2(), self.n_p(), self.n_p2());
+        let (nb, m, m2) = (self.basis.n2(), self.n_p(), self.n_p2());
         let r = self.cons.n_rows();
         let rs = self.cons.support.nrows();
         let rj = r - rs;
         let nj = self.n_joints();
-        self.frame_into(ws, x)?;
+        self.frame_into(ws, x, jac.is_some())?;
         let p = &x[..m];
         let p2 = &x[m..m + m2];
-        gemv(&mut ws.q1, false, &ws.z, na, p, 1.0);
+        self.apply_z(ws, p);
         if self.z2_identity {
             ws.q2.copy_from_slice(p2);
         } else {
@@ -501,7 +544,7 @@ impl ExactJointsRom {
             );
         }
         // ṗ = Zᵀf1 − K p
-        gemv_t(&mut ws.ztf, false, &ws.z, na, &ws.f1, 1.0);
+        self.apply_z_t(ws);
         let kp = &mut ws.mtmp2;
         kp.fill(0.0);
         skew_apply(&ws.v, &ws.wj, rj, p, kp, &mut ws.rtmp);

@@ -20,7 +20,7 @@ use crate::exact_joints::frame::{
     gemm, gemv, gemv_t, phi_apply, right_phi_t, skew_apply, view, view_mut,
 };
 use crate::exact_joints::model::{u_right, ExactJointsRom};
-use nalgebra::{Matrix4, Vector4};
+use nalgebra::Vector4;
 
 impl ExactJointsRom {
     /// The Jacobians into `jx` (`n × n`) and `ju` (`n × inputs`), column-major, after
@@ -135,13 +135,14 @@ impl ExactJointsRom {
             1.0,
         );
         for l in 0..m {
-            for i in 0..m {
-                if i < l {
-                    jx[l * n + i] -= ws.mm[i * m + l];
-                } else if i > l {
-                    jx[l * n + i] += ws.mm[l * m + i];
-                }
+            let col = &mut jx[l * n..l * n + m];
+            for (i, v) in col[..l].iter_mut().enumerate() {
+                *v -= ws.mm[i * m + l];
             }
+            col[l + 1..]
+                .iter_mut()
+                .zip(&ws.mm[l * m + l + 1..(l + 1) * m])
+                .for_each(|(v, w)| *v += w);
         }
         // Ξ = ∂ξ̇/∂p (joint and root rows)
         for (j, jr) in self.cons.joints.iter().enumerate() {
@@ -225,8 +226,7 @@ impl ExactJointsRom {
         let rj = r - rs;
         let nj = self.n_joints();
         let p = &x[..m];
-        // A f1, G A f1, P f1, E_j P f1, W p, ȦAᵀ
-        self.rows_times(&ws.c, &ws.f1, &mut ws.af1, &mut ws.ktmp);
+        // G A f1 (A f1 from the right-hand side), P f1, E_j P f1, W p, ȦAᵀ
         gemv(&mut ws.gf, false, &ws.g, r, &ws.af1, 1.0);
         ws.zc.copy_from_slice(&ws.f1);
         self.rows_t_times(&ws.c, &ws.gf, -1.0, &mut ws.zc, &mut ws.ktmp);
@@ -243,7 +243,9 @@ impl ExactJointsRom {
                 1.0,
             );
         }
-        let mjs: Vec<Matrix4<f64>> = (0..nj).map(|j| joint_rate_matrix(self, &ws.eq[j])).collect();
+        for j in 0..nj {
+            ws.mjs[j] = joint_rate_matrix(self, &ws.eq[j]);
+        }
         for (j, jr) in self.cons.joints.iter().enumerate() {
             let (rjj, kk, o) = (jr.rows, jr.e.nrows(), self.row_offsets[j]);
             // A_cᵀ-free pieces shared by the four c: G[:, rows j], ȦAᵀ G[:, rows j]
@@ -292,7 +294,7 @@ impl ExactJointsRom {
                 for i in 0..nj {
                     let mut d = joint_rate_matrix(self, &ws.eqc[i]) * ws.xi[i];
                     if i == j {
-                        d += mjs[j].column(c);
+                        d += ws.mjs[j].column(c);
                     }
                     ws.dxd[i] = d;
                     let oi = self.joint_offset(i);

@@ -426,7 +426,7 @@ impl ExactJointsRom {
     fn null_basis(&self, x: &[f64]) -> Result<Mat<f64>> {
         let (na, m) = (self.basis.n1(), self.n_p());
         with_workspace(self, |ws| {
-            self.frame_into(ws, x)?;
+            self.frame_into(ws, x, true)?;
             Ok(Mat::from_fn(na, m, |i, j| ws.z[j * na + i]))
         })
     }

@@ -130,9 +130,9 @@ impl<D: Dynamics> SqpSolver<D> {
             for i in 0..self.nx {
                 self.lin.hq[k][(i, i)] += lm;
             }
-            // gradient q_k = w Q (s_k − x_r) (+ P (s_N − x_r))
+            // gradient q_k = w Q (s_k − x_r,k) (+ P (s_N − x_r,N))
             self.tmp_x.copy_from(&self.s[k]);
-            self.tmp_x -= &self.ocp.x_ref;
+            self.tmp_x -= self.ocp.node_reference(k);
             gemv(self.lin.q[k].as_mut_slice(), &self.ocp.q, self.tmp_x.as_slice(), w, false);
             if k == n {
                 gemv(
@@ -184,7 +184,7 @@ impl<D: Dynamics> SqpSolver<D> {
         let mut j = 0.0;
         for k in 0..=n {
             self.tmp_x.copy_from(&s[k]);
-            self.tmp_x -= &self.ocp.x_ref;
+            self.tmp_x -= self.ocp.node_reference(k);
             gemv(self.tmp_x2.as_mut_slice(), &self.ocp.q, self.tmp_x.as_slice(), 1.0, false);
             j += 0.5 * self.ocp.node_weight(k) * self.tmp_x.dot(&self.tmp_x2);
             if k == n {

@@ -294,6 +294,31 @@ impl<D: Dynamics> SqpSolver<D> {
         Ok(())
     }
 
+    /// Sets per-node state references `x_r,0 … x_r,Nc` ([`Ocp::x_ref_nodes`]; each `nx`,
+    /// finite); an empty slice returns to the constant reference `x_r` at every node.
+    pub fn set_node_references(&mut self, x_refs: &[Vec<f64>]) -> Result<()> {
+        if x_refs.is_empty() {
+            self.ocp.x_ref_nodes.clear();
+            return Ok(());
+        }
+        check_dim("x_ref_nodes", self.n + 1, x_refs.len())?;
+        for r in x_refs {
+            check_dim("x_ref_nodes entry", self.nx, r.len())?;
+            if !all_finite(r) {
+                return Err(invalid(
+                    "x_ref_nodes",
+                    "non-finite entry",
+                    "references must be finite",
+                ));
+            }
+        }
+        self.ocp.x_ref_nodes.resize(self.n + 1, DVector::zeros(self.nx));
+        for (d, r) in self.ocp.x_ref_nodes.iter_mut().zip(x_refs) {
+            d.copy_from_slice(r);
+        }
+        Ok(())
+    }
+
     /// Sets the control bounds (validated; the controls are clamped into them).
     pub fn set_control_bounds(&mut self, u_min: &[f64], u_max: &[f64]) -> Result<()> {
         check_dim("u_min", self.nu, u_min.len())?;

@@ -5,6 +5,7 @@ use ocp_transcription::samples::{self, CartPole, LinearModel, ModalLike};
 use ocp_transcription::{Dynamics, Integrator, IntegratorKind, IntegratorSettings};
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed};
+use rand::Rng;
 
 const KINDS: [IntegratorKind; 3] =
     [IntegratorKind::Rk4, IntegratorKind::ImplicitMidpoint, IntegratorKind::LawsonRk4];
@@ -235,8 +236,8 @@ fn rom_like_model_has_the_rom_structure_and_exact_sensitivities() {
     let m = ModalLike::rom_like(24, 3, 60.0, 1.0, 5).unwrap();
     let n = m.nx();
     assert_eq!(n, 24);
-    let mut rng = ocp_transcription::samples::SplitMix64::new(9);
-    let x: Vec<f64> = (0..n).map(|_| rng.uniform(-0.3, 0.3)).collect();
+    let mut rng = ocp_transcription::samples::seeded(9);
+    let x: Vec<f64> = (0..n).map(|_| rng.random_range(-0.3..0.3)).collect();
     let u = [0.2, -0.4, 0.1];
     // xᵀN(x)x = 0: sums of ~100 products of size ≤ 30·0.3³, round-off ~1e-14
     assert!(m.nonlinear_power(&x).abs() < 1e-12, "{}", m.nonlinear_power(&x));
@@ -265,8 +266,8 @@ fn rom_like_model_has_the_rom_structure_and_exact_sensitivities() {
 fn rhs_and_jacobians_agree_with_separate_calls() {
     let m = ModalLike::rom_like(30, 4, 80.0, 0.5, 2).unwrap();
     let c = CartPole::default();
-    let mut rng = ocp_transcription::samples::SplitMix64::new(4);
-    let x: Vec<f64> = (0..30).map(|_| rng.uniform(-1.0, 1.0)).collect();
+    let mut rng = ocp_transcription::samples::seeded(4);
+    let x: Vec<f64> = (0..30).map(|_| rng.random_range(-1.0..1.0)).collect();
     let u = [0.3, -0.2, 0.9, -1.0];
     let check = |d: &dyn Dynamics, x: &[f64], u: &[f64]| {
         let (n, nu) = (d.nx(), d.nu());
@@ -292,16 +293,16 @@ fn rhs_and_jacobians_agree_with_separate_calls() {
 /// sensitivities to round-off (‖x‖ ≈ 1, tolerance 1e-12 relative; a missing term is O(1)).
 #[test]
 fn lawson_trial_with_the_model_remainder_matches_the_sensitivity_pass() {
-    use ocp_transcription::samples::{ModalLike, SplitMix64};
+    use ocp_transcription::samples::{seeded, ModalLike};
     let m = ModalLike::rom_like(61, 5, 175.0, 0.1, 7).unwrap();
     let (nx, nu) = (m.nx(), m.nu());
     let w = m.linear_part().unwrap();
-    let mut rng = SplitMix64::new(5);
+    let mut rng = seeded(5);
     let mut int =
         Integrator::new(&m, &IntegratorSettings::new(IntegratorKind::LawsonRk4, 16), 0.25).unwrap();
     for _ in 0..4 {
-        let x: Vec<f64> = (0..nx).map(|_| rng.uniform(-1.0, 1.0)).collect();
-        let u: Vec<f64> = (0..nu).map(|_| rng.uniform(-1.0, 1.0)).collect();
+        let x: Vec<f64> = (0..nx).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let u: Vec<f64> = (0..nu).map(|_| rng.random_range(-1.0..1.0)).collect();
         let (mut g, mut f) = (vec![f64::NAN; nx], vec![0.0; nx]);
         assert!(m.remainder(&x, &u, &mut g));
         m.rhs(&x, &u, &mut f);

@@ -4,4 +4,5 @@ mod adaptive;
 mod globalisation;
 mod hessian;
 mod integrators;
+mod reference;
 mod sqp;

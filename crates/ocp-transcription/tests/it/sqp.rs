@@ -8,7 +8,7 @@ use ocp_transcription::{
     Ocp, QpForm, SqpMode, SqpSettings, SqpSolver, SqpStatus,
 };
 
-fn lqr_problem() -> (LinearModel, Ocp) {
+pub(crate) fn lqr_problem() -> (LinearModel, Ocp) {
     let model = LinearModel::spring_chain(3, 2);
     let mut ocp = Ocp::new(6, 2, 3.0, 15).unwrap();
     ocp.r = DMatrix::identity(2, 2) * 0.5;
@@ -18,7 +18,7 @@ fn lqr_problem() -> (LinearModel, Ocp) {
 
 /// Discrete-time Riccati recursion on the integrator's own `A`, `B` with the OCP's
 /// trapezoidal node weights; returns the closed-loop states and controls from `x0`.
-fn riccati(
+pub(crate) fn riccati(
     model: &LinearModel,
     ocp: &Ocp,
     settings: &IntegratorSettings,
