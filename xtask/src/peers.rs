@@ -190,7 +190,8 @@ pub struct Solved {
     pub stats: SqpStats,
     /// Thread CPU seconds of the SQP solve (the linear MPC start excluded).
     pub cpu: f64,
-    /// Start: the linear MPC plan's nodes `s_0 … s_Nc` and controls `u_0 … u_{Nc−1}`.
+    /// Start the SQP iterated from: the linear MPC plan (or the `--start-from` point, or the
+    /// rollout the fallback made when the dynamics were not finite at the plan's nodes).
     pub start: Trajectory,
     /// Solution nodes and controls.
     pub solution: Trajectory,
