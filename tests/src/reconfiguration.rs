@@ -48,6 +48,13 @@ fn fold(text: &str, name: &str) -> CaseOutcome {
         s.energy_ratio_final,
         mpc::ENERGY_RATIO_LIMIT,
     ));
+    // every real-time QP solved (the 3D fold's QPs failed while the shooting integrator was
+    // unstable at a bent elbow: docs/mpc.md, "Reconfiguration")
+    out.push(Metric::at_most(
+        "samples whose SQP iteration was not accepted",
+        s.fallback_samples as f64,
+        0.0,
+    ));
     out.push(Metric::at_most("worst solve time (s, report)", s.solve_time_worst_s, f64::INFINITY));
     // contrast: the paper's model on the same scene
     let mut paper = control.controller.clone();

@@ -319,6 +319,12 @@ pub fn run_sweep(
 /// horizon, `Nc`, integrator, initial state) so that another solver can solve exactly the
 /// same problem.
 ///
+/// Either controller model: the paper's (14)–(29), or the exact-joints model (theory.md §10),
+/// whose problem is that of the closed loop's first sample ([`mpc::first_sample_exact`]: the
+/// FE state projected onto the exact-joints state, the joint commands' references at the
+/// shooting nodes' times). The export is the paper model's only (the exact-joints model has
+/// no export format): `export` with the exact-joints model is an error.
+///
 /// With `converge` (NMPC), the problem is solved to convergence from the linear MPC plan by a
 /// full SQP twice, with [`ocp_transcription::SqpSettings::converge`] (merit line search) and
 /// [`ocp_transcription::SqpSettings::converge_filter`] (KKT tolerance 1e-8, Gauss–Newton then
@@ -337,47 +343,101 @@ pub fn first_sample(
     converge: bool,
 ) -> Result<serde_json::Value> {
     let control = control_of(scene, overrides)?;
-    if control.controller.model != mpc::ModelKind::Paper {
-        bail!(
-            "{}: `flexmpc ocp` solves and exports the paper model's first sample only; \
-             model = {} runs in `flexmpc mpc` / `sweep`",
-            scene.file.display(),
-            control.controller.model.name()
-        );
-    }
     let setup = Setup::new(&control.scenario)
         .with_context(|| format!("setting up the controller of {}", scene.file.display()))?;
-    let problem = match export {
-        Some(dir) => {
-            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-            mpc::export_first_sample(&setup, control.omega0, &control.controller, dir)?
-        }
-        None => mpc::first_sample_problem(&setup, control.omega0, &control.controller)?,
-    };
-    let model = mpc::RomDynamics::new(&setup.rom)?;
-    let nu = problem.u_min.len();
-    let mut ocp = ocp_transcription::Ocp::new(
-        problem.x0.len(),
-        nu,
-        control.scenario.mpc.horizon,
-        control.scenario.mpc.intervals,
-    )?;
-    ocp.q = setup.weights.q.clone();
-    ocp.r = setup.weights.r.clone();
-    ocp.x_ref = setup.weights.x_ref.clone();
-    ocp.u_ref = nalgebra::DVector::from_vec(problem.u_ref.clone());
-    ocp.u_min = nalgebra::DVector::from_vec(problem.u_min.clone());
-    ocp.u_max = nalgebra::DVector::from_vec(problem.u_max.clone());
-    let rows = |u: &[nalgebra::DVector<f64>]| -> Vec<Vec<f64>> {
-        u.iter().map(|u| u.iter().copied().collect()).collect()
-    };
     let mut v = serde_json::json!({
         "omega0": control.omega0,
         "controller": control.controller.kind.name(),
-        "inputs": problem.inputs,
-        "n_state": problem.x0.len(),
+        "model": control.controller.model.name(),
         "export": export,
     });
+    let fields = match control.controller.model {
+        mpc::ModelKind::Paper => {
+            let problem = match export {
+                Some(dir) => {
+                    std::fs::create_dir_all(dir)
+                        .with_context(|| format!("creating {}", dir.display()))?;
+                    mpc::export_first_sample(&setup, control.omega0, &control.controller, dir)?
+                }
+                None => mpc::first_sample_problem(&setup, control.omega0, &control.controller)?,
+            };
+            let first = FirstSample {
+                weights: &setup.weights,
+                schedule: None,
+                x0: &problem.x0,
+                inputs: &problem.inputs,
+            };
+            solve_first(&control, mpc::RomDynamics::new(&setup.rom)?, &first, converge)?
+        }
+        mpc::ModelKind::ExactJoints => {
+            if let Some(dir) = export {
+                bail!(
+                    "{}: --export {} writes the paper model's problem (modal-rom's model export); \
+                     the exact-joints model has no export format: use --model paper, or drop \
+                     --export",
+                    scene.file.display(),
+                    dir.display()
+                );
+            }
+            let p = mpc::first_sample_exact(&setup, control.omega0, &control.controller)?;
+            let first = FirstSample {
+                weights: &p.weights,
+                schedule: p.schedule.as_ref(),
+                x0: &p.x0,
+                inputs: p.dynamics.rom().input_names(),
+            };
+            solve_first(&control, p.dynamics.clone(), &first, converge)?
+        }
+    };
+    if let (Some(m), Some(f)) = (v.as_object_mut(), fields.as_object()) {
+        for (k, x) in f {
+            m.insert(k.clone(), x.clone());
+        }
+    }
+    Ok(v)
+}
+
+/// The data of a first sample's problem on either model.
+struct FirstSample<'a> {
+    weights: &'a mpc::Weights,
+    schedule: Option<&'a mpc::ReferenceSchedule>,
+    x0: &'a [f64],
+    inputs: &'a [String],
+}
+
+/// Solves the first sample's problem on `model` ([`first_sample`]) and returns its fields.
+fn solve_first<D: ocp_transcription::Dynamics + Clone>(
+    control: &Control,
+    model: D,
+    first: &FirstSample<'_>,
+    converge: bool,
+) -> Result<serde_json::Value> {
+    let mpc_settings = &control.scenario.mpc;
+    let nu = model.nu();
+    let mut ocp = ocp_transcription::Ocp::new(
+        first.x0.len(),
+        nu,
+        mpc_settings.horizon,
+        mpc_settings.intervals,
+    )?;
+    ocp.q = first.weights.q.clone();
+    ocp.r = first.weights.r.clone();
+    ocp.x_ref = first.weights.x_ref.clone();
+    ocp.u_min = nalgebra::DVector::from_element(nu, -mpc_settings.u_max);
+    ocp.u_max = nalgebra::DVector::from_element(nu, mpc_settings.u_max);
+    if let Some(s) = first.schedule {
+        // the plan starts at t = 0: references at the nodes' times, as in the closed loop
+        ocp.x_ref = nalgebra::DVector::from_vec(s.at(0.0));
+        ocp.x_ref_nodes = s
+            .nodes(0.0, ocp.interval(), ocp.intervals)
+            .into_iter()
+            .map(nalgebra::DVector::from_vec)
+            .collect();
+    }
+    let rows = |u: &[nalgebra::DVector<f64>]| -> Vec<Vec<f64>> {
+        u.iter().map(|u| u.iter().copied().collect()).collect()
+    };
+    let head = serde_json::json!({ "inputs": first.inputs, "n_state": first.x0.len() });
     let fields = if converge && control.controller.kind == ControllerKind::Nmpc {
         use ocp_transcription::{Globalisation, SqpMode, SqpSettings, SqpSolver, SqpStatus, Start};
         let integrator = control.controller.integrator.clone();
@@ -389,11 +449,10 @@ pub fn first_sample(
             ..SqpSettings::default()
         };
         let mut lmpc = SqpSolver::new(model.clone(), ocp.clone(), lq)?;
-        lmpc.solve(&problem.x0)?;
+        lmpc.solve(first.x0)?;
         // the merit and the filter line search from the same start; the better result is kept
-        type Attempt =
-            (SqpSolver<mpc::RomDynamics>, ocp_transcription::SqpStats, &'static str, Start);
-        let mut best: Option<Attempt> = None;
+        type Attempt<D> = (SqpSolver<D>, ocp_transcription::SqpStats, &'static str, Start);
+        let mut best: Option<Attempt<D>> = None;
         let mut time = 0.0;
         for (name, settings) in [
             ("merit", SqpSettings::converge(integrator.clone())),
@@ -406,7 +465,7 @@ pub fn first_sample(
             for (d, s) in nmpc.controls_mut().iter_mut().zip(lmpc.controls()) {
                 d.copy_from(s);
             }
-            let (st, start) = nmpc.solve_with_fallback_starts(&problem.x0)?;
+            let (st, start) = nmpc.solve_with_fallback_starts(first.x0)?;
             time += st.time_total;
             if best.as_ref().is_none_or(|(_, b, _, _)| st.better_than(b)) {
                 best = Some((nmpc, st, name, start));
@@ -429,13 +488,12 @@ pub fn first_sample(
             "controls": rows(nmpc.controls()),
         })
     } else {
-        let mut ctrl = mpc::Controller::new(
-            model,
-            &setup.weights,
-            &control.scenario.mpc,
-            &control.controller,
-        )?;
-        let report = ctrl.step(0.0, &problem.x0)?;
+        let mut ctrl =
+            mpc::Controller::new(model, first.weights, mpc_settings, &control.controller)?;
+        if let Some(s) = first.schedule {
+            ctrl.set_reference_schedule(s.clone())?;
+        }
+        let report = ctrl.step(0.0, first.x0)?;
         let (states, controls) = ctrl.plan();
         let rti = report.status == "RealTimeIteration";
         let (cost, kkt) = if rti {
@@ -454,15 +512,17 @@ pub fn first_sample(
             "strategy": report.strategy,
             "iterations": report.iterations,
             "solve_time_s": report.solve_time,
+            "first_control": report.u,
             "controls": rows(controls),
         })
     };
-    if let (Some(m), Some(f)) = (v.as_object_mut(), fields.as_object()) {
+    let mut out = head;
+    if let (Some(m), Some(f)) = (out.as_object_mut(), fields.as_object()) {
         for (k, x) in f {
             m.insert(k.clone(), x.clone());
         }
     }
-    Ok(v)
+    Ok(out)
 }
 
 #[cfg(test)]

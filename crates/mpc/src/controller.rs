@@ -447,8 +447,8 @@ impl<D: Dynamics + Clone> Controller<D> {
         self.monitor = Some(monitor);
     }
 
-    /// Makes the reference of every plan the schedule's state at the plan's start time
-    /// (constant over the horizon; [`crate::reference`]).
+    /// Makes the reference of every plan the schedule's states at the times of the plan's
+    /// shooting nodes ([`crate::reference`]).
     pub fn set_reference_schedule(&mut self, schedule: ReferenceSchedule) -> Result<()> {
         let nx = self.predictor.nx();
         if schedule.at(0.0).len() != nx {
@@ -462,14 +462,18 @@ impl<D: Dynamics + Clone> Controller<D> {
         Ok(())
     }
 
-    /// Sets the reference of every solver to the schedule's at `start`.
+    /// Sets the node references of every solver to the schedule's at the times of a plan
+    /// starting at `start` (its constant reference to the one at `start`).
     fn apply_schedule(&mut self, start: f64) -> Result<()> {
         let Some(s) = &self.schedule else { return Ok(()) };
         let x_ref = s.at(start);
+        let nodes = s.nodes(start, self.interval(), self.mpc.intervals);
         let u_ref = vec![0.0; self.predictor.nu()];
-        self.lmpc.set_references(&x_ref, &u_ref)?;
-        for solver in [self.nmpc.as_mut(), self.relaxed.as_mut()].into_iter().flatten() {
+        for solver in
+            [Some(&mut self.lmpc), self.nmpc.as_mut(), self.relaxed.as_mut()].into_iter().flatten()
+        {
             solver.set_references(&x_ref, &u_ref)?;
+            solver.set_node_references(&nodes)?;
         }
         Ok(())
     }

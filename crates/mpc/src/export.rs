@@ -5,7 +5,10 @@
 
 use crate::controller::ControllerSettings;
 use crate::error::{invalid, MpcError, Result};
+use crate::exact_dynamics::{default_link_elastic_modes, ExactDynamics};
+use crate::reference::ReferenceSchedule;
 use crate::scenario::Setup;
+use crate::weights::Weights;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -118,4 +121,46 @@ pub fn export_first_sample(
         reason: e.to_string(),
     })?;
     Ok(p)
+}
+
+/// The first sample's problem on the exact-joints model (theory.md §10.8): the model, its
+/// weights, the reference schedule of the scenario's joint commands (`None` without
+/// commands) and the initial state, the FE state of a run with disturbance `omega0` projected
+/// onto the exact-joints state (what the closed loop's first sample starts from).
+#[derive(Clone, Debug)]
+pub struct ExactFirstSample {
+    /// The controller model.
+    pub dynamics: ExactDynamics,
+    /// Weights and (constant) reference.
+    pub weights: Weights,
+    /// The joint commands' references over time.
+    pub schedule: Option<ReferenceSchedule>,
+    /// Initial state `x(0)`.
+    pub x0: Vec<f64>,
+}
+
+/// [`ExactFirstSample`] of a run with disturbance `omega0` and the controller `controller`
+/// (its [`ControllerSettings::link_elastic_modes`]).
+pub fn first_sample_exact(
+    setup: &Setup,
+    omega0: f64,
+    controller: &ControllerSettings,
+) -> Result<ExactFirstSample> {
+    if !omega0.is_finite() {
+        return Err(invalid("omega0", omega0, "must be finite"));
+    }
+    let sc = &setup.scenario;
+    let elastic = controller
+        .link_elastic_modes
+        .unwrap_or_else(|| default_link_elastic_modes(setup.planar_axis.is_none()));
+    let (dynamics, weights) = ExactDynamics::for_setup(setup, elastic)?;
+    let w = Vector3::from_column_slice(&sc.omega_direction) * omega0;
+    let x_fe = sc.structure.rigid_rotation_state(w, Vector3::from_column_slice(&sc.center));
+    let x0 = dynamics.rom().project_fe(&x_fe, sc.structure.reference())?;
+    let schedule = if sc.references.is_empty() {
+        None
+    } else {
+        Some(dynamics.reference_schedule(setup, &weights)?)
+    };
+    Ok(ExactFirstSample { dynamics, weights, schedule, x0 })
 }

@@ -13,8 +13,11 @@
 //!
 //! (zero rate at both ends of the ramp, so the command itself excites no vibration step).
 //! The exact-joints cost (theory.md §10.8) measures the joint and root quaternion states
-//! against these references directly. Each plan's reference is the command at the plan's
-//! start (constant over the horizon).
+//! against these references directly. Each plan's reference follows the command over the
+//! horizon: the stage cost of the shooting node at time `t_0 + kΔt` (`t_0` the plan's start)
+//! measures the state against the command at that time ([`ReferenceSchedule::nodes`],
+//! `ocp_transcription::Ocp::x_ref_nodes`), so a plan anticipates the ramp instead of chasing
+//! the command of its start.
 
 use crate::error::{invalid, Result};
 use intrinsic_beam::rotation::{axis_angle, quat_mul};
@@ -161,6 +164,12 @@ impl ReferenceSchedule {
         }
         x
     }
+
+    /// The reference states at the `intervals + 1` shooting nodes of a plan starting at
+    /// `start` with intervals of `interval` s: `at(start + k·interval)`, `k = 0 … intervals`.
+    pub fn nodes(&self, start: f64, interval: f64, intervals: usize) -> Vec<Vec<f64>> {
+        (0..=intervals).map(|k| self.at(start + k as f64 * interval)).collect()
+    }
 }
 
 #[cfg(test)]
@@ -195,6 +204,33 @@ mod tests {
         assert!((quaternion_distance(&q, &(-expect)) - 0.0).abs() < 1e-6);
         let held = JointCommand { ramp_s: 0.0, ..c.clone() };
         assert!((held.angle_at(0.0) - 90f64.to_radians()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn node_references_follow_the_ramp() {
+        let c = JointCommand {
+            joint: "elbow".into(),
+            axis: [0.0, 0.0, 1.0],
+            angle_deg: 60.0,
+            ramp_s: 4.0,
+        };
+        let base = Vector4::new(1.0, 0.0, 0.0, 0.0);
+        let mut x_ref = vec![0.0; 9];
+        x_ref[5] = 1.0;
+        let s = ReferenceSchedule::new(x_ref.clone(), vec![(5, c.clone(), base)]).unwrap();
+        let nodes = s.nodes(1.0, 0.25, 24);
+        assert_eq!(nodes.len(), 25);
+        for (k, x) in nodes.iter().enumerate() {
+            let t = 1.0 + 0.25 * k as f64;
+            assert_eq!(x, &s.at(t), "node {k}");
+            assert_eq!(&x[..5], &x_ref[..5]);
+            let q = Vector4::from_column_slice(&x[5..9]);
+            assert!((quaternion_distance(&q, &base) - c.angle_at(t)).abs() < 1e-12);
+        }
+        // moving within the ramp, constant after it
+        assert!(nodes[1][8] > nodes[0][8]);
+        assert_eq!(nodes[12], nodes[24]);
+        assert!(ReferenceSchedule::new(x_ref, vec![(6, c, base)]).is_err());
     }
 
     #[test]

@@ -155,7 +155,8 @@ fn mpc_short_run_writes_csv_solver_log_and_report() {
 /// `flexmpc mpc --model exact-joints` on the paper's 2D scene (2 × 8 elements, 1 s): the
 /// NMPC on the exact-joints model runs on the FE plant, writes its summary into a folder of
 /// its own (`nmpc-exact-fe-w1`, next to the paper model's `nmpc-fe-w1`), and slows the spin;
-/// `ocp` and an LMPC with it are clear errors naming the model.
+/// `ocp` with it solves the closed loop's first sample (same first control); `ocp --export`
+/// and an LMPC with it are clear errors naming the model.
 #[test]
 fn mpc_with_the_exact_joints_model() {
     let (scene, out) = small_2d_scene("mpc-exact");
@@ -180,8 +181,25 @@ fn mpc_with_the_exact_joints_model() {
             .unwrap();
     assert_eq!(summary["v_ratio_final"], v["v_ratio_final"]);
     assert!(!dir.join("out/small-2d/nmpc-fe-w1").exists());
+    // the first sample alone: the closed loop's first control
+    let o = flexmpc()
+        .current_dir(&dir)
+        .args(["--json", "ocp"])
+        .arg(&scene)
+        .args(["--model", "exact-joints"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "stderr: {}", String::from_utf8_lossy(&o.stderr));
+    let first: serde_json::Value = serde_json::from_slice(&o.stdout).expect("stdout is only JSON");
+    assert_eq!(first["model"], "exact-joints");
+    let samples: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(folder.join("samples.json")).unwrap())
+            .unwrap();
+    assert_eq!(first["first_control"], samples[0]["u"], "{first}");
+    assert_eq!(first["controls"].as_array().unwrap().len(), 24, "Nc = 24");
+    assert!(first["cost"].as_f64().unwrap().is_finite(), "{first}");
     for (args, needle) in [
-        (vec!["ocp", "--model", "exact-joints"], "exact-joints"),
+        (vec!["ocp", "--model", "exact-joints", "--export", "ocp-exact"], "exact-joints"),
         (vec!["mpc", "--model", "exact-joints", "--controller", "lmpc"], "kind"),
     ] {
         let o = flexmpc().current_dir(&dir).args(&args[..1]).arg(&scene).args(&args[1..]).output();
