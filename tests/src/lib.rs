@@ -11,6 +11,7 @@
 
 pub mod beam;
 pub mod exact_joints;
+pub mod kick;
 pub mod modal;
 pub mod mpc;
 pub mod multibody;
@@ -110,6 +111,7 @@ pub fn all_cases() -> Vec<Case> {
     cases.extend(exact_joints::cases());
     cases.extend(ocp::cases());
     cases.extend(mpc::cases());
+    cases.extend(kick::cases());
     cases.extend(reconfiguration::cases());
     cases.extend(stress::cases());
     cases
