@@ -200,9 +200,10 @@ impl ControllerSettings {
     /// seconds per sample in 3D. Why not the real-time iteration: from the paper's 3D spin at
     /// ω0 ≥ 1 one Gauss–Newton step per sample never reaches the optimal plan (KKT residual
     /// ≈ 1 in every sample) and the elbow folds (88–180°), also with the exact-joints model
-    /// itself as the plant; the converged plans keep it within ≈ 20° and stabilise every
-    /// ω0 = 0.25, 0.375, …, 1.5 with the paper's weights (docs/mpc.md, "The exact-joints
-    /// model in the closed loop").
+    /// itself as the plant; the SQP's plans keep it within ≈ 20° and stabilise ω0 = 1 with the
+    /// paper's weights on both plants. Above, its QPs start failing in every sample from some
+    /// point on, and the loop is lost at some ω0 ≥ 1.125 (docs/mpc.md, "The exact-joints
+    /// model in the closed loop", for the measured range).
     pub fn exact_joints() -> Self {
         Self {
             model: ModelKind::ExactJoints,
