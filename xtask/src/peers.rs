@@ -18,7 +18,7 @@ usage: cargo xtask bench peers [--variant NAME]... [--scene 2d|3d] [--omega0 W].
                                [--keep DIR] [--start-from DIR]
 
 Solves the first sample's problem of scenes/paper-2d-mpc.toml (ω0 = 0.5, 1, 2, 2.5) and
-scenes/paper-3d-mpc.toml (ω0 = 0.5, 1, 1.5) to convergence (KKT tolerance 1e-8) from the
+scenes/paper-3d-mpc-paper-model.toml (ω0 = 0.5, 1, 1.5) to convergence (KKT tolerance 1e-8) from the
 linear MPC plan and prints status, iterations, KKT, cost J*, CPU time per solve and per
 iteration. --variant picks the globalisation (converge (default), merit, full, exact, ...);
 continuation-K solves along x0(α) = x_ref + α(x0 − x_ref), α = 1/K, 2/K, …, 1 with the
@@ -58,7 +58,11 @@ pub struct Problem {
 /// Builds the first-sample problem of `scene` (`2d` or `3d`) at `omega0` through the scene
 /// loader and the mpc crate's public API (the problem `flexmpc ocp --export` writes).
 pub fn problem(root: &Path, scene: &'static str, omega0: f64) -> Result<Problem> {
-    let file = root.join(format!("scenes/paper-{scene}-mpc.toml"));
+    // the paper model's problems: the 3D paper scene runs the exact-joints model
+    let file = match scene {
+        "3d" => root.join("scenes/paper-3d-mpc-paper-model.toml"),
+        _ => root.join(format!("scenes/paper-{scene}-mpc.toml")),
+    };
     let s = flexmpc::scene::load(&file).with_context(|| format!("loading {}", file.display()))?;
     let overrides = flexmpc::control::Overrides { omega0: Some(omega0), ..Default::default() };
     let control = flexmpc::control::control_of(&s, &overrides)?;
