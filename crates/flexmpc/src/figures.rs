@@ -263,12 +263,13 @@ const STRATEGIES: [(mpc::Strategy, &str, RGBColor); 5] = [
     (mpc::Strategy::Qp, "linear MPC (QP)", RGBColor(44, 160, 44)),
     (mpc::Strategy::Sqp, "NMPC (SQP)", RGBColor(31, 119, 180)),
     (mpc::Strategy::Relaxed, "NMPC relaxed retry", RGBColor(255, 127, 14)),
-    (mpc::Strategy::Fallback, "LMPC fallback", RGBColor(214, 39, 40)),
+    (mpc::Strategy::Fallback, "NMPC failed (fallback)", RGBColor(214, 39, 40)),
     (mpc::Strategy::Held, "LMPC held", RGBColor(148, 103, 189)),
 ];
 
 /// Which path produced each sample's control: one bar per sample over `[t, t + τs]` on the row
-/// of its strategy (QP, SQP, relaxed retry, LMPC fallback, held on the LMPC), so that the
+/// of its strategy (QP, SQP, relaxed retry, failed NMPC: the LMPC plan or, without the LMPC
+/// fallback, the NMPC's own iterate applied; held on the LMPC), so that the
 /// samples where the NMPC failed or was not tried stand out.
 pub fn strategy_timeline(path: &Path, result: &RunResult, sampling: f64) -> Result<()> {
     let root = SVGBackend::new(path, (1000, 300)).into_drawing_area();

@@ -332,15 +332,21 @@ fn print_mpc(o: &control::MpcOutput, cli: &Cli) -> Result<()> {
         s.max_orientation_deg,
         s.rigid_rate_ratio
     );
+    // without the LMPC fallback a failed sample applies the NMPC's own last iterate
+    let failed = if o.control.controller.fallback_to_lmpc {
+        format!("LMPC fallback {}", s.fallback_samples)
+    } else {
+        format!("not accepted {} (the NMPC's own iterate applied)", s.fallback_samples)
+    };
     say!(
-        "{} samples: solve time median {:.3} s, worst {:.3} s (τs = {} s); relaxed {}, LMPC \
-         fallback {} (then held {}; plans beyond the joint limit in {}); loop wall time {:.1} s{}",
+        "{} samples: solve time median {:.3} s, worst {:.3} s (τs = {} s); relaxed {}, {} \
+         (then held {}; plans beyond the joint limit in {}); loop wall time {:.1} s{}",
         o.result.samples.len(),
         s.solve_time_median_s,
         s.solve_time_worst_s,
         o.control.scenario.mpc.sampling,
         s.relaxed_samples,
-        s.fallback_samples,
+        failed,
         s.held_samples,
         s.joint_limit_samples,
         o.result.wall_time_s,

@@ -320,7 +320,7 @@ pub fn write(
         ),
         ("rigid rate at T / at 0", format!("{:.3e}", s.rigid_rate_ratio)),
         (
-            "samples: total / failed first attempts / relaxed / LMPC fallback / held / joint limit",
+            "samples: total / failed first attempts / relaxed / failed (fallback) / held / joint limit",
             format!(
                 "{} / {} / {} / {} / {} / {}",
                 result.samples.len(),

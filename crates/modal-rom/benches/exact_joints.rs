@@ -14,7 +14,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use modal_rom::exact_joints::{from_fields, paper_reduction, ExactJointsRom};
 use modal_rom::samples;
 use modal_rom::{
-    BasisSettings, LinkBasisSettings, ModalRom, ModeSelection, RomOptions, StructureModel,
+    BasisSettings, Input, LinkBasisSettings, ModalRom, ModeSelection, RomOptions, StructureModel,
 };
 use std::hint::black_box;
 
@@ -29,15 +29,17 @@ fn cpu_report(label: &str, calls: usize, mut f: impl FnMut()) {
     eprintln!("{label}: thread CPU {:.3e} s/call over {calls} calls", (c1 - c0) / calls as f64);
 }
 
-/// The exact-joints model on the per-link basis (rigid link motions + the lowest `elastic`
-/// constrained modes at 0° split per link), and the paper's model (with quaternion states)
-/// on the lowest constrained modes whose state count is closest to the exact-joints one.
-fn models(spatial: bool, elements: usize, elastic: usize) -> (ExactJointsRom, ModalRom) {
-    let none = ModeSelection::Lowest(1);
+/// The paper's 2D or 3D two-link sample (`elements` per link, modes `selection`) and its inputs.
+fn sample(
+    spatial: bool,
+    elements: usize,
+    selection: &ModeSelection,
+) -> (samples::Sample, Vec<Input>) {
+    let opts = RomOptions::default();
     let s = if spatial {
-        samples::paper_3d(elements, 0.0, true, &none, &RomOptions::default())
+        samples::paper_3d(elements, 0.0, true, selection, &opts)
     } else {
-        samples::paper_2d(elements, 0.0, true, &none, &RomOptions::default())
+        samples::paper_2d(elements, 0.0, true, selection, &opts)
     }
     .expect("paper sample");
     let inputs = if spatial {
@@ -46,6 +48,14 @@ fn models(spatial: bool, elements: usize, elastic: usize) -> (ExactJointsRom, Mo
         samples::inputs_2d(&s.structure, &s.model)
     }
     .expect("inputs");
+    (s, inputs)
+}
+
+/// The exact-joints model on the per-link basis (rigid link motions + the lowest `elastic`
+/// constrained modes at 0° split per link), and the paper's model (with quaternion states)
+/// on the lowest constrained modes whose state count is closest to the exact-joints one.
+fn models(spatial: bool, elements: usize, elastic: usize) -> (ExactJointsRom, ModalRom) {
+    let (s, inputs) = sample(spatial, elements, &ModeSelection::Lowest(1));
     let model: &StructureModel = &s.model;
     let modes = model.modes(&BasisSettings::default()).expect("modes");
     let sel = modes.select(&ModeSelection::Lowest(modes.n_rigid() + elastic)).expect("select");
@@ -102,20 +112,9 @@ fn exact_state(rom: &ExactJointsRom) -> Vec<f64> {
 /// Both models on the paper's mode set of the 2D / 3D scene.
 fn paper_basis_models(spatial: bool, elements: usize) -> (ExactJointsRom, ModalRom) {
     let opts = RomOptions::default();
-    let s = if spatial {
-        samples::paper_3d(elements, 0.0, true, &samples::paper_3d_selection(), &opts)
-    } else {
-        samples::paper_2d(elements, 0.0, true, &samples::paper_2d_selection(), &opts)
-    }
-    .expect("paper sample");
-    let inputs = if spatial {
-        samples::inputs_3d(&s.structure, &s.model)
-    } else {
-        samples::inputs_2d(&s.structure, &s.model)
-    }
-    .expect("inputs");
     let selection =
         if spatial { samples::paper_3d_selection() } else { samples::paper_2d_selection() };
+    let (s, inputs) = sample(spatial, elements, &selection);
     let modes = s.basis.select(&selection).expect("select");
     let exact = paper_reduction(&s.structure, &s.model, &modes, Some(&s.model.damping), &inputs)
         .expect("exact-joints model on the paper basis");
