@@ -11,7 +11,7 @@ use crate::scenario::{ratio, Setup};
 use crate::validity::JointMonitor;
 use crate::weights::ControlGrid;
 use intrinsic_beam::Kinematics;
-use nalgebra::{Vector3, Vector4};
+use nalgebra::Vector4;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
@@ -342,8 +342,7 @@ pub fn run(
     ratio("output_interval per duration", sc.duration, sc.output_interval)?;
     let steps = ratio("plant.dt per output_interval", sc.output_interval, sc.plant.dt)?;
     ratio("output_interval per snapshot", sc.snapshot_interval, sc.output_interval)?;
-    let omega = Vector3::from_column_slice(&sc.omega_direction) * omega0;
-    let x0 = sc.structure.rigid_rotation_state(omega, Vector3::from_column_slice(&sc.center));
+    let x0 = sc.disturbed_state(omega0);
     let mut plant = SimPlant::fe(&sc.structure, sc.plant, steps, &sc.inputs, &x0)?;
     if plant_kind == PlantKind::Rom && controller.model == ModelKind::Paper {
         let (obs, _) = observe(setup, &plant, false, 0.0)?;
@@ -547,8 +546,7 @@ pub fn open_loop(
         return Err(invalid(format!("inputs[{k}] length"), u.len(), format!("must be {nu}")));
     }
     let steps = ratio("plant.dt per output_interval", sc.output_interval, sc.plant.dt)?;
-    let omega = Vector3::from_column_slice(&sc.omega_direction) * omega0;
-    let x0 = sc.structure.rigid_rotation_state(omega, Vector3::from_column_slice(&sc.center));
+    let x0 = sc.disturbed_state(omega0);
     let mut plant = SimPlant::fe(&sc.structure, sc.plant, steps, &sc.inputs, &x0)?;
     if plant_kind == PlantKind::Rom {
         let (obs, _) = observe(setup, &plant, false, 0.0)?;

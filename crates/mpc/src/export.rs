@@ -9,7 +9,6 @@ use crate::exact_dynamics::{default_link_elastic_modes, ExactDynamics};
 use crate::reference::ReferenceSchedule;
 use crate::scenario::Setup;
 use crate::weights::Weights;
-use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -64,8 +63,7 @@ pub fn first_sample_problem(
         return Err(invalid("omega0", omega0, "must be finite"));
     }
     let sc = &setup.scenario;
-    let w = Vector3::from_column_slice(&sc.omega_direction) * omega0;
-    let x0 = sc.structure.rigid_rotation_state(w, Vector3::from_column_slice(&sc.center));
+    let x0 = sc.disturbed_state(omega0);
     let xi: Vec<[f64; 4]> = sc
         .structure
         .reference()
@@ -154,8 +152,7 @@ pub fn first_sample_exact(
         .link_elastic_modes
         .unwrap_or_else(|| default_link_elastic_modes(setup.planar_axis.is_none()));
     let (dynamics, weights) = ExactDynamics::for_setup(setup, elastic)?;
-    let w = Vector3::from_column_slice(&sc.omega_direction) * omega0;
-    let x_fe = sc.structure.rigid_rotation_state(w, Vector3::from_column_slice(&sc.center));
+    let x_fe = sc.disturbed_state(omega0);
     let x0 = dynamics.rom().project_fe(&x_fe, sc.structure.reference())?;
     let schedule = if sc.references.is_empty() {
         None

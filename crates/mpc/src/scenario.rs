@@ -10,7 +10,7 @@ use intrinsic_beam::Section;
 use modal_rom::{BasisSettings, ModalRom, ModeSelection, RomOptions, StructureModel};
 use multibody_constraints::Structure;
 use multibody_constraints::{samples, PlantSettings};
-use nalgebra::Vector4;
+use nalgebra::{Vector3, Vector4};
 
 /// A closed-loop stabilisation scenario (paper §5.2–5.3).
 #[derive(Clone, Debug)]
@@ -206,6 +206,13 @@ impl Scenario {
 }
 
 impl Scenario {
+    /// The FE plant's initial state of a run with disturbance `omega0`: the undeformed
+    /// structure in rigid rotation at `omega0 · omega_direction` about `center`.
+    pub fn disturbed_state(&self, omega0: f64) -> Vec<f64> {
+        let omega = Vector3::from_column_slice(&self.omega_direction) * omega0;
+        self.structure.rigid_rotation_state(omega, Vector3::from_column_slice(&self.center))
+    }
+
     /// Each command valid (errors name `references[i].<field>`), on a joint or support of the
     /// structure, at most one per joint.
     fn validate_references(&self) -> Result<()> {
