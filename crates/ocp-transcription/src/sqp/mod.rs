@@ -360,22 +360,11 @@ impl<D: Dynamics> SqpSolver<D> {
         Ok(())
     }
 
-    /// Cold start by simulation: `s_0 = x0`, `s_{k+1} = Φ(s_k, u)` with the constant control `u`.
+    /// Cold start by simulation: `s_0 = x0`, `s_{k+1} = Φ(s_k, u)` with the constant control `u`
+    /// (clamped to the bounds), multipliers zero.
     pub fn initialize_by_simulation(&mut self, x0: &[f64], u: &[f64]) -> Result<()> {
         self.initialize_constant(x0, u)?;
-        for k in 0..self.n {
-            let (head, tail) = self.s.split_at_mut(k + 1);
-            let c = self.integrators[0].choose_substeps(&self.model, head[k].as_slice(), u, None);
-            self.integrators[0].set_substeps(c)?;
-            self.counts[k] = c;
-            self.integrators[0].integrate(
-                &self.model,
-                head[k].as_slice(),
-                self.u[k].as_slice(),
-                tail[0].as_mut_slice(),
-            )?;
-        }
-        Ok(())
+        self.initialize_by_rollout(x0)
     }
 
     /// Cold start by rolling out the current controls: `s_0 = x0`, `s_{k+1} = Φ(s_k, u_k)`,

@@ -7,7 +7,6 @@ use super::{
 use crate::dynamics::Dynamics;
 use crate::error::{check_dim, invalid, Result};
 use crate::la::{all_finite, norm_inf};
-use crate::qp::QpFailure;
 use std::time::Instant;
 
 /// The start a [`SqpSolver::solve_with_fallback_starts`] ended up using.
@@ -112,12 +111,8 @@ impl<D: Dynamics> SqpSolver<D> {
             }
             let qp_iters = match self.solve_qp_with_recovery() {
                 Ok(q) => q,
-                Err(QpFailure::Infeasible) => {
-                    status = SqpStatus::QpInfeasible;
-                    break;
-                }
-                Err(QpFailure::Failed) => {
-                    status = SqpStatus::QpFailed;
+                Err(f) => {
+                    status = f.status();
                     break;
                 }
             };
@@ -135,12 +130,8 @@ impl<D: Dynamics> SqpSolver<D> {
             if hybrid && ((self.exact_phase && t != Some(1.0)) || t.is_none()) {
                 t = match self.levenberg_marquardt_retries(it == 0, t) {
                     Ok(t) => t,
-                    Err(QpFailure::Infeasible) => {
-                        status = SqpStatus::QpInfeasible;
-                        break;
-                    }
-                    Err(QpFailure::Failed) => {
-                        status = SqpStatus::QpFailed;
+                    Err(f) => {
+                        status = f.status();
                         break;
                     }
                 };
