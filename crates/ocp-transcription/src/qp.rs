@@ -112,16 +112,6 @@ pub(crate) enum QpFailure {
     Failed,
 }
 
-impl QpFailure {
-    /// The SQP status a failed QP ends the solve with.
-    pub(crate) fn status(self) -> crate::SqpStatus {
-        match self {
-            Self::Infeasible => crate::SqpStatus::QpInfeasible,
-            Self::Failed => crate::SqpStatus::QpFailed,
-        }
-    }
-}
-
 /// Dense condensing workspace (`Δs = G Δu + g`).
 pub(crate) struct Condenser {
     n: usize,

@@ -7,6 +7,7 @@ use super::{
 use crate::dynamics::Dynamics;
 use crate::error::{check_dim, invalid, Result};
 use crate::la::{all_finite, norm_inf};
+use crate::qp::QpFailure;
 use std::time::Instant;
 
 /// The start a [`SqpSolver::solve_with_fallback_starts`] ended up using.
@@ -180,5 +181,15 @@ impl<D: Dynamics> SqpSolver<D> {
         self.stats.integrator_calls = self.integrator_calls() - calls0;
         self.stats.time_total = start.elapsed().as_secs_f64();
         Ok(self.stats)
+    }
+}
+
+impl QpFailure {
+    /// The SQP status a failed QP ends the solve with.
+    fn status(self) -> SqpStatus {
+        match self {
+            Self::Infeasible => SqpStatus::QpInfeasible,
+            Self::Failed => SqpStatus::QpFailed,
+        }
     }
 }
