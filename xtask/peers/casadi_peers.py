@@ -145,6 +145,173 @@ def nlp(meta, prob, arr):
     return {"x": ca.vertcat(*w), "f": j, "g": ca.vertcat(*g)}, lbw, ubw
 
 
+def sensitivities(meta, prob, arr):
+    """Phi and its Jacobian [A B] = dPhi/d(x, u) as MX functions of dense matrix products.
+
+    The forward sensitivities are propagated through the Lawson RK4 substeps with the
+    recursion of the integrator itself (X = dx/d(x0, u), K_i = dg/dq(y_i) Y_i + [0 dg/du]),
+    the scheme flexmpc integrates; the remainder g and its Jacobian dg/dq are scalar (SX)
+    functions called inside. Differentiating the expanded scalar graph instead would give
+    (nx + nu) times the graph of Phi as straight-line code (tens of millions of operations at
+    the 3D sizes), too large to compile.
+    """
+    gfun, qs, us = remainder(meta, prob, arr)
+    nx, nu = prob["nx"], prob["nu"]
+    gq = ca.Function("gq", [qs, us], [ca.jacobian(gfun(qs, us), qs)])
+    gu = ca.Function("gu", [qs, us], [ca.jacobian(gfun(qs, us), us)])
+    bu = ca.sparsify(ca.horzcat(ca.DM(nx, nx), gu(np.zeros(nx), np.zeros(nu))))
+    e = sparse(prob["lawson_e"])
+    n = prob["substeps"]
+    h = prob["interval"] / n
+    x0 = ca.MX.sym("x", nx)
+    u = ca.MX.sym("u", nu)
+    x = x0
+    xs = ca.MX(ca.horzcat(ca.DM.eye(nx), ca.DM(nx, nu)))
+
+    def stage(y, ys):
+        return gfun(y, u), ca.mtimes(gq(y, u), ys) + bu
+
+    for _ in range(n):
+        k1, k1s = stage(x, xs)
+        ex, exs = ca.mtimes(e, x), ca.mtimes(e, xs)
+        ek1, ek1s = ca.mtimes(e, k1), ca.mtimes(e, k1s)
+        k2, k2s = stage(ex + 0.5 * h * ek1, exs + 0.5 * h * ek1s)
+        k3, k3s = stage(ex + 0.5 * h * k2, exs + 0.5 * h * k2s)
+        k4, k4s = stage(ca.mtimes(e, ex + h * k3), ca.mtimes(e, exs + h * k3s))
+        x = ca.mtimes(e, ex + h / 6.0 * ek1 + h / 3.0 * (k2 + k3)) + h / 6.0 * k4
+        xs = ca.mtimes(e, exs + h / 6.0 * ek1s + h / 3.0 * (k2s + k3s)) + h / 6.0 * k4s
+    return ca.Function("Phi", [x0, u], [x]), ca.Function("PhiS", [x0, u], [x, xs])
+
+
+def gauss_newton_nlp(meta, prob, arr, jit):
+    """The same NLP for `sqpmethod`: s_0 fixed by its bounds (lbx = ubx = x0) instead of the
+    constraint s_0 = x0, constraints the gaps Phi(s_k, u_k) - s_{k+1} in stage order (the
+    [gap_0 gap_1 ...] layout HPIPM reads), the cost 1/2 (w - w_ref)' H (w - w_ref) with the
+    constant block-diagonal H of the trapezoidal weights, and the Gauss-Newton Hessian of the
+    Lagrangian sigma H (constraint curvature dropped; the cost is quadratic in w, so this is
+    the Gauss-Newton Hessian of its residual sum of squares). Returns the NLP, the explicit
+    derivative functions and the bounds."""
+    nx, nu, nc = prob["nx"], prob["nu"], prob["intervals"]
+    dt = prob["interval"]
+    phi, phis = sensitivities(meta, prob, arr)
+    qw, rw, pw = (np.array(prob[k]) for k in ("q", "r", "terminal"))
+    blocks, wref, lbw, ubw = [], [], [], []
+    for k in range(nc + 1):
+        c = 0.5 * dt if k in (0, nc) else dt
+        blocks.append(c * qw + (pw if k == nc else 0.0))
+        wref += prob["x_ref"]
+        lbw += prob["x0"] if k == 0 else [-np.inf] * nx
+        ubw += prob["x0"] if k == 0 else [np.inf] * nx
+        if k < nc:
+            blocks.append(dt * rw)
+            wref += prob["u_ref"]
+            lbw += prob["u_min"]
+            ubw += prob["u_max"]
+    hess = ca.sparsify(ca.diagcat(*[ca.DM(b) for b in blocks]))
+    nw = hess.shape[0]
+    w = ca.MX.sym("w", nw)
+    p = ca.MX.sym("p", 0)
+    m = ca.reshape(w[: nc * (nx + nu)], nx + nu, nc)
+    s, uu = m[:nx, :], m[nx:, :]
+    snext = ca.horzcat(m[:nx, 1:], w[nc * (nx + nu):])
+    dw = w - np.array(wref)
+    hdw = ca.mtimes(hess, dw)
+    f = 0.5 * ca.dot(dw, hdw)
+    g = ca.vec(phi.map(nc)(s, uu) - snext)
+    xn, sens = phis.map(nc)(s, uu)
+    gaps = ca.vec(xn - snext)
+    minus_i = ca.MX(-ca.DM.eye(nx))
+    rows = []
+    for k in range(nc):
+        ab = sens[:, k * (nx + nu):(k + 1) * (nx + nu)]
+        left = k * (nx + nu)
+        right = nw - left - (nx + nu) - nx
+        rows.append(ca.horzcat(ca.MX(nx, left), ab, minus_i, ca.MX(nx, right)))
+    jac = ca.vertcat(*rows)
+    jopts = dict(jit)
+    jac_fg = ca.Function("nlp_jac_fg", [w, p], [f, hdw, gaps, jac], ["x", "p"],
+                         ["f", "grad_f_x", "g", "jac_g_x"], jopts)
+    lam_f = ca.MX.sym("lam_f")
+    lam_g = ca.MX.sym("lam_g", nc * nx)
+    hess_lag = ca.Function("nlp_hess_l", [w, p, lam_f, lam_g], [lam_f * ca.MX(hess)],
+                           ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
+    return {"x": w, "p": p, "f": f, "g": g}, jac_fg, hess_lag, lbw, ubw
+
+
+def sqpmethod(meta, prob, arr, w0, qpsol):
+    """Solves the NLP with CasADi's `sqpmethod`, Gauss-Newton Hessian, `qpsol`, every NLP
+    function generated as C and compiled by gcc -O2 before the solve."""
+    nx, nu, nc = prob["nx"], prob["nu"], prob["intervals"]
+    jit = {"jit": True, "compiler": "shell", "jit_cleanup": True,
+           "jit_options": {"flags": ["-O2"], "verbose": False}}
+    c0, t0, ch0 = time.process_time(), time.perf_counter(), children_cpu()
+    problem, jac_fg, hess_lag, lbw, ubw = gauss_newton_nlp(meta, prob, arr, jit)
+    qopts = {"printLevel": "none", "error_on_fail": False} if qpsol == "qpoases" else {}
+    if qpsol == "hpipm":
+        qopts = {"N": nc, "nx": [nx] * (nc + 1), "nu": [nu] * nc + [0],
+                 "ng": [0] * (nc + 1), "error_on_fail": False,
+                 "hpipm": {"iter_max": 200, "res_g_max": 1e-12, "res_b_max": 1e-12,
+                           "res_d_max": 1e-12, "res_m_max": 1e-12, "warm_start": 0}}
+    opts = dict(jit)
+    opts.update({
+        "hess_lag": hess_lag,
+        "jac_fg": jac_fg,
+        "qpsol": qpsol,
+        "qpsol_options": qopts,
+        "max_iter": 200,
+        "tol_pr": 1e-8,
+        "tol_du": 1e-8,
+        "print_header": False,
+        "print_iteration": os.environ.get("PEERS_LOG") is not None,
+        "print_status": False,
+        "print_time": False,
+        "error_on_fail": False,
+    })
+    solver = ca.nlpsol("sqpmethod", "sqpmethod", problem, opts)
+    build_cpu = time.process_time() - c0 + children_cpu() - ch0
+    build_wall = time.perf_counter() - t0
+    ng = nc * nx
+    c0, t0 = time.process_time(), time.perf_counter()
+    sol = solver(x0=w0, lbx=lbw, ubx=ubw, lbg=np.zeros(ng), ubg=np.zeros(ng))
+    cpu, wall = time.process_time() - c0, time.perf_counter() - t0
+    st = solver.stats()
+    if os.environ.get("PEERS_LOG") is not None:
+        print({k: v for k, v in st.items() if k.startswith("t_") or k.startswith("n_")},
+              file=sys.stderr)
+    its = st.get("iterations", {})
+    last = (lambda k: float(its[k][-1]) if its and its.get(k) else float("nan"))
+    return sol, {
+        "qpsol": qpsol,
+        "status": st.get("return_status", "?"),
+        "success": bool(st.get("success", False)),
+        "cost": float(sol["f"]),
+        "iterations": int(st.get("iter_count", 0)),
+        "inf_pr": last("inf_pr"),
+        "inf_du": last("inf_du"),
+        "cpu_s": cpu,
+        "wall_s": wall,
+        "build_cpu_s": build_cpu,
+        "build_wall_s": build_wall,
+    }
+
+
+def children_cpu():
+    t = os.times()
+    return t.children_user + t.children_system
+
+
+def unstack(prob, w):
+    nx, nu, nc = prob["nx"], prob["nu"], prob["intervals"]
+    states, controls, i = [], [], 0
+    for k in range(nc + 1):
+        states.append(w[i:i + nx].tolist())
+        i += nx
+        if k < nc:
+            controls.append(w[i:i + nu].tolist())
+            i += nu
+    return states, controls
+
+
 def stack(prob, states, controls):
     nc = prob["intervals"]
     v = []
@@ -155,16 +322,9 @@ def stack(prob, states, controls):
     return np.array(v)
 
 
-def main():
-    d = sys.argv[1]
-    meta, prob, arr = load(d)
-    problem, lbw, ubw = nlp(meta, prob, arr)
+def ipopt(problem, lbw, ubw, w0):
+    """IPOPT with the exact Hessian of the Lagrangian (AD of the MX graph), tol 1e-10."""
     ng = problem["g"].shape[0]
-    fg = ca.Function("fg", [problem["x"]], [problem["f"], problem["g"]])
-    jf, gf = fg(stack(prob, "flexmpc_states", "flexmpc_controls"))
-    jf = float(jf)
-    check_cost = abs(jf - prob["flexmpc_cost"]) / abs(prob["flexmpc_cost"])
-    check_def = float(np.max(np.abs(np.array(gf))))
     opts = {
         "ipopt.tol": 1e-10,
         "ipopt.print_level": 0,
@@ -173,38 +333,63 @@ def main():
         "ipopt.hessian_approximation": "exact",
     }
     solver = ca.nlpsol("ipopt", "ipopt", problem, opts)
-    w0 = stack(prob, "start_states", "start_controls")
     c0, t0 = time.process_time(), time.perf_counter()
     sol = solver(x0=w0, lbx=lbw, ubx=ubw, lbg=np.zeros(ng), ubg=np.zeros(ng))
     cpu, wall = time.process_time() - c0, time.perf_counter() - t0
     st = solver.stats()
     its = st.get("iterations", {})
-    wopt = np.array(sol["x"]).ravel()
-    nx, nu, nc = prob["nx"], prob["nu"], prob["intervals"]
-    states, controls, i = [], [], 0
-    for k in range(nc + 1):
-        states.append(wopt[i:i + nx].tolist())
-        i += nx
-        if k < nc:
-            controls.append(wopt[i:i + nu].tolist())
-            i += nu
-    with open(os.path.join(d, "ipopt_solution.json"), "w") as f:
+    return sol, {
+        "status": st["return_status"],
+        "cost": float(sol["f"]),
+        "iterations": int(st["iter_count"]),
+        "inf_pr": float(its["inf_pr"][-1]) if its else float("nan"),
+        "inf_du": float(its["inf_du"][-1]) if its else float("nan"),
+        "cpu_s": cpu,
+        "wall_s": wall,
+    }
+
+
+def write_solution(d, name, prob, sol, status):
+    states, controls = unstack(prob, np.array(sol["x"]).ravel())
+    with open(os.path.join(d, name), "w") as f:
         json.dump({"states": states, "controls": controls, "cost": float(sol["f"]),
-                   "status": st["return_status"]}, f)
+                   "status": status}, f)
+
+
+def main():
+    args = sys.argv[1:]
+    d = args[0]
+    peers = ["sqpmethod", "ipopt"]
+    qpsol = "qpoases"
+    rest = args[1:]
+    while rest:
+        a = rest.pop(0)
+        if a == "--only":
+            peers = rest.pop(0).split(",")
+        elif a == "--qpsol":
+            qpsol = rest.pop(0)
+        else:
+            sys.exit(f"unknown argument {a}")
+    meta, prob, arr = load(d)
+    problem, lbw, ubw = nlp(meta, prob, arr)
+    fg = ca.Function("fg", [problem["x"]], [problem["f"], problem["g"]])
+    jf, gf = fg(stack(prob, "flexmpc_states", "flexmpc_controls"))
+    jf = float(jf)
     out = {
         "check_cost": jf,
-        "check_cost_rel": check_cost,
-        "check_defect": check_def,
-        "ipopt": {
-            "status": st["return_status"],
-            "cost": float(sol["f"]),
-            "iterations": int(st["iter_count"]),
-            "inf_pr": float(its["inf_pr"][-1]) if its else float("nan"),
-            "inf_du": float(its["inf_du"][-1]) if its else float("nan"),
-            "cpu_s": cpu,
-            "wall_s": wall,
-        },
+        "check_cost_rel": abs(jf - prob["flexmpc_cost"]) / abs(prob["flexmpc_cost"]),
+        "check_defect": float(np.max(np.abs(np.array(gf)))),
     }
+    w0 = stack(prob, "start_states", "start_controls")
+    if "sqpmethod" in peers:
+        sol, out["sqpmethod"] = sqpmethod(meta, prob, arr, w0, qpsol)
+        # the optimum in IPOPT's NLP (constraint s_0 = x0 included)
+        _, gs = fg(sol["x"])
+        out["sqpmethod"]["max_defect"] = float(np.max(np.abs(np.array(gs))))
+        write_solution(d, "sqpmethod_solution.json", prob, sol, out["sqpmethod"]["status"])
+    if "ipopt" in peers:
+        sol, out["ipopt"] = ipopt(problem, lbw, ubw, w0)
+        write_solution(d, "ipopt_solution.json", prob, sol, out["ipopt"]["status"])
     print(json.dumps(out).replace("NaN", "null"))
 
 

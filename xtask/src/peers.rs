@@ -1,8 +1,9 @@
 //! `cargo xtask bench peers`: the first-sample optimal control problems of the paper's scenes
 //! (`scenes/paper-{2d,3d}-mpc.toml` at several ω0) solved to convergence by flexmpc's SQP
 //! from the linear MPC plan, with iterations, KKT residual, cost and time per solve and per
-//! iteration (thread CPU time), and the same problems solved by CasADi (IPOPT with the exact
-//! Hessian, `sqpmethod` with Gauss–Newton) when a `python3` with `casadi` is present.
+//! iteration (thread CPU time), and the same problems solved by CasADi (`sqpmethod` with the
+//! Gauss–Newton Hessian and compiled NLP functions, IPOPT with the exact Hessian) when a
+//! `python3` with `casadi` is present.
 
 use anyhow::{bail, Context, Result};
 use mpc::RomDynamics;
@@ -14,8 +15,8 @@ use std::path::{Path, PathBuf};
 
 const USAGE: &str = "\
 usage: cargo xtask bench peers [--variant NAME]... [--scene 2d|3d] [--omega0 W]...
-                               [--python PATH | --no-casadi] [--log]
-                               [--keep DIR] [--start-from DIR]
+                               [--python PATH | --no-casadi] [--peers LIST] [--qpsol NAME]
+                               [--log] [--keep DIR] [--start-from DIR]
 
 Solves the first sample's problem of scenes/paper-2d-mpc.toml (ω0 = 0.5, 1, 2, 2.5) and
 scenes/paper-3d-mpc-paper-model.toml (ω0 = 0.5, 1, 1.5) to convergence (KKT tolerance 1e-8) from the
@@ -29,11 +30,15 @@ converge-rollout / converge-filter-rollout start from the plan's controls rolled
 
 When --python PATH is given, or `python3` can `import casadi`, each problem is exported to a
 temporary directory (modal model, `problem.json` with the OCP data, the Lawson propagator,
-the start and flexmpc's solution) and solved by xtask/peers/casadi_peers.py with IPOPT
-(exact Hessian) from the same start; a second table compares both (the first --variant).
+the start and flexmpc's solution) and solved by xtask/peers/casadi_peers.py from the same
+start with CasADi's `sqpmethod` (Gauss–Newton Hessian, QP solver --qpsol, default qpoases;
+NLP functions generated as C and compiled with gcc -O2 before the solve) and with IPOPT
+(exact Hessian); a second table compares them with the first --variant (CPU time ratios
+per solve and per iteration). --peers sqpmethod,ipopt (default both) picks the peers; gcc
+must be on PATH for sqpmethod.
 --keep DIR writes each problem's export to DIR/SCENE-W and keeps it (with --no-casadi
 only the export is written; `python casadi_peers.py DIR/SCENE-W` then runs the peer alone
-and writes its solution to DIR/SCENE-W/ipopt_solution.json). --start-from DIR starts flexmpc
+and writes the solutions to DIR/SCENE-W/{sqpmethod,ipopt}_solution.json). --start-from DIR starts flexmpc
 from DIR/SCENE-W/ipopt_solution.json instead of the linear MPC plan (does the optimum the
 peer found stay a KKT point of flexmpc's NLP?).";
 
@@ -412,11 +417,21 @@ fn find_python(explicit: Option<PathBuf>) -> std::result::Result<PathBuf, String
     }
 }
 
+/// Whether `gcc` (CasADi's `shell` JIT compiler for the generated C code) runs.
+fn find_gcc() -> std::result::Result<(), String> {
+    match std::process::Command::new("gcc").arg("--version").output() {
+        Ok(o) if o.status.success() => Ok(()),
+        Ok(_) => Err("`gcc --version` failed".into()),
+        Err(e) => Err(format!("cannot run `gcc`: {e}")),
+    }
+}
+
 /// Runs the CasADi peer on an exported problem; returns its JSON report.
-fn run_casadi(py: &Path, script: &Path, dir: &Path) -> Result<serde_json::Value> {
+fn run_casadi(py: &Path, script: &Path, dir: &Path, extra: &[String]) -> Result<serde_json::Value> {
     let o = std::process::Command::new(py)
         .arg(script)
         .arg(dir)
+        .args(extra)
         .output()
         .with_context(|| format!("running {}", py.display()))?;
     if !o.status.success() {
@@ -437,6 +452,8 @@ pub fn main(args: &[String]) -> Result<()> {
     let mut log = false;
     let mut keep: Option<PathBuf> = None;
     let mut start_from: Option<PathBuf> = None;
+    let mut selected: Vec<String> = vec!["sqpmethod".into(), "ipopt".into()];
+    let mut qpsol: Option<String> = None;
     let mut it = args.iter();
     while let Some(a) = it.next() {
         match a.as_str() {
@@ -452,6 +469,17 @@ pub fn main(args: &[String]) -> Result<()> {
             }
             "--python" => python = Some(it.next().context("--python needs a path")?.into()),
             "--no-casadi" => casadi = false,
+            "--peers" => {
+                let v = it.next().context("--peers needs a list (sqpmethod,ipopt)")?;
+                if v.split(',').any(|p| p != "sqpmethod" && p != "ipopt") {
+                    bail!("--peers takes sqpmethod and/or ipopt, comma-separated, found `{v}`");
+                }
+                selected = v.split(',').map(str::to_string).collect();
+            }
+            "--qpsol" => {
+                let v = it.next().context("--qpsol needs a CasADi QP solver name")?;
+                qpsol = Some(v.clone());
+            }
             "--log" => log = true,
             "--keep" => keep = Some(it.next().context("--keep needs a directory")?.into()),
             "--start-from" => {
@@ -476,13 +504,24 @@ pub fn main(args: &[String]) -> Result<()> {
         match find_python(python) {
             Ok(p) => Some(p),
             Err(why) => {
-                println!("casadi not found: {why}; skipping the IPOPT column");
+                println!("casadi not found: {why}; skipping the sqpmethod and IPOPT columns");
                 None
             }
         }
     } else {
         None
     };
+    if python.is_some() && selected.iter().any(|p| p == "sqpmethod") {
+        if let Err(why) = find_gcc() {
+            println!("{why}; skipping the compiled sqpmethod column");
+            selected.retain(|p| p != "sqpmethod");
+        }
+    }
+    let python = if selected.is_empty() { None } else { python };
+    let mut peer_args = vec!["--only".to_string(), selected.join(",")];
+    if let Some(q) = qpsol {
+        peer_args.extend(["--qpsol".to_string(), q]);
+    }
     let mut peers: Vec<String> = Vec::new();
     println!("| scene | ω0 | variant | status | iterations | KKT | J* | CPU s/solve | CPU ms/iteration | integration / condensing / QP ms/it | trial passes/it |");
     println!("|---|---|---|---|---|---|---|---|---|---|---|");
@@ -534,7 +573,7 @@ pub fn main(args: &[String]) -> Result<()> {
                         .with_context(|| format!("creating {}", dir.display()))?;
                     export(&p, &sol, &set, &dir)?;
                     if let Some(py) = &python {
-                        let r = run_casadi(py, &script, &dir)?;
+                        let r = run_casadi(py, &script, &dir, &peer_args)?;
                         peers.push(peer_row(scene, w, v, st, cpu, &r));
                     }
                     if keep.is_none() {
@@ -546,7 +585,7 @@ pub fn main(args: &[String]) -> Result<()> {
     }
     if !peers.is_empty() {
         println!();
-        println!("| scene | ω0 | NLP check: J rel. diff / max defect at flexmpc's optimum | flexmpc J* | IPOPT J* | rel. diff | iterations flexmpc / IPOPT | IPOPT status, inf_pr / inf_du | CPU s/solve flexmpc / IPOPT | ms/iteration flexmpc / IPOPT | time ratio IPOPT / flexmpc |");
+        println!("| scene | ω0 | NLP check: J rel. diff / max defect at flexmpc's optimum | peer | J* (rel. diff to flexmpc) | status, inf_pr / inf_du | iterations | CPU s/solve | CPU ms/iteration | peer / flexmpc CPU per solve, per iteration | code generation + gcc s |");
         println!("|---|---|---|---|---|---|---|---|---|---|---|");
         for r in &peers {
             println!("{r}");
@@ -555,7 +594,7 @@ pub fn main(args: &[String]) -> Result<()> {
     Ok(())
 }
 
-/// One row of the comparison table.
+/// The rows of the comparison table for one problem: flexmpc, then each peer the script ran.
 fn peer_row(
     scene: &str,
     w: f64,
@@ -565,23 +604,45 @@ fn peer_row(
     r: &serde_json::Value,
 ) -> String {
     let f = |k: &str| r[k].as_f64().unwrap_or(f64::NAN);
-    let ip = &r["ipopt"];
-    let g = |k: &str| ip[k].as_f64().unwrap_or(f64::NAN);
-    let it = ip["iterations"].as_u64().unwrap_or(0);
-    let j = g("cost");
-    let t = g("cpu_s");
-    format!(
-        "| {scene} | {w} | {:.1e} / {:.1e} | {:.10e} ({v}) | {j:.10e} | {:.1e} | {} / {it} | {} {:.1e} / {:.1e} | {cpu:.3} / {t:.3} | {:.1} / {:.1} | {:.2} |",
+    let its = st.iterations.max(1) as f64;
+    let mut rows = vec![format!(
+        "| {scene} | {w} | {:.1e} / {:.1e} | flexmpc `{v}` | {:.10e} | {:?}, KKT {:.1e} | {} | {cpu:.3} | {:.1} | — | — |",
         f("check_cost_rel"),
         f("check_defect"),
         st.cost,
-        (st.cost - j) / j.abs(),
+        st.status,
+        st.kkt,
         st.iterations,
-        ip["status"].as_str().unwrap_or("?"),
-        g("inf_pr"),
-        g("inf_du"),
-        1e3 * cpu / st.iterations.max(1) as f64,
-        1e3 * t / it.max(1) as f64,
-        t / cpu,
-    )
+        1e3 * cpu / its,
+    )];
+    for (key, name) in [("sqpmethod", "sqpmethod GN"), ("ipopt", "IPOPT exact")] {
+        let p = &r[key];
+        if p.is_null() {
+            continue;
+        }
+        let g = |k: &str| p[k].as_f64().unwrap_or(f64::NAN);
+        let it = p["iterations"].as_u64().unwrap_or(0);
+        let (j, t) = (g("cost"), g("cpu_s"));
+        let per = t / it.max(1) as f64;
+        let name = match p["qpsol"].as_str() {
+            Some(q) => format!("{name} ({q})"),
+            None => name.to_string(),
+        };
+        let build = if p["build_cpu_s"].is_null() {
+            "—".to_string()
+        } else {
+            format!("{:.1} CPU / {:.1} wall", g("build_cpu_s"), g("build_wall_s"))
+        };
+        rows.push(format!(
+            "| {scene} | {w} | | {name} | {j:.10e} ({:+.1e}) | {} {:.1e} / {:.1e} | {it} | {t:.3} | {:.1} | {:.1} / {:.1} | {build} |",
+            (j - st.cost) / st.cost.abs(),
+            p["status"].as_str().unwrap_or("?"),
+            g("inf_pr"),
+            g("inf_du"),
+            1e3 * per,
+            t / cpu,
+            per / (cpu / its),
+        ));
+    }
+    rows.join("\n")
 }
