@@ -31,7 +31,7 @@ converge-rollout / converge-filter-rollout start from the plan's controls rolled
 When --python PATH is given, or `python3` can `import casadi`, each problem is exported to a
 temporary directory (modal model, `problem.json` with the OCP data, the Lawson propagator,
 the start and flexmpc's solution) and solved by xtask/peers/casadi_peers.py from the same
-start with CasADi's `sqpmethod` (Gauss–Newton Hessian, QP solver --qpsol, default qpoases;
+start with CasADi's `sqpmethod` (Gauss–Newton Hessian, QP solver --qpsol, default hpipm;
 NLP functions generated as C and compiled with gcc -O2 before the solve) and with IPOPT
 (exact Hessian); a second table compares them with the first --variant (CPU time ratios
 per solve and per iteration). --peers sqpmethod,ipopt (default both) picks the peers; gcc
