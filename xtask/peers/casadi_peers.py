@@ -259,6 +259,7 @@ def sqpmethod(meta, prob, arr, w0, qpsol):
         "qpsol": qpsol,
         "qpsol_options": qopts,
         "max_iter": 200,
+        "max_iter_ls": 30,
         "tol_pr": 1e-8,
         "tol_du": 1e-8,
         "print_header": False,
