@@ -1,6 +1,8 @@
-"""CasADi/IPOPT peer of `cargo xtask bench peers`: solves one exported first-sample problem.
+"""CasADi peers of `cargo xtask bench peers`: solves one exported first-sample problem with
+`sqpmethod` (Gauss-Newton, compiled) and IPOPT (exact Hessian).
 
-Usage: python casadi_peers.py DIR
+Usage: python casadi_peers.py DIR [--only sqpmethod,ipopt] [--qpsol hpipm|qpoases|...]
+                               [--max-iter-ls N]
 
 Inputs in DIR (written by xtask/src/peers.rs):
   * model.json + *.npy: the modal model (modal-rom's export), used here:
@@ -23,15 +25,30 @@ bounds u_min <= u_k <= u_max; cost
   J = sum_k c_k dt 1/2 |s_k - x_ref|_Q^2 + 1/2 |s_Nc - x_ref|_P^2
       + sum_k dt 1/2 |u_k - u_ref|_R^2,  c_0 = c_Nc = 1/2, else 1.
 
-IPOPT's primal solution is written to DIR/ipopt_solution.json (states: Nc + 1 node vectors,
-controls: Nc vectors, cost), the format `cargo xtask bench peers --start-from` reads.
+The solutions are written to DIR/sqpmethod_solution.json and DIR/ipopt_solution.json
+(states: Nc + 1 node vectors, controls: Nc vectors, cost, status), the format
+`cargo xtask bench peers --start-from` reads (it reads ipopt_solution.json).
+
+sqpmethod: CasADi's SQP with the Gauss-Newton Hessian sigma H (H the constant Hessian of the
+quadratic cost; the constraint curvature is dropped), supplied as `hess_lag`; the objective
+gradient and constraint Jacobian as `jac_fg`, with [A_k B_k] = dPhi/d(s_k, u_k) from forward
+sensitivities through the substeps (`sensitivities`). jac_fg and the NLP's own functions are
+generated as C and compiled by gcc -O2 (CasADi's `shell` JIT) before the solve; the build time
+(Python process CPU plus the compiler's, and wall) is reported apart from the solve. QP solver
+HPIPM (default settings, the OCP stages given by N, nx, nu; s_0 fixed by its bounds) or any
+CasADi conic plugin (--qpsol). Merit line search with --max-iter-ls backtracking trials
+(default 3, CasADi's; when they fail the last trial is taken); stops at tol_pr = tol_du = 1e-8
+or after 200 iterations.
 
 Output: one JSON line on stdout with
   check_cost_rel: |J(flexmpc optimum) - flexmpc_cost| / |flexmpc_cost| (this NLP's objective
                   at flexmpc's solution against flexmpc's own cost),
   check_defect:   max |constraint residual| of this NLP at flexmpc's solution,
+  sqpmethod: {qpsol, status, success, cost, iterations, inf_pr, inf_du (max constraint
+          violation and max |Lagrangian gradient| at the solution), cpu_s (process CPU time of
+          the solve), wall_s, build_cpu_s, build_wall_s, max_defect (in the NLP with s_0 = x0)},
   ipopt: {status, cost, iterations, inf_pr, inf_du, cpu_s (process CPU time of the solve),
-          wall_s)}.
+          wall_s}.
 IPOPT runs with the exact Hessian of the Lagrangian (CasADi's AD of the expression graph),
 tol 1e-10, MUMPS.
 """
@@ -238,7 +255,7 @@ def gauss_newton_nlp(meta, prob, arr, jit):
     return {"x": w, "p": p, "f": f, "g": g}, jac_fg, hess_lag, lbw, ubw
 
 
-def sqpmethod(meta, prob, arr, w0, qpsol):
+def sqpmethod(meta, prob, arr, w0, qpsol, max_iter_ls):
     """Solves the NLP with CasADi's `sqpmethod`, Gauss-Newton Hessian, `qpsol`, every NLP
     function generated as C and compiled by gcc -O2 before the solve."""
     nx, nu, nc = prob["nx"], prob["nu"], prob["intervals"]
@@ -259,7 +276,7 @@ def sqpmethod(meta, prob, arr, w0, qpsol):
         "qpsol": qpsol,
         "qpsol_options": qopts,
         "max_iter": 200,
-        "max_iter_ls": 30,
+        "max_iter_ls": max_iter_ls,
         "tol_pr": 1e-8,
         "tol_du": 1e-8,
         "print_header": False,
@@ -368,6 +385,7 @@ def main():
     d = args[0]
     peers = ["sqpmethod", "ipopt"]
     qpsol = "hpipm"
+    max_iter_ls = 3
     rest = args[1:]
     while rest:
         a = rest.pop(0)
@@ -375,6 +393,8 @@ def main():
             peers = rest.pop(0).split(",")
         elif a == "--qpsol":
             qpsol = rest.pop(0)
+        elif a == "--max-iter-ls":
+            max_iter_ls = int(rest.pop(0))
         else:
             sys.exit(f"unknown argument {a}")
     meta, prob, arr = load(d)
@@ -389,7 +409,7 @@ def main():
     }
     w0 = stack(prob, "start_states", "start_controls")
     if "sqpmethod" in peers:
-        sol, out["sqpmethod"] = sqpmethod(meta, prob, arr, w0, qpsol)
+        sol, out["sqpmethod"] = sqpmethod(meta, prob, arr, w0, qpsol, max_iter_ls)
         # the optimum in IPOPT's NLP (constraint s_0 = x0 included)
         _, gs = fg(sol["x"])
         out["sqpmethod"]["max_defect"] = float(np.max(np.abs(np.array(gs))))

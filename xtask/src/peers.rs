@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 const USAGE: &str = "\
 usage: cargo xtask bench peers [--variant NAME]... [--scene 2d|3d] [--omega0 W]...
                                [--python PATH | --no-casadi] [--peers LIST] [--qpsol NAME]
-                               [--log] [--keep DIR] [--start-from DIR]
+                               [--sqp-ls N] [--log] [--keep DIR] [--start-from DIR]
 
 Solves the first sample's problem of scenes/paper-2d-mpc.toml (ω0 = 0.5, 1, 2, 2.5) and
 scenes/paper-3d-mpc-paper-model.toml (ω0 = 0.5, 1, 1.5) to convergence (KKT tolerance 1e-8) from the
@@ -35,7 +35,8 @@ start with CasADi's `sqpmethod` (Gauss–Newton Hessian, QP solver --qpsol, defa
 NLP functions generated as C and compiled with gcc -O2 before the solve) and with IPOPT
 (exact Hessian); a second table compares them with the first --variant (CPU time ratios
 per solve and per iteration). --peers sqpmethod,ipopt (default both) picks the peers; gcc
-must be on PATH for sqpmethod.
+must be on PATH for sqpmethod. --sqp-ls N sets sqpmethod's backtracking trials per line
+search (max_iter_ls, CasADi's default 3: a search that fails after them takes the last trial).
 --keep DIR writes each problem's export to DIR/SCENE-W and keeps it (with --no-casadi
 only the export is written; `python casadi_peers.py DIR/SCENE-W` then runs the peer alone
 and writes the solutions to DIR/SCENE-W/{sqpmethod,ipopt}_solution.json). --start-from DIR starts flexmpc
@@ -454,6 +455,7 @@ pub fn main(args: &[String]) -> Result<()> {
     let mut start_from: Option<PathBuf> = None;
     let mut selected: Vec<String> = vec!["sqpmethod".into(), "ipopt".into()];
     let mut qpsol: Option<String> = None;
+    let mut sqp_ls: Option<usize> = None;
     let mut it = args.iter();
     while let Some(a) = it.next() {
         match a.as_str() {
@@ -479,6 +481,10 @@ pub fn main(args: &[String]) -> Result<()> {
             "--qpsol" => {
                 let v = it.next().context("--qpsol needs a CasADi QP solver name")?;
                 qpsol = Some(v.clone());
+            }
+            "--sqp-ls" => {
+                let v = it.next().context("--sqp-ls needs a count")?;
+                sqp_ls = Some(v.parse().with_context(|| format!("--sqp-ls {v}"))?);
             }
             "--log" => log = true,
             "--keep" => keep = Some(it.next().context("--keep needs a directory")?.into()),
@@ -521,6 +527,9 @@ pub fn main(args: &[String]) -> Result<()> {
     let mut peer_args = vec!["--only".to_string(), selected.join(",")];
     if let Some(q) = qpsol {
         peer_args.extend(["--qpsol".to_string(), q]);
+    }
+    if let Some(n) = sqp_ls {
+        peer_args.extend(["--max-iter-ls".to_string(), n.to_string()]);
     }
     let mut peers: Vec<String> = Vec::new();
     println!("| scene | ω0 | variant | status | iterations | KKT | J* | CPU s/solve | CPU ms/iteration | integration / condensing / QP ms/it | trial passes/it |");
