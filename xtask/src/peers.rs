@@ -38,10 +38,10 @@ per solve and per iteration). --peers sqpmethod,ipopt (default both) picks the p
 must be on PATH for sqpmethod. --sqp-ls N sets sqpmethod's backtracking trials per line
 search (max_iter_ls, CasADi's default 3: a search that fails after them takes the last trial).
 --keep DIR writes each problem's export to DIR/SCENE-W and keeps it (with --no-casadi
-only the export is written; `python casadi_peers.py DIR/SCENE-W` then runs the peer alone
-and writes the solutions to DIR/SCENE-W/{sqpmethod,ipopt}_solution.json). --start-from DIR starts flexmpc
-from DIR/SCENE-W/ipopt_solution.json instead of the linear MPC plan (does the optimum the
-peer found stay a KKT point of flexmpc's NLP?).";
+only the export is written; `python casadi_peers.py DIR/SCENE-W` then runs the peers alone
+and writes their solutions to DIR/SCENE-W/{sqpmethod,ipopt}_solution.json). --start-from DIR
+starts flexmpc from DIR/SCENE-W/ipopt_solution.json instead of the linear MPC plan (does the
+optimum IPOPT found stay a KKT point of flexmpc's NLP?).";
 
 /// One first-sample problem: the model, the OCP and the initial state.
 pub struct Problem {
