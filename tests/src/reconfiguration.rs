@@ -6,8 +6,7 @@
 //! rigid in torsion about each end's own axis, a constraint that is not integrable, so the
 //! rotations reached depend on the path, and this order is one the joints follow exactly
 //! (docs/mpc.md, "Reconfiguration"). The paper's model refuses the commands (its modes and
-//! joint rows are linearised at the reference angle); the
-//! contrast row reports that refusal.
+//! joint rows are linearised at the reference angle); the contrast row reports that refusal.
 
 use crate::{Case, CaseOutcome, Metric, Tier};
 use mpc::{ModelKind, Setup};
