@@ -4,14 +4,18 @@
 //! A command on joint `j` prescribes its relative rotation `ξ_j,r(t) = q(a, θ(t)) ⊗ ξ̄_j` (axis
 //! `a` in the joint's first end frame, `ξ̄_j` the reference relative rotation); a command on
 //! the root support prescribes the supported node's orientation `ξ_root,r(t) = q(a, θ(t)) ⊗
-//! ξ̄_root` (axis global). `q(a, θ) = (cos θ/2, sin θ/2 a/|a|)` (eq. 9). The angle ramps from 0
-//! to its target `θ_f` within `ramp_s` with a smooth step,
+//! ξ̄_root` (axis global). `q(a, θ) = (cos θ/2, sin θ/2 a/|a|)` (eq. 9). The angle stays 0
+//! until `start_s`, then ramps to its target `θ_f` within `ramp_s` with a smooth step,
 //!
 //! ```text
-//!   θ(t) = θ_f (3τ² − 2τ³),   τ = min(t / ramp_s, 1)        (θ = θ_f when ramp_s = 0)
+//!   θ(t) = θ_f (3τ² − 2τ³),   τ = clamp((t − start_s) / ramp_s, 0, 1)
 //! ```
 //!
-//! (zero rate at both ends of the ramp, so the command itself excites no vibration step).
+//! (`θ = θ_f` from `start_s` on when `ramp_s = 0`; zero rate at both ends of the ramp, so the
+//! command itself excites no vibration step). Staggered starts order the motions: with joints
+//! rigid in torsion about each end's own axis (the universal joint, theory.md §3) the relative
+//! rotation reached depends on the path, not only on its end (the torsion constraint is not
+//! integrable), so the order in which a root and an elbow command move matters.
 //! The exact-joints cost (theory.md §10.8) measures the joint and root quaternion states
 //! against these references directly. Each plan's reference follows the command over the
 //! horizon: the stage cost of the shooting node at time `t_0 + kΔt` (`t_0` the plan's start)
@@ -34,12 +38,15 @@ pub struct JointCommand {
     pub axis: [f64; 3],
     /// Target angle (deg).
     pub angle_deg: f64,
-    /// Time to reach the target from 0 (s); 0: the target from the start.
+    /// Time to reach the target from 0 (s), from `start_s` on; 0: a step at `start_s`.
     pub ramp_s: f64,
+    /// Time the ramp starts (s); the angle is 0 before it. Default 0.
+    #[serde(default)]
+    pub start_s: f64,
 }
 
 impl JointCommand {
-    /// Checks the values (errors name `axis`, `angle_deg`, `ramp_s`); the joint name is
+    /// Checks the values (errors name `axis`, `angle_deg`, `ramp_s`, `start_s`); the joint name is
     /// checked against the structure by [`crate::Scenario::validate`].
     pub fn validate(&self) -> Result<()> {
         if self.joint.trim().is_empty() {
@@ -55,14 +62,18 @@ impl JointCommand {
         if !(self.ramp_s.is_finite() && self.ramp_s >= 0.0) {
             return Err(invalid("ramp_s", self.ramp_s, "must be finite and ≥ 0"));
         }
+        if !(self.start_s.is_finite() && self.start_s >= 0.0) {
+            return Err(invalid("start_s", self.start_s, "must be finite and ≥ 0"));
+        }
         Ok(())
     }
 
     /// Commanded angle at time `t` (rad), the smooth ramp of the module docs.
     pub fn angle_at(&self, t: f64) -> f64 {
         let target = self.angle_deg.to_radians();
+        let t = t - self.start_s;
         if self.ramp_s <= 0.0 {
-            return target;
+            return if t >= 0.0 { target } else { 0.0 };
         }
         let tau = (t / self.ramp_s).clamp(0.0, 1.0);
         target * tau * tau * (3.0 - 2.0 * tau)
@@ -183,6 +194,7 @@ mod tests {
             axis: [0.0, 2.0, 0.0],
             angle_deg: 90.0,
             ramp_s: 4.0,
+            start_s: 0.0,
         };
         c.validate().unwrap();
         assert_eq!(c.angle_at(0.0), 0.0);
@@ -204,6 +216,15 @@ mod tests {
         assert!((quaternion_distance(&q, &(-expect)) - 0.0).abs() < 1e-6);
         let held = JointCommand { ramp_s: 0.0, ..c.clone() };
         assert!((held.angle_at(0.0) - 90f64.to_radians()).abs() < 1e-12);
+        // a later start shifts the ramp (0 before it, a step at it without a ramp)
+        let late = JointCommand { start_s: 1.5, ..c.clone() };
+        for t in [0.0, 0.7, 1.5, 2.3, 3.5, 5.5, 9.0] {
+            let expect = if t < 1.5 { 0.0 } else { c.angle_at(t - 1.5) };
+            assert_eq!(late.angle_at(t), expect, "t = {t}");
+        }
+        let step = JointCommand { start_s: 1.5, ..held };
+        assert_eq!(step.angle_at(1.4), 0.0);
+        assert_eq!(step.angle_at(1.5), 90f64.to_radians());
     }
 
     #[test]
@@ -213,6 +234,7 @@ mod tests {
             axis: [0.0, 0.0, 1.0],
             angle_deg: 60.0,
             ramp_s: 4.0,
+            start_s: 0.0,
         };
         let base = Vector4::new(1.0, 0.0, 0.0, 0.0);
         let mut x_ref = vec![0.0; 9];
@@ -240,14 +262,17 @@ mod tests {
             axis: [0.0, 0.0, 1.0],
             angle_deg: 30.0,
             ramp_s: 0.0,
+            start_s: 0.0,
         };
         ok.validate().unwrap();
-        let cases: [(&str, JointCommand); 5] = [
+        let cases: [(&str, JointCommand); 7] = [
             ("joint", JointCommand { joint: " ".into(), ..ok.clone() }),
             ("axis", JointCommand { axis: [0.0; 3], ..ok.clone() }),
             ("axis", JointCommand { axis: [f64::NAN, 0.0, 1.0], ..ok.clone() }),
             ("angle_deg", JointCommand { angle_deg: 200.0, ..ok.clone() }),
             ("ramp_s", JointCommand { ramp_s: -1.0, ..ok.clone() }),
+            ("start_s", JointCommand { start_s: -0.5, ..ok.clone() }),
+            ("start_s", JointCommand { start_s: f64::INFINITY, ..ok.clone() }),
         ];
         for (field, c) in cases {
             match c.validate() {

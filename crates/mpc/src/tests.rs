@@ -731,6 +731,7 @@ fn exact_joints_rejects_paper_only_settings() {
         axis: [0.0, 1.0, 0.0],
         angle_deg: 30.0,
         ramp_s: 1.0,
+        start_s: 0.0,
     }];
     let setup = Setup::new(&sc).unwrap();
     let e = run(&setup, 0.0, &ControllerSettings::default(), PlantKind::Fe);

@@ -10,7 +10,8 @@
 //! ```
 //!
 //! `axis`: in the joint's first end frame (global for a support); `ramp_s`: time to reach
-//! `angle_deg` from 0 along a smooth step (default 0: the target from the start).
+//! `angle_deg` from 0 along a smooth step (default 0: the target from the start); `start_s`:
+//! when the ramp starts (default 0; the angle is 0 before it).
 
 use multibody_constraints::Structure;
 
@@ -43,6 +44,7 @@ pub(super) fn references_of(
             axis: c.axis,
             angle_deg: c.angle_deg,
             ramp_s: c.ramp_s.unwrap_or(0.0),
+            start_s: c.start_s.unwrap_or(0.0),
         };
         if let Err(mpc::MpcError::Invalid { field, value, reason }) = command.validate() {
             return ctx.err(

@@ -431,4 +431,6 @@ pub struct JointCommandSpec {
     pub angle_deg: f64,
     /// Time to reach the target (s) \[0\].
     pub ramp_s: Option<f64>,
+    /// Time the ramp starts (s) \[0\].
+    pub start_s: Option<f64>,
 }

@@ -422,6 +422,10 @@ fn joint_commands_load_and_name_their_fields() {
     assert_eq!(c.scenario.references.len(), 2);
     assert_eq!(c.scenario.references[0].joint, "elbow");
     assert_eq!(c.scenario.references[1].ramp_s, 4.0);
+    assert_eq!(c.scenario.references[1].start_s, 0.0);
+    let late = text.replacen("ramp_s = 4.0 }", "ramp_s = 2.0, start_s = 1.5 }", 1);
+    let r = &load_str(Path::new("fold-2d.toml"), &late).unwrap().control.unwrap().scenario;
+    assert_eq!((r.references[0].ramp_s, r.references[0].start_s), (2.0, 1.5));
     for (from, to, field) in [
         ("angle_deg = 90.0", "angle_deg = 270.0", "reference.joints[0].angle_deg"),
         (
@@ -433,6 +437,11 @@ fn joint_commands_load_and_name_their_fields() {
             "ramp_s = 4.0 },\n  { joint = \"root\"",
             "ramp_s = -1.0 },\n  { joint = \"root\"",
             "reference.joints[0].ramp_s",
+        ),
+        (
+            "ramp_s = 4.0 },\n  { joint = \"root\"",
+            "ramp_s = 4.0, start_s = -2.0 },\n  { joint = \"root\"",
+            "reference.joints[0].start_s",
         ),
         ("joint = \"root\", axis", "joint = \"wrist\", axis", "reference.joints[1].joint"),
         ("joint = \"root\", axis", "joint = \"elbow\", axis", "reference.joints[1].joint"),
