@@ -96,8 +96,7 @@ pub(crate) struct Workspace {
     pub(super) mjs: Vec<Matrix4<f64>>,
     pub(super) aac: Vec<f64>,
     pub(super) x1tmp: Vec<f64>,
-    /// `Φ(V_cᵀW_j + W_jᵀV_c)ᵀ` of one Jacobian column (`m × m`).
-    pub(super) lt: Vec<f64>,
+    pub(super) phitmp: Vec<f64>,
     pub(super) qj: Vec<f64>,
     pub(super) dkp: Vec<f64>,
     pub(super) ambient_tmp: Vec<f64>,
@@ -204,7 +203,7 @@ impl Workspace {
             hy: zeros(r),
             aac: zeros(r * rmax),
             x1tmp: zeros(kk * rmax),
-            lt: zeros(m * m),
+            phitmp: zeros(2 * r * rmax),
             qj: zeros(rmax * r),
             dkp: zeros(m),
             ambient_tmp: zeros(rom.ops.scratch_len()),

@@ -1,12 +1,11 @@
 //! Dense kernels of the null-space frame `Z(ξ)` (theory.md §10.4): column-major buffers viewed
 //! as faer matrices, Cholesky (faer's in-place `llt`), triangular solves and products, and the
-//! O(r·m) form of the skew `K`, and the Cholesky-derivative triangle `Φ` as one `m × m` matrix.
+//! O(r·m) forms of the skew `K` and of the Cholesky-derivative triangle `Φ`.
 //!
 //! With `M = aᵀb` (`a`, `b` of `r` rows, `m` columns), `K(a, b) = strictly upper(Mᵀ) − strictly
 //! lower(M)` is the skew matrix `−M − Φ(−(M + Mᵀ))ᵀ` of theory.md §10.4 (`K = −VᵀW − Λᵀ`,
-//! `Λ = Φ(X)`, `X = −(WᵀV + VᵀW)`), applied to a vector by running sums of columns instead of
-//! forming the `m × m` matrix; `Φ(aᵀb + bᵀa)`, a triangle of inner products, is formed once per
-//! Jacobian column (one product `aᵀb`) and used by products with vectors and matrices.
+//! `Λ = Φ(X)`, `X = −(WᵀV + VᵀW)`), and `Φ(aᵀb + bᵀa)` is a triangle of inner products; both
+//! act on a vector by running sums of columns instead of forming the `m × m` matrix.
 
 use crate::error::{ModalError, Result};
 use faer::dyn_stack::{MemBuffer, MemStack};
@@ -135,17 +134,74 @@ pub(crate) fn skew_apply(
     }
 }
 
-/// `out = Φ(aᵀb + bᵀa)ᵀ` (`m × m`, column-major; `a`, `b`: `r × m`): the upper triangle of
-/// `aᵀb + bᵀa` with half its diagonal, `Φ` the lower triangle with half its diagonal. One
-/// product `aᵀb`, then the triangle in place.
-pub(crate) fn phi_t_matrix(a: &[f64], b: &[f64], r: usize, m: usize, out: &mut [f64]) {
-    gemm(view_mut(out, m, m), false, view(a, r, m).transpose(), view(b, r, m), 1.0);
-    for l in 0..m {
-        for i in 0..l {
-            out[i + l * m] += out[l + i * m];
-        }
+/// `out (+)= alpha · Φ(aᵀb + bᵀa)ᵀ p` (`upper`, the transposed triangle) or
+/// `alpha · Φ(aᵀb + bᵀa) p` (lower), `Φ` the lower triangle with half its diagonal.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn phi_apply(
+    a: &[f64],
+    b: &[f64],
+    r: usize,
+    p: &[f64],
+    upper: bool,
+    alpha: f64,
+    out: &mut [f64],
+    tmp: &mut [f64],
+) {
+    let m = p.len();
+    let (sa, sb) = tmp[..2 * r].split_at_mut(r);
+    sa.fill(0.0);
+    sb.fill(0.0);
+    let mut step = |i: usize| {
+        let (ai, bi) = (&a[i * r..(i + 1) * r], &b[i * r..(i + 1) * r]);
+        let h = 0.5 * p[i];
+        sa.iter_mut().zip(ai).for_each(|(s, x)| *s += h * x);
+        sb.iter_mut().zip(bi).for_each(|(s, x)| *s += h * x);
+        let v: f64 = ai.iter().zip(sb.iter()).map(|(x, y)| x * y).sum::<f64>()
+            + bi.iter().zip(sa.iter()).map(|(x, y)| x * y).sum::<f64>();
+        out[i] += alpha * v;
+        sa.iter_mut().zip(ai).for_each(|(s, x)| *s += h * x);
+        sb.iter_mut().zip(bi).for_each(|(s, x)| *s += h * x);
+    };
+    if upper {
+        (0..m).rev().for_each(&mut step);
+    } else {
+        (0..m).for_each(&mut step);
     }
+}
+
+/// `out += alpha · P Φ(X)ᵀ` for `X = −(bᵀa + aᵀb)` (`a`, `b`: `r × m`; `P`: `q × m`; `out`:
+/// `q × m`): column `l` of `PΦ(X)ᵀ` is `−(Σ_{i≤l} c_il P_i a_iᵀ) b_l − (Σ_{i≤l} c_il P_i b_iᵀ) a_l`,
+/// `c_il = 1`, `c_ll = ½`. `tmp`: `2 q r` scratch.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn right_phi_t(
+    pm: &[f64],
+    q: usize,
+    a: &[f64],
+    b: &[f64],
+    r: usize,
+    m: usize,
+    alpha: f64,
+    out: &mut [f64],
+    tmp: &mut [f64],
+) {
+    // column l: −(S1 b_l + S2 a_l) − (a_l·b_l) P_l with S1 = Σ_{i<l} P_i a_iᵀ, S2 = Σ_{i<l} P_i b_iᵀ
+    let (s1, s2) = tmp[..2 * q * r].split_at_mut(q * r);
+    s1.fill(0.0);
+    s2.fill(0.0);
+    let add_outer = |s: &mut [f64], pl: &[f64], x: &[f64]| {
+        for (k, &xk) in x.iter().enumerate() {
+            s[k * q..(k + 1) * q].iter_mut().zip(pl).for_each(|(s, p)| *s += xk * p);
+        }
+    };
     for l in 0..m {
-        out[l * m + l + 1..(l + 1) * m].fill(0.0);
+        let pl = &pm[l * q..(l + 1) * q];
+        let (al, bl) = (&a[l * r..(l + 1) * r], &b[l * r..(l + 1) * r]);
+        let o = &mut out[l * q..(l + 1) * q];
+        gemv(o, true, s1, q, bl, -alpha);
+        gemv(o, true, s2, q, al, -alpha);
+        let d: f64 = al.iter().zip(bl).map(|(x, y)| x * y).sum();
+        o.iter_mut().zip(pl).for_each(|(o, p)| *o -= alpha * d * p);
+        add_outer(s1, pl, al);
+        add_outer(s2, pl, bl);
     }
 }

@@ -16,7 +16,9 @@
 //! the constant `∂²A/∂ξ²`.
 
 use crate::exact_joints::eval::{joint_rate_matrix, rates, Workspace};
-use crate::exact_joints::frame::{gemm, gemv, gemv_t, phi_t_matrix, skew_apply, view, view_mut};
+use crate::exact_joints::frame::{
+    gemm, gemv, gemv_t, phi_apply, right_phi_t, skew_apply, view, view_mut,
+};
 use crate::exact_joints::model::{u_right, ExactJointsRom};
 use nalgebra::Vector4;
 
@@ -261,8 +263,8 @@ impl ExactJointsRom {
                 let wjj = &ws.wjj[j];
                 // V_c p, Λ_cᵀ p, a1 = ∂C_jcᵀ W_j p
                 gemv(&mut ws.vcp, false, dcj, rjj, &ws.eq[j], 1.0);
-                phi_t_matrix(vc, wjj, rjj, m, &mut ws.lt);
-                gemv(&mut ws.lp, false, &ws.lt, m, p, -1.0);
+                ws.lp.fill(0.0);
+                phi_apply(vc, wjj, rjj, p, true, -1.0, &mut ws.lp, &mut ws.rtmp);
                 gemv_t(&mut ws.a1, false, dcj, rjj, &ws.wp[o..o + rjj], 1.0);
                 // d = V_c p − A A_cᵀ W p, z_c = −AᵀG d − E_jᵀ a1 − Z Λ_cᵀ p
                 gemv_t(&mut ws.dvec, false, &ws.ta[j], kk, &ws.a1, -1.0);
@@ -280,7 +282,7 @@ impl ExactJointsRom {
                 gemv_t(colp, true, vc, rjj, &ws.gf[o..o + rjj], -1.0);
                 gemv(&mut ws.tj, false, dcj, rjj, &ws.epf[j], 1.0);
                 gemv_t(colp, true, wjj, rjj, &ws.tj[..rjj], -1.0);
-                gemv_t(colp, true, &ws.lt, m, &ws.ztf, 1.0);
+                phi_apply(vc, wjj, rjj, &ws.ztf, false, 1.0, colp, &mut ws.rtmp);
                 gemv(colp, true, &ws.t11, m, &ws.zc, 1.0);
                 // p2 rows
                 gemv(&mut jx[col * n + m..col * n + m + m2], false, &ws.u21, m2, &ws.zc, 1.0);
@@ -383,13 +385,7 @@ impl ExactJointsRom {
                     view(wjj, rjj, m),
                     -1.0,
                 );
-                gemm(
-                    view_mut(&mut ws.dv, rj, m),
-                    true,
-                    view(&ws.v, rj, m),
-                    view(&ws.lt, m, m),
-                    1.0,
-                );
+                right_phi_t(&ws.v, rj, vc, wjj, rjj, m, -1.0, &mut ws.dv, &mut ws.phitmp);
                 // ∂G = −G(Q + Qᵀ)G, Q = A_cAᵀ (rows j: ∂C_jc E_j Aᵀ)
                 gemm(
                     view_mut(&mut ws.qj, rjj, r),
@@ -448,13 +444,7 @@ impl ExactJointsRom {
                     1.0,
                 );
                 // − G_J B Λ_cᵀ = − W_J Λ_cᵀ
-                gemm(
-                    view_mut(&mut ws.dw, rj, m),
-                    true,
-                    view(&ws.wj, rj, m),
-                    view(&ws.lt, m, m),
-                    1.0,
-                );
+                right_phi_t(&ws.wj, rj, vc, wjj, rjj, m, -1.0, &mut ws.dw, &mut ws.phitmp);
                 // − ∂(K p)
                 let colp = &mut ws.colp;
                 let t = &mut ws.dkp;
