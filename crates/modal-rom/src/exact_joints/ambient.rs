@@ -103,6 +103,28 @@ fn orthonormalise(f: &Mat<f64>, b: MatRef<'_, f64>, tol: f64, what: &str) -> Res
                 out[(i, c)] += f[(i, j)] * w;
             }
         }
+    }
+    // The Gram eigenvectors of the small eigenvalues carry errors of `ε λ_max / λ`, so the
+    // columns above are `B`-orthonormal only to that (1e-7 for strain images of near-rigid
+    // link pieces); two Cholesky–QR passes `Y ← Y R⁻¹`, `RᵀR = YᵀBY`, restore orthonormality
+    // to round-off without leaving `span f` (a triangular change of size of that error).
+    for _ in 0..2 {
+        let g = out.transpose() * (b * &out);
+        let g = Mat::from_fn(g.nrows(), g.ncols(), |i, j| 0.5 * (g[(i, j)] + g[(j, i)]));
+        let l = g.llt(Side::Lower).map_err(|e| ModalError::Numerical {
+            stage: format!("re-orthonormalisation of the {what} fields"),
+            reason: format!("{e:?}"),
+        })?;
+        let lt = l.L().to_owned();
+        let mut t = out.transpose().to_owned();
+        faer::linalg::triangular_solve::solve_lower_triangular_in_place(
+            lt.as_ref(),
+            t.as_mut(),
+            faer::Par::Seq,
+        );
+        out = t.transpose().to_owned();
+    }
+    for c in 0..out.ncols() {
         let (mut big, mut at) = (0.0f64, 0);
         for i in 0..f.nrows() {
             if out[(i, c)].abs() > big + 1e-12 * big {
@@ -130,6 +152,20 @@ impl LinkBasis {
     pub fn from_fields(
         model: &StructureModel,
         fields: &[MatRef<'_, f64>],
+        settings: &LinkBasisSettings,
+    ) -> Result<Self> {
+        Self::from_fields_and_forces(model, fields, None, settings)
+    }
+
+    /// As [`LinkBasis::from_fields`], with the force fields the per-link pieces of the given
+    /// structure force fields `forces` (`n2 × s`, e.g. the modes' `Φ2`) instead of the strain
+    /// images `B2⁻¹DᵀΦ1` of the velocity fields: for fields whose force partners are
+    /// `φ2 ∝ B2⁻¹Dᵀφ1` (the paper's modes) the span is the same, and the given `φ2` are then
+    /// re-expanded to round-off (the strain images hold them only to the modes' eigen residual).
+    pub fn from_fields_and_forces(
+        model: &StructureModel,
+        fields: &[MatRef<'_, f64>],
+        forces: Option<MatRef<'_, f64>>,
         settings: &LinkBasisSettings,
     ) -> Result<Self> {
         settings.validate()?;
@@ -188,16 +224,25 @@ impl LinkBasis {
                 }
             }
         }
-        // Force fields: strain images B2⁻¹Dᵀφ1 per link.
-        let dt_phi = prob.d.transpose() * &phi1;
-        let lu = prob.b2.partial_piv_lu();
-        let y = lu.solve(dt_phi);
+        // Force fields: strain images B2⁻¹Dᵀφ1 per link, or the given force fields.
+        if let Some(f2) = forces {
+            if f2.nrows() != n2 {
+                return Err(shape("forces", (n2, f2.ncols()), (f2.nrows(), f2.ncols())));
+            }
+        }
+        let y = match forces {
+            Some(f2) => f2.to_owned(),
+            None => prob.b2.partial_piv_lu().solve(prob.d.transpose() * &phi1),
+        };
         let mut phi2_blocks = Vec::new();
         let mut cols2 = Vec::new();
         let mut total2 = 0;
         for (b, beam) in layout.beams.iter().enumerate() {
             let r = (layout.x2_offset(b), layout.x2_offset(b) + k * beam.n_elements());
-            let yb = sub(&y, r, cols1[b]);
+            let yb = match forces {
+                Some(_) => sub(&y, r, (0, y.ncols())),
+                None => sub(&y, r, cols1[b]),
+            };
             let bb = sub(&prob.b2, r, r);
             let ob = orthonormalise(&yb, bb.as_ref(), settings.rank_tolerance.max(1e-12), "force")?;
             cols2.push((total2, total2 + ob.ncols()));

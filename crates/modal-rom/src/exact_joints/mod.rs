@@ -37,8 +37,9 @@ use faer::Mat;
 use multibody_constraints::Structure;
 
 /// The exact-joints model on the paper's basis: link fields = per-link pieces of the selected
-/// constrained modes `modes` (no added rigid link motions), `Z0` = the modes' coordinates
-/// on them, `Z2` = the elastic modes' force coordinates. At the reference rotations it equals
+/// constrained modes `modes` (no added rigid link motions), force fields = per-link pieces of
+/// the elastic modes' `Φ2`, `Z0` = the modes' coordinates on them, `Z2` = the elastic modes'
+/// force coordinates (both exact re-expansions, to round-off). At the reference rotations it equals
 /// the paper's [`crate::ModalRom`] on `modes` without quaternion states.
 pub fn paper_reduction(
     structure: &Structure,
@@ -48,10 +49,11 @@ pub fn paper_reduction(
     inputs: &[Input],
 ) -> Result<ExactJointsRom> {
     let settings = LinkBasisSettings { rigid_links: false, ..LinkBasisSettings::default() };
-    let basis = LinkBasis::from_fields(model, &[modes.phi1()], &settings)?;
-    let z0 = basis.coordinates1(modes.phi1());
     let el: Vec<usize> = (modes.n_rigid()..modes.n_modes()).collect();
     let phi2 = Mat::from_fn(modes.phi2().nrows(), el.len(), |i, j| modes.phi2()[(i, el[j])]);
+    let basis =
+        LinkBasis::from_fields_and_forces(model, &[modes.phi1()], Some(phi2.as_ref()), &settings)?;
+    let z0 = basis.coordinates1(modes.phi1());
     let z2 = basis.coordinates2(phi2.as_ref());
     ExactJointsRom::with_coordinates(structure, basis, damping, inputs, z0, z2)
 }
