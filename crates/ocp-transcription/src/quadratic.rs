@@ -32,6 +32,12 @@ pub struct QuadraticTerms {
     groups: Vec<(usize, usize)>,
     idx: Vec<u32>,
     val: Vec<f64>,
+    /// The same terms grouped by output row for the right-hand side (same sliced-ELLPACK
+    /// layout: output row of each lane, `(offset, width)` of each group, `(l, j)` and `v`).
+    rhs_pos: Vec<u32>,
+    rhs_groups: Vec<(usize, usize)>,
+    rhs_idx: Vec<(u32, u32)>,
+    rhs_val: Vec<f64>,
 }
 
 impl QuadraticTerms {
@@ -90,6 +96,32 @@ impl QuadraticTerms {
                 out.pos.push(chunk.get(lane).map_or(u32::MAX, |r| r.0));
             }
         }
+        // right-hand side: terms grouped by output row, longest rows first
+        let mut by_row: Vec<(u32, Vec<(u32, u32, f64)>)> = Vec::new();
+        let mut sorted: Vec<(u32, u32, u32, f64)> = out.terms.clone();
+        sorted.sort_by_key(|t| (t.0, t.1, t.2));
+        for (i, l, j, v) in sorted {
+            match by_row.last_mut() {
+                Some((r, list)) if *r == i => list.push((l, j, v)),
+                _ => by_row.push((i, vec![(l, j, v)])),
+            }
+        }
+        by_row.sort_by_key(|r| std::cmp::Reverse(r.1.len()));
+        for chunk in by_row.chunks(LANES) {
+            let width = chunk[0].1.len();
+            out.rhs_groups.push((out.rhs_idx.len(), width));
+            for slot in 0..width {
+                for lane in 0..LANES {
+                    let (l, j, v) =
+                        chunk.get(lane).and_then(|r| r.1.get(slot)).copied().unwrap_or((0, 0, 0.0));
+                    out.rhs_idx.push((l, j));
+                    out.rhs_val.push(v);
+                }
+            }
+            for lane in 0..LANES {
+                out.rhs_pos.push(chunk.get(lane).map_or(u32::MAX, |r| r.0));
+            }
+        }
         Ok(out)
     }
 
@@ -113,10 +145,27 @@ impl QuadraticTerms {
         self.pos.iter().filter(|&&p| p != u32::MAX).count()
     }
 
-    /// `out_i += Σ v x_l x_j` (`x`, `out` of length `n`).
+    /// `out_i += Σ v x_l x_j` (`x`, `out` of length `n`): each row's sum is accumulated in a
+    /// fixed order by fused multiply–adds (rows side by side in groups of eight, the layout of
+    /// the Jacobian kernel), then added to `out_i`.
     pub fn add_rhs(&self, x: &[f64], out: &mut [f64]) {
-        for &(i, l, j, v) in &self.terms {
-            out[i as usize] += v * x[l as usize] * x[j as usize];
+        assert_eq!(out.len(), self.n, "out must have length n");
+        assert_eq!(x.len(), self.n, "x must have length n");
+        if self.n <= PAD {
+            Arch::new().dispatch(RhsKernel { map: self, x, out });
+        } else {
+            for (g, &(off, width)) in self.rhs_groups.iter().enumerate() {
+                let mut acc = [0.0_f64; LANES];
+                for slot in 0..width {
+                    let o = off + slot * LANES;
+                    for lane in 0..LANES {
+                        let (l, j) = self.rhs_idx[o + lane];
+                        acc[lane] = (self.rhs_val[o + lane] * x[l as usize])
+                            .mul_add(x[j as usize], acc[lane]);
+                    }
+                }
+                scatter(&self.rhs_pos[g * LANES..(g + 1) * LANES], &acc, out);
+            }
         }
     }
 
@@ -191,6 +240,35 @@ impl WithSimd for JacobianKernel<'_> {
     }
 }
 
+struct RhsKernel<'a> {
+    map: &'a QuadraticTerms,
+    x: &'a [f64],
+    out: &'a mut [f64],
+}
+
+impl WithSimd for RhsKernel<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) {
+        let RhsKernel { map, x, out } = self;
+        let mut xa = [0.0_f64; PAD];
+        xa[..x.len()].copy_from_slice(x);
+        for (g, &(off, width)) in map.rhs_groups.iter().enumerate() {
+            let mut acc = [0.0_f64; LANES];
+            let (idx, val) =
+                (&map.rhs_idx[off..off + width * LANES], &map.rhs_val[off..off + width * LANES]);
+            for (ix, v) in idx.chunks_exact(LANES).zip(val.chunks_exact(LANES)) {
+                for lane in 0..LANES {
+                    let (l, j) = ix[lane];
+                    let a = v[lane] * xa[l as usize & (PAD - 1)];
+                    acc[lane] = a.mul_add(xa[j as usize & (PAD - 1)], acc[lane]);
+                }
+            }
+            scatter(&map.rhs_pos[g * LANES..(g + 1) * LANES], &acc, out);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -227,6 +305,12 @@ mod tests {
             assert!(dev < 1e-13, "n = {n}: {dev}");
             let mut f = vec![0.0; n];
             q.add_rhs(&x, &mut f);
+            let mut f_direct = vec![0.0; n];
+            for &(i, l, j, v) in &terms {
+                f_direct[i] += v * x[l] * x[j];
+            }
+            let dev = f.iter().zip(&f_direct).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+            assert!(dev < 1e-13, "n = {n}: rhs {dev}");
             for i in 0..n {
                 let jx: f64 = (0..n).map(|c| fx[i + c * n] * x[c]).sum();
                 assert!((jx - 2.0 * f[i]).abs() < 1e-12, "n = {n}, row {i}");
