@@ -245,49 +245,70 @@ struct SparseRightT<'a> {
 
 const CHUNK: usize = 16;
 
+/// One chunk of `W` consecutive rows (directions) of column `i` of [`SparseRightT`]:
+/// `d[c0..c0 + W] (=|+=) alpha Σ_p val[p] src[col[p]·m + c0 ..][..W]`, accumulated in `W`
+/// registers (fixed width, so the loop is fully vectorised and unrolled).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn sparse_chunk<const W: usize>(
+    d: &mut [f64],
+    src: &[f64],
+    cols: &[usize],
+    vals: &[f64],
+    m: usize,
+    c0: usize,
+    alpha: f64,
+    add: bool,
+) {
+    let mut acc = [0.0_f64; W];
+    for (&c, &v) in cols.iter().zip(vals) {
+        let s: &[f64; W] = src[c * m + c0..c * m + c0 + W].try_into().expect("chunk width");
+        for t in 0..W {
+            acc[t] = v.mul_add(s[t], acc[t]);
+        }
+    }
+    let dd: &mut [f64; W] = (&mut d[c0..c0 + W]).try_into().expect("chunk width");
+    if add {
+        for t in 0..W {
+            dd[t] = alpha.mul_add(acc[t], dd[t]);
+        }
+    } else {
+        // also for alpha = 1 (exact): a plain copy of 16 values compiles to a libc memcpy
+        // call (8 % of an interval, measured)
+        for t in 0..W {
+            dd[t] = alpha * acc[t];
+        }
+    }
+}
+
 impl WithSimd for SparseRightT<'_> {
     type Output = ();
     #[inline(always)]
     fn with_simd<S: Simd>(self, _simd: S) {
         let SparseRightT { dst, src, row_ptr, row_end, col, val, m, alpha, add } = self;
         for i in 0..row_ptr.len() {
-            let (p0, p1) = (row_ptr[i], row_end[i]);
+            let (cols, vals) = (&col[row_ptr[i]..row_end[i]], &val[row_ptr[i]..row_end[i]]);
             let d = &mut dst[i * m..(i + 1) * m];
+            // chunks of 16, then 8, 4, 2, 1 rows: every width is a compile-time constant
             let mut c0 = 0;
-            while c0 < m {
-                let w = CHUNK.min(m - c0);
-                let mut acc = [0.0_f64; CHUNK];
-                if w == CHUNK {
-                    for p in p0..p1 {
-                        let v = val[p];
-                        let s = &src[col[p] * m + c0..col[p] * m + c0 + CHUNK];
-                        for t in 0..CHUNK {
-                            acc[t] = v.mul_add(s[t], acc[t]);
-                        }
-                    }
-                } else {
-                    for p in p0..p1 {
-                        let v = val[p];
-                        let base = col[p] * m + c0;
-                        let s = &src[base..base + w];
-                        for t in 0..w {
-                            acc[t] = v.mul_add(s[t], acc[t]);
-                        }
-                    }
-                }
-                let dd = &mut d[c0..c0 + w];
-                if add {
-                    for t in 0..w {
-                        dd[t] = alpha.mul_add(acc[t], dd[t]);
-                    }
-                } else {
-                    // also for alpha = 1 (exact): a plain copy of 16 values compiles to a libc
-                    // memcpy call (8 % of an interval, measured)
-                    for t in 0..w {
-                        dd[t] = alpha * acc[t];
-                    }
-                }
-                c0 += w;
+            while c0 + CHUNK <= m {
+                sparse_chunk::<CHUNK>(d, src, cols, vals, m, c0, alpha, add);
+                c0 += CHUNK;
+            }
+            if c0 + 8 <= m {
+                sparse_chunk::<8>(d, src, cols, vals, m, c0, alpha, add);
+                c0 += 8;
+            }
+            if c0 + 4 <= m {
+                sparse_chunk::<4>(d, src, cols, vals, m, c0, alpha, add);
+                c0 += 4;
+            }
+            if c0 + 2 <= m {
+                sparse_chunk::<2>(d, src, cols, vals, m, c0, alpha, add);
+                c0 += 2;
+            }
+            if c0 < m {
+                sparse_chunk::<1>(d, src, cols, vals, m, c0, alpha, add);
             }
         }
     }
