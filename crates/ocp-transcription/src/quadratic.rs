@@ -20,6 +20,24 @@ use faer::traits::pulp::{Arch, Simd, WithSimd};
 const LANES: usize = 8;
 /// Stack copy of `x` for dimensions up to this (larger models use bounds-checked reads).
 const PAD: usize = 128;
+/// Positions per chunk of a dense cluster.
+const DLANES: usize = 16;
+/// Largest support (distinct `x` entries read) of a dense cluster.
+const MAX_SUPPORT: usize = 16;
+
+/// Jacobian positions whose contributions read a few common `x` entries (`support`), stored
+/// densely: in chunks of [`DLANES`] positions, for every support entry the values of the
+/// chunk's positions side by side (zero where a position has no contribution), so that the
+/// kernel multiplies contiguous values by one broadcast `x` entry (no gathers). A modal ROM's
+/// selection rules make the supports of whole position classes coincide.
+#[derive(Clone, Debug, Default)]
+struct DenseCluster {
+    support: Vec<u32>,
+    /// Position of each chunk lane (`u32::MAX` = padding).
+    pos: Vec<u32>,
+    /// Per chunk: `support.len() × DLANES` values, support-entry major.
+    val: Vec<f64>,
+}
 
 /// Bilinear terms `f_i += v x_l x_j` of an `n`-dimensional state, with their Jacobian map.
 #[derive(Clone, Debug, Default)]
@@ -32,6 +50,8 @@ pub struct QuadraticTerms {
     groups: Vec<(usize, usize)>,
     idx: Vec<u32>,
     val: Vec<f64>,
+    /// Positions evaluated densely (the others are in `groups`).
+    dense: Vec<DenseCluster>,
     /// The same terms grouped by output row for the right-hand side (same sliced-ELLPACK
     /// layout: output row of each lane, `(offset, width)` of each group, `(l, j)` and `v`).
     rhs_pos: Vec<u32>,
@@ -74,13 +94,15 @@ impl QuadraticTerms {
                 _ => rows.push((p, vec![(j, v)])),
             }
         }
-        // longest first (stable on position), so each group's padding is small
-        rows.sort_by_key(|r| std::cmp::Reverse(r.1.len()));
         let mut out = Self {
             n,
             terms: terms.iter().map(|&(i, l, j, v)| (ix(i), ix(l), ix(j), v)).collect(),
             ..Self::default()
         };
+        let (dense, mut rows) = dense_clusters(rows);
+        out.dense = dense;
+        // longest first (stable on position), so each group's padding is small
+        rows.sort_by_key(|r| std::cmp::Reverse(r.1.len()));
         for chunk in rows.chunks(LANES) {
             let width = chunk[0].1.len();
             out.groups.push((out.idx.len(), width));
@@ -142,7 +164,11 @@ impl QuadraticTerms {
 
     /// Number of structurally nonzero Jacobian positions.
     pub fn jacobian_nonzeros(&self) -> usize {
-        self.pos.iter().filter(|&&p| p != u32::MAX).count()
+        self.pos
+            .iter()
+            .chain(self.dense.iter().flat_map(|c| &c.pos))
+            .filter(|&&p| p != u32::MAX)
+            .count()
     }
 
     /// `out_i += Σ v x_l x_j` (`x`, `out` of length `n`): each row's sum is accumulated in a
@@ -188,6 +214,31 @@ impl QuadraticTerms {
                 }
                 scatter(&self.pos[g * LANES..(g + 1) * LANES], &acc, fx);
             }
+            self.add_dense_jacobian(x, fx);
+        }
+    }
+
+    /// The dense clusters' part of [`QuadraticTerms::add_jacobian`]: each position's sum in
+    /// support order (ascending `x` index, the order of the sparse layout), by fused
+    /// multiply–adds.
+    #[inline(always)]
+    fn add_dense_jacobian(&self, x: &[f64], fx: &mut [f64]) {
+        for c in &self.dense {
+            let k = c.support.len();
+            let mut xs = [0.0_f64; MAX_SUPPORT];
+            for (t, &j) in c.support.iter().enumerate() {
+                xs[t] = x[j as usize];
+            }
+            for (pos, vals) in c.pos.chunks_exact(DLANES).zip(c.val.chunks_exact(k * DLANES)) {
+                let mut acc = [0.0_f64; DLANES];
+                for (col, &xv) in vals.chunks_exact(DLANES).zip(&xs[..k]) {
+                    let col: &[f64; DLANES] = col.try_into().expect("chunk width");
+                    for lane in 0..DLANES {
+                        acc[lane] = col[lane].mul_add(xv, acc[lane]);
+                    }
+                }
+                scatter(pos, &acc, fx);
+            }
         }
     }
 
@@ -204,13 +255,94 @@ impl QuadraticTerms {
 }
 
 #[inline(always)]
-fn scatter(pos: &[u32], acc: &[f64; LANES], fx: &mut [f64]) {
-    for lane in 0..LANES {
-        let p = pos[lane];
+fn scatter(pos: &[u32], acc: &[f64], fx: &mut [f64]) {
+    for (&p, &a) in pos.iter().zip(acc) {
         if p != u32::MAX {
-            fx[p as usize] += acc[lane];
+            fx[p as usize] += a;
         }
     }
+}
+
+/// A position's contributions `(x index, value)`, ascending in the index.
+type Row = (u32, Vec<(u32, f64)>);
+
+/// Splits the positions into dense clusters (greedy: positions by decreasing support size
+/// join the cluster whose support they overlap most when the union stays within
+/// [`MAX_SUPPORT`] and at least half of their support is shared; a cluster is kept when it
+/// has at least [`LANES`] positions and at least half of its dense entries are contributions)
+/// and the rest, returned for the sparse layout.
+fn dense_clusters(rows: Vec<Row>) -> (Vec<DenseCluster>, Vec<Row>) {
+    let support = |r: &Row| {
+        let mut s: Vec<u32> = r.1.iter().map(|c| c.0).collect();
+        s.dedup();
+        s
+    };
+    let mut order: Vec<usize> = (0..rows.len()).collect();
+    order.sort_by_key(|&r| (std::cmp::Reverse(support(&rows[r]).len()), rows[r].0));
+    // (support union, members)
+    let mut clusters: Vec<(Vec<u32>, Vec<usize>)> = Vec::new();
+    let mut sparse = vec![false; rows.len()];
+    for r in order {
+        let sup = support(&rows[r]);
+        if sup.len() > MAX_SUPPORT {
+            sparse[r] = true;
+            continue;
+        }
+        let mut best: Option<(usize, usize)> = None;
+        for (c, (u, _)) in clusters.iter().enumerate() {
+            let new = sup.iter().filter(|j| u.binary_search(j).is_err()).count();
+            if u.len() + new <= MAX_SUPPORT
+                && 2 * new <= sup.len()
+                && best.is_none_or(|(_, b)| new < b)
+            {
+                best = Some((c, new));
+                if new == 0 {
+                    break;
+                }
+            }
+        }
+        match best {
+            Some((c, _)) => {
+                let (u, members) = &mut clusters[c];
+                for j in sup {
+                    if let Err(at) = u.binary_search(&j) {
+                        u.insert(at, j);
+                    }
+                }
+                members.push(r);
+            }
+            None => clusters.push((sup, vec![r])),
+        }
+    }
+    let mut dense = Vec::new();
+    for (u, mut members) in clusters {
+        let entries: usize = members.iter().map(|&r| support(&rows[r]).len()).sum();
+        if members.len() < LANES || 2 * entries < members.len() * u.len() {
+            for r in members {
+                sparse[r] = true;
+            }
+            continue;
+        }
+        members.sort_by_key(|&r| rows[r].0);
+        let k = u.len();
+        let mut c = DenseCluster { support: u, ..DenseCluster::default() };
+        for chunk in members.chunks(DLANES) {
+            let base = c.val.len();
+            c.val.resize(base + k * DLANES, 0.0);
+            for (lane, &r) in chunk.iter().enumerate() {
+                for &(j, v) in &rows[r].1 {
+                    let t = c.support.binary_search(&j).expect("support of the cluster");
+                    c.val[base + t * DLANES + lane] += v;
+                }
+            }
+            for lane in 0..DLANES {
+                c.pos.push(chunk.get(lane).map_or(u32::MAX, |&r| rows[r].0));
+            }
+        }
+        dense.push(c);
+    }
+    let rest = rows.into_iter().zip(sparse).filter(|(_, s)| *s).map(|(r, _)| r).collect();
+    (dense, rest)
 }
 
 struct JacobianKernel<'a> {
@@ -237,6 +369,7 @@ impl WithSimd for JacobianKernel<'_> {
             }
             scatter(&map.pos[g * LANES..(g + 1) * LANES], &acc, fx);
         }
+        map.add_dense_jacobian(x, fx);
     }
 }
 
@@ -317,6 +450,39 @@ mod tests {
             }
         }
         assert!(QuadraticTerms::new(3, &[(0, 3, 1, 1.0)]).is_err());
+    }
+
+    /// Terms under a selection rule (4 symmetry classes, `c_i ⊕ c_l ⊕ c_j = 0`, as a modal
+    /// ROM's): the positions' supports coincide by class, most positions go to dense
+    /// clusters, and the Jacobian still matches the term list.
+    #[test]
+    fn class_structured_terms_use_dense_clusters() {
+        let n = 48;
+        let mut rng = seeded(3);
+        let class: Vec<usize> = (0..n).map(|_| rng.random_range(0..4)).collect();
+        let mut terms = Vec::new();
+        for i in 0..n {
+            for l in 0..n {
+                for j in l..n {
+                    if class[i] ^ class[l] ^ class[j] == 0 && rng.random_range(0.0..1.0) < 0.8 {
+                        terms.push((i, l, j, rng.random_range(-1.0..1.0)));
+                    }
+                }
+            }
+        }
+        let q = QuadraticTerms::new(n, &terms).unwrap();
+        let dense: usize = q.dense.iter().flat_map(|c| &c.pos).filter(|&&p| p != u32::MAX).count();
+        assert!(dense * 2 > q.jacobian_nonzeros(), "{dense} of {}", q.jacobian_nonzeros());
+        let x: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let mut fx = vec![0.0; n * n];
+        q.add_jacobian(&x, &mut fx);
+        let mut direct = vec![0.0; n * n];
+        for &(i, l, j, v) in &terms {
+            direct[i + l * n] += v * x[j];
+            direct[i + j * n] += v * x[l];
+        }
+        let dev = fx.iter().zip(&direct).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        assert!(dev < 1e-13, "{dev}");
         assert!(QuadraticTerms::new(3, &[(0, 1, 1, f64::NAN)]).is_err());
     }
 }
