@@ -10,6 +10,10 @@
 //! eight accumulators of a group are independent and the kernel, compiled for the best SIMD
 //! level available at run time (pulp dispatch), has no dependency chains. `x` is read from a
 //! zero-padded stack copy indexed with a mask, so no bounds check is left in the loop.
+//! Positions whose contributions read a common small set of `x` entries (a modal ROM's
+//! selection rules make whole classes of positions share one) are evaluated densely instead
+//! (`DenseCluster`: contiguous values times one broadcast `x` entry, no gathers). The
+//! right-hand side uses the same sliced-ELLPACK layout grouped by output row.
 //! Results are bit-for-bit deterministic (each position's sum is accumulated in a fixed
 //! order by fused multiply–adds, which are exactly rounded on every dispatch path).
 
