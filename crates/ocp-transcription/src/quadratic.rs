@@ -43,12 +43,11 @@ struct DenseCluster {
     val: Vec<f64>,
 }
 
-/// Bilinear terms `f_i += v x_l x_j` of an `n`-dimensional state, with their Jacobian map.
+/// Sums `Σ_c v_c x_{j_c}` of many positions, each over its own contributions `(j_c, v_c)`:
+/// dense clusters plus a sliced-ELLPACK layout for the rest.
 #[derive(Clone, Debug, Default)]
-pub struct QuadraticTerms {
-    n: usize,
-    terms: Vec<(u32, u32, u32, f64)>,
-    /// Column-major Jacobian position of each group lane (`u32::MAX` = padding).
+struct Layout {
+    /// Position of each group lane (`u32::MAX` = padding).
     pos: Vec<u32>,
     /// `(offset into idx/val, width)` of each group.
     groups: Vec<(usize, usize)>,
@@ -56,55 +55,61 @@ pub struct QuadraticTerms {
     val: Vec<f64>,
     /// Positions evaluated densely (the others are in `groups`).
     dense: Vec<DenseCluster>,
-    /// The same terms grouped by output row for the right-hand side (same sliced-ELLPACK
-    /// layout: output row of each lane, `(offset, width)` of each group, `(l, j)` and `v`).
-    rhs_pos: Vec<u32>,
-    rhs_groups: Vec<(usize, usize)>,
-    rhs_idx: Vec<(u32, u32)>,
-    rhs_val: Vec<f64>,
 }
 
-impl QuadraticTerms {
-    /// From terms `(i, l, j, v)`: `f_i += v x_l x_j` (`i, l, j < n`, `v` finite; repeated and
-    /// symmetric pairs are allowed, they add up).
-    pub fn new(n: usize, terms: &[(usize, usize, usize, f64)]) -> Result<Self> {
-        if n >= u32::MAX as usize {
-            return Err(invalid("n", n, "must be below 2^32"));
+/// Where a position's sum goes.
+trait Sink {
+    fn put(&mut self, p: u32, a: f64);
+}
+
+/// `fx[p] += a` (the Jacobian).
+struct AddTo<'a>(&'a mut [f64]);
+
+impl Sink for AddTo<'_> {
+    #[inline(always)]
+    fn put(&mut self, p: u32, a: f64) {
+        self.0[p as usize] += a;
+    }
+}
+
+/// `out[i] += a x_l` with `(i, l) = pairs[p]` (the right-hand side from the row sums
+/// `Σ_j v x_j` of the pairs `(i, l)`).
+struct RhsSink<'a> {
+    out: &'a mut [f64],
+    x: &'a [f64],
+    pairs: &'a [(u32, u32)],
+}
+
+impl Sink for RhsSink<'_> {
+    #[inline(always)]
+    fn put(&mut self, p: u32, a: f64) {
+        let (i, l) = self.pairs[p as usize];
+        self.out[i as usize] = a.mul_add(self.x[l as usize], self.out[i as usize]);
+    }
+}
+
+#[inline(always)]
+fn scatter<S: Sink>(pos: &[u32], acc: &[f64], sink: &mut S) {
+    for (&p, &a) in pos.iter().zip(acc) {
+        if p != u32::MAX {
+            sink.put(p, a);
         }
-        for (t, &(i, l, j, v)) in terms.iter().enumerate() {
-            if i >= n || l >= n || j >= n {
-                return Err(invalid(
-                    "terms",
-                    format!("({i}, {l}, {j}) at {t} (n = {n})"),
-                    "indices must be below n",
-                ));
-            }
-            if !v.is_finite() {
-                return Err(invalid("terms", format!("value {v} at {t}"), "must be finite"));
-            }
-        }
-        let ix = |v: usize| v as u32;
-        // Jacobian contributions (position, x index, value), grouped by position
-        let mut contrib: Vec<(u32, u32, f64)> = Vec::with_capacity(2 * terms.len());
-        for &(i, l, j, v) in terms {
-            contrib.push((ix(i + l * n), ix(j), v));
-            contrib.push((ix(i + j * n), ix(l), v));
-        }
+    }
+}
+
+impl Layout {
+    /// From contributions `(position, x index, value)`.
+    fn new(mut contrib: Vec<(u32, u32, f64)>) -> Self {
         contrib.sort_by_key(|c| (c.0, c.1));
-        let mut rows: Vec<(u32, Vec<(u32, f64)>)> = Vec::new();
+        let mut rows: Vec<Row> = Vec::new();
         for (p, j, v) in contrib {
             match rows.last_mut() {
                 Some((q, list)) if *q == p => list.push((j, v)),
                 _ => rows.push((p, vec![(j, v)])),
             }
         }
-        let mut out = Self {
-            n,
-            terms: terms.iter().map(|&(i, l, j, v)| (ix(i), ix(l), ix(j), v)).collect(),
-            ..Self::default()
-        };
         let (dense, mut rows) = dense_clusters(rows);
-        out.dense = dense;
+        let mut out = Layout { dense, ..Layout::default() };
         // longest first (stable on position), so each group's padding is small
         rows.sort_by_key(|r| std::cmp::Reverse(r.1.len()));
         for chunk in rows.chunks(LANES) {
@@ -122,33 +127,138 @@ impl QuadraticTerms {
                 out.pos.push(chunk.get(lane).map_or(u32::MAX, |r| r.0));
             }
         }
-        // right-hand side: terms grouped by output row, longest rows first
-        let mut by_row: Vec<(u32, Vec<(u32, u32, f64)>)> = Vec::new();
-        let mut sorted: Vec<(u32, u32, u32, f64)> = out.terms.clone();
-        sorted.sort_by_key(|t| (t.0, t.1, t.2));
-        for (i, l, j, v) in sorted {
-            match by_row.last_mut() {
-                Some((r, list)) if *r == i => list.push((l, j, v)),
-                _ => by_row.push((i, vec![(l, j, v)])),
-            }
-        }
-        by_row.sort_by_key(|r| std::cmp::Reverse(r.1.len()));
-        for chunk in by_row.chunks(LANES) {
-            let width = chunk[0].1.len();
-            out.rhs_groups.push((out.rhs_idx.len(), width));
-            for slot in 0..width {
+        out
+    }
+
+    /// Structurally nonzero positions.
+    fn positions(&self) -> usize {
+        self.pos
+            .iter()
+            .chain(self.dense.iter().flat_map(|c| &c.pos))
+            .filter(|&&p| p != u32::MAX)
+            .count()
+    }
+
+    /// Every position's sum into `sink`: the ELLPACK groups with `x` read through `xr`, then
+    /// the dense clusters; each sum in ascending `x` index by fused multiply–adds.
+    #[inline(always)]
+    fn eval<S: Sink>(&self, x: &[f64], xr: impl Fn(u32) -> f64, sink: &mut S) {
+        for (g, &(off, width)) in self.groups.iter().enumerate() {
+            let mut acc = [0.0_f64; LANES];
+            let (idx, val) =
+                (&self.idx[off..off + width * LANES], &self.val[off..off + width * LANES]);
+            for (ix, v) in idx.chunks_exact(LANES).zip(val.chunks_exact(LANES)) {
                 for lane in 0..LANES {
-                    let (l, j, v) =
-                        chunk.get(lane).and_then(|r| r.1.get(slot)).copied().unwrap_or((0, 0, 0.0));
-                    out.rhs_idx.push((l, j));
-                    out.rhs_val.push(v);
+                    acc[lane] = v[lane].mul_add(xr(ix[lane]), acc[lane]);
                 }
             }
-            for lane in 0..LANES {
-                out.rhs_pos.push(chunk.get(lane).map_or(u32::MAX, |r| r.0));
+            scatter(&self.pos[g * LANES..(g + 1) * LANES], &acc, sink);
+        }
+        for c in &self.dense {
+            let k = c.support.len();
+            let mut xs = [0.0_f64; MAX_SUPPORT];
+            for (t, &j) in c.support.iter().enumerate() {
+                xs[t] = x[j as usize];
+            }
+            for (pos, vals) in c.pos.chunks_exact(DLANES).zip(c.val.chunks_exact(k * DLANES)) {
+                let mut acc = [0.0_f64; DLANES];
+                for (col, &xv) in vals.chunks_exact(DLANES).zip(&xs[..k]) {
+                    let col: &[f64; DLANES] = col.try_into().expect("chunk width");
+                    for lane in 0..DLANES {
+                        acc[lane] = col[lane].mul_add(xv, acc[lane]);
+                    }
+                }
+                scatter(pos, &acc, sink);
             }
         }
-        Ok(out)
+    }
+
+    /// [`Layout::eval`], compiled for the best SIMD level (pulp dispatch) with `x` from a
+    /// zero-padded stack copy indexed by a mask when `n ≤ PAD` (no bounds checks), with
+    /// bounds-checked reads otherwise.
+    fn eval_dispatch<S: Sink>(&self, x: &[f64], sink: &mut S) {
+        struct Kernel<'a, S> {
+            layout: &'a Layout,
+            x: &'a [f64],
+            sink: &'a mut S,
+        }
+        impl<S: Sink> WithSimd for Kernel<'_, S> {
+            type Output = ();
+            #[inline(always)]
+            fn with_simd<T: Simd>(self, _simd: T) {
+                let Kernel { layout, x, sink } = self;
+                let mut xa = [0.0_f64; PAD];
+                xa[..x.len()].copy_from_slice(x);
+                layout.eval(x, |j| xa[j as usize & (PAD - 1)], sink);
+            }
+        }
+        if x.len() <= PAD {
+            Arch::new().dispatch(Kernel { layout: self, x, sink });
+        } else {
+            self.eval(x, |j| x[j as usize], sink);
+        }
+    }
+}
+
+/// Bilinear terms `f_i += v x_l x_j` of an `n`-dimensional state, with their Jacobian map.
+#[derive(Clone, Debug, Default)]
+pub struct QuadraticTerms {
+    n: usize,
+    terms: Vec<(u32, u32, u32, f64)>,
+    /// The Jacobian: position `i + l n` sums `v x_j` over the terms `(i, l, j)` and `(i, j, l)`.
+    jac: Layout,
+    /// The right-hand side's row sums: position `p` (the pair `pairs[p] = (i, l)`) sums
+    /// `v x_j` over the terms `(i, l, j)`; then `f_i += x_l · sum`.
+    half: Layout,
+    pairs: Vec<(u32, u32)>,
+}
+
+impl QuadraticTerms {
+    /// From terms `(i, l, j, v)`: `f_i += v x_l x_j` (`i, l, j < n`, `v` finite; repeated and
+    /// symmetric pairs are allowed, they add up).
+    pub fn new(n: usize, terms: &[(usize, usize, usize, f64)]) -> Result<Self> {
+        if n >= u32::MAX as usize || n.checked_mul(n).is_none_or(|nn| nn >= u32::MAX as usize) {
+            return Err(invalid("n", n, "n² must be below 2^32"));
+        }
+        for (t, &(i, l, j, v)) in terms.iter().enumerate() {
+            if i >= n || l >= n || j >= n {
+                return Err(invalid(
+                    "terms",
+                    format!("({i}, {l}, {j}) at {t} (n = {n})"),
+                    "indices must be below n",
+                ));
+            }
+            if !v.is_finite() {
+                return Err(invalid("terms", format!("value {v} at {t}"), "must be finite"));
+            }
+        }
+        let ix = |v: usize| v as u32;
+        // Jacobian contributions (position, x index, value)
+        let mut contrib: Vec<(u32, u32, f64)> = Vec::with_capacity(2 * terms.len());
+        for &(i, l, j, v) in terms {
+            contrib.push((ix(i + l * n), ix(j), v));
+            contrib.push((ix(i + j * n), ix(l), v));
+        }
+        // right-hand side: pairs (i, l) numbered in column-major order
+        let mut pairs: Vec<(u32, u32)> = terms.iter().map(|&(i, l, _, _)| (ix(i), ix(l))).collect();
+        pairs.sort_by_key(|&(i, l)| (l, i));
+        pairs.dedup();
+        let half_contrib = terms
+            .iter()
+            .map(|&(i, l, j, v)| {
+                let p = pairs
+                    .binary_search_by_key(&(ix(l), ix(i)), |&(pi, pl)| (pl, pi))
+                    .expect("pair of the term");
+                (ix(p), ix(j), v)
+            })
+            .collect();
+        Ok(Self {
+            n,
+            terms: terms.iter().map(|&(i, l, j, v)| (ix(i), ix(l), ix(j), v)).collect(),
+            jac: Layout::new(contrib),
+            half: Layout::new(half_contrib),
+            pairs,
+        })
     }
 
     /// State dimension `n`.
@@ -168,82 +278,23 @@ impl QuadraticTerms {
 
     /// Number of structurally nonzero Jacobian positions.
     pub fn jacobian_nonzeros(&self) -> usize {
-        self.pos
-            .iter()
-            .chain(self.dense.iter().flat_map(|c| &c.pos))
-            .filter(|&&p| p != u32::MAX)
-            .count()
+        self.jac.positions()
     }
 
-    /// `out_i += Σ v x_l x_j` (`x`, `out` of length `n`): each row's sum is accumulated in a
-    /// fixed order by fused multiply–adds (rows side by side in groups of eight, the layout of
-    /// the Jacobian kernel), then added to `out_i`.
+    /// `out_i += Σ v x_l x_j` (`x`, `out` of length `n`): for every pair `(i, l)` the sum
+    /// `Σ_j v x_j` (the Jacobian's layout: dense clusters and ELLPACK groups), then
+    /// `out_i += x_l · sum` by a fused multiply–add, pairs in a fixed order.
     pub fn add_rhs(&self, x: &[f64], out: &mut [f64]) {
         assert_eq!(out.len(), self.n, "out must have length n");
         assert_eq!(x.len(), self.n, "x must have length n");
-        if self.n <= PAD {
-            Arch::new().dispatch(RhsKernel { map: self, x, out });
-        } else {
-            for (g, &(off, width)) in self.rhs_groups.iter().enumerate() {
-                let mut acc = [0.0_f64; LANES];
-                for slot in 0..width {
-                    let o = off + slot * LANES;
-                    for lane in 0..LANES {
-                        let (l, j) = self.rhs_idx[o + lane];
-                        acc[lane] = (self.rhs_val[o + lane] * x[l as usize])
-                            .mul_add(x[j as usize], acc[lane]);
-                    }
-                }
-                scatter(&self.rhs_pos[g * LANES..(g + 1) * LANES], &acc, out);
-            }
-        }
+        self.half.eval_dispatch(x, &mut RhsSink { out, x, pairs: &self.pairs });
     }
 
     /// `fx += ∂(N(x)x)/∂x` into the column-major `n × n` slice `fx`.
     pub fn add_jacobian(&self, x: &[f64], fx: &mut [f64]) {
         assert_eq!(fx.len(), self.n * self.n, "fx must be n × n");
         assert_eq!(x.len(), self.n, "x must have length n");
-        if self.n <= PAD {
-            Arch::new().dispatch(JacobianKernel { map: self, x, fx });
-        } else {
-            // large models: the same order of operations, bounds-checked reads
-            for (g, &(off, width)) in self.groups.iter().enumerate() {
-                let mut acc = [0.0_f64; LANES];
-                for slot in 0..width {
-                    let o = off + slot * LANES;
-                    for lane in 0..LANES {
-                        acc[lane] =
-                            self.val[o + lane].mul_add(x[self.idx[o + lane] as usize], acc[lane]);
-                    }
-                }
-                scatter(&self.pos[g * LANES..(g + 1) * LANES], &acc, fx);
-            }
-            self.add_dense_jacobian(x, fx);
-        }
-    }
-
-    /// The dense clusters' part of [`QuadraticTerms::add_jacobian`]: each position's sum in
-    /// support order (ascending `x` index, the order of the sparse layout), by fused
-    /// multiply–adds.
-    #[inline(always)]
-    fn add_dense_jacobian(&self, x: &[f64], fx: &mut [f64]) {
-        for c in &self.dense {
-            let k = c.support.len();
-            let mut xs = [0.0_f64; MAX_SUPPORT];
-            for (t, &j) in c.support.iter().enumerate() {
-                xs[t] = x[j as usize];
-            }
-            for (pos, vals) in c.pos.chunks_exact(DLANES).zip(c.val.chunks_exact(k * DLANES)) {
-                let mut acc = [0.0_f64; DLANES];
-                for (col, &xv) in vals.chunks_exact(DLANES).zip(&xs[..k]) {
-                    let col: &[f64; DLANES] = col.try_into().expect("chunk width");
-                    for lane in 0..DLANES {
-                        acc[lane] = col[lane].mul_add(xv, acc[lane]);
-                    }
-                }
-                scatter(pos, &acc, fx);
-            }
-        }
+        self.jac.eval_dispatch(x, &mut AddTo(fx));
     }
 
     /// `out += Σ_i w_i ∇²(N(x)x)_i` (symmetric, `out` is at least `n × n`, column-major with
@@ -254,15 +305,6 @@ impl QuadraticTerms {
             let c = w[i as usize] * v;
             out[l + j * ld] += c;
             out[j + l * ld] += c;
-        }
-    }
-}
-
-#[inline(always)]
-fn scatter(pos: &[u32], acc: &[f64], fx: &mut [f64]) {
-    for (&p, &a) in pos.iter().zip(acc) {
-        if p != u32::MAX {
-            fx[p as usize] += a;
         }
     }
 }
@@ -349,63 +391,6 @@ fn dense_clusters(rows: Vec<Row>) -> (Vec<DenseCluster>, Vec<Row>) {
     (dense, rest)
 }
 
-struct JacobianKernel<'a> {
-    map: &'a QuadraticTerms,
-    x: &'a [f64],
-    fx: &'a mut [f64],
-}
-
-impl WithSimd for JacobianKernel<'_> {
-    type Output = ();
-    #[inline(always)]
-    fn with_simd<S: Simd>(self, _simd: S) {
-        let JacobianKernel { map, x, fx } = self;
-        let mut xa = [0.0_f64; PAD];
-        xa[..x.len()].copy_from_slice(x);
-        for (g, &(off, width)) in map.groups.iter().enumerate() {
-            let mut acc = [0.0_f64; LANES];
-            let (idx, val) =
-                (&map.idx[off..off + width * LANES], &map.val[off..off + width * LANES]);
-            for (ix, v) in idx.chunks_exact(LANES).zip(val.chunks_exact(LANES)) {
-                for lane in 0..LANES {
-                    acc[lane] = v[lane].mul_add(xa[ix[lane] as usize & (PAD - 1)], acc[lane]);
-                }
-            }
-            scatter(&map.pos[g * LANES..(g + 1) * LANES], &acc, fx);
-        }
-        map.add_dense_jacobian(x, fx);
-    }
-}
-
-struct RhsKernel<'a> {
-    map: &'a QuadraticTerms,
-    x: &'a [f64],
-    out: &'a mut [f64],
-}
-
-impl WithSimd for RhsKernel<'_> {
-    type Output = ();
-    #[inline(always)]
-    fn with_simd<S: Simd>(self, _simd: S) {
-        let RhsKernel { map, x, out } = self;
-        let mut xa = [0.0_f64; PAD];
-        xa[..x.len()].copy_from_slice(x);
-        for (g, &(off, width)) in map.rhs_groups.iter().enumerate() {
-            let mut acc = [0.0_f64; LANES];
-            let (idx, val) =
-                (&map.rhs_idx[off..off + width * LANES], &map.rhs_val[off..off + width * LANES]);
-            for (ix, v) in idx.chunks_exact(LANES).zip(val.chunks_exact(LANES)) {
-                for lane in 0..LANES {
-                    let (l, j) = ix[lane];
-                    let a = v[lane] * xa[l as usize & (PAD - 1)];
-                    acc[lane] = a.mul_add(xa[j as usize & (PAD - 1)], acc[lane]);
-                }
-            }
-            scatter(&map.rhs_pos[g * LANES..(g + 1) * LANES], &acc, out);
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -475,7 +460,8 @@ mod tests {
             }
         }
         let q = QuadraticTerms::new(n, &terms).unwrap();
-        let dense: usize = q.dense.iter().flat_map(|c| &c.pos).filter(|&&p| p != u32::MAX).count();
+        let dense: usize =
+            q.jac.dense.iter().flat_map(|c| &c.pos).filter(|&&p| p != u32::MAX).count();
         assert!(dense * 2 > q.jacobian_nonzeros(), "{dense} of {}", q.jacobian_nonzeros());
         let x: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
         let mut fx = vec![0.0; n * n];
