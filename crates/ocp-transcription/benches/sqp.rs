@@ -475,13 +475,16 @@ fn iteration_3d_table() {
     );
     println!("| threads | CPU total | CPU per thread | integration | condensing | QP | line-search trials |");
     println!("|---|---|---|---|---|---|---|");
+    // `OCP_BENCH_ITER3D_SECONDS`: CPU seconds per row (default 1; longer for profiling)
+    let seconds: f64 =
+        std::env::var("OCP_BENCH_ITER3D_SECONDS").ok().and_then(|s| s.parse().ok()).unwrap_or(1.0);
     for threads in [1usize, 2] {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("pool");
         pool.install(|| {
             let (mut s, x, states, controls) = plan_3d(iteration_3d_settings(threads > 1));
             let (mut cpu, mut wall, mut ti, mut tc, mut tq, mut trials, mut runs) =
                 (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0usize);
-            while cpu < 1.0 || runs < 10 {
+            while cpu < seconds || runs < 10 {
                 s.states_mut().clone_from_slice(&states);
                 s.controls_mut().clone_from_slice(&controls);
                 let c0 = process_cpu_time().unwrap_or(0.0);
@@ -493,6 +496,18 @@ fn iteration_3d_table() {
                 tq += st.time_qp;
                 trials += st.integrator_calls as f64 / 24.0 - 1.0;
                 runs += 1;
+            }
+            // `OCP_BENCH_ITER3D_DUMP=path`: the iterate after one iteration, every value in
+            // round-trip precision, to `path.<threads>` (to compare implementations)
+            if let Ok(path) = std::env::var("OCP_BENCH_ITER3D_DUMP") {
+                s.states_mut().clone_from_slice(&states);
+                s.controls_mut().clone_from_slice(&controls);
+                s.solve(&x).expect("valid x0");
+                let mut out = String::new();
+                for v in s.states().iter().chain(s.controls()).flat_map(|v| v.iter()) {
+                    out.push_str(&format!("{v:?}\n"));
+                }
+                std::fs::write(format!("{path}.{threads}"), out).expect("writable dump path");
             }
             let per = 1e3 / runs as f64;
             let f = cpu / wall;

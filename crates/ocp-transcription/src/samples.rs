@@ -690,9 +690,7 @@ impl Dynamics for ModalLike {
         for &(i, j, v) in &self.w_entries {
             xdot[i] += v * x[j];
         }
-        for &(i, l, j, v) in &self.gamma {
-            xdot[i] += v * x[l] * x[j];
-        }
+        self.quad.add_rhs(x, xdot);
         crate::la::gemv(xdot, &self.b, u, 1.0, true);
     }
     fn jacobians(&self, x: &[f64], _u: &[f64], fx: &mut DMatrix<f64>, fu: &mut DMatrix<f64>) {
@@ -719,9 +717,7 @@ impl Dynamics for ModalLike {
     fn remainder(&self, x: &[f64], u: &[f64], g: &mut [f64]) -> bool {
         // g = f − Wx = N(x)x + Bu
         g.fill(0.0);
-        for &(i, l, j, v) in &self.gamma {
-            g[i] += v * x[l] * x[j];
-        }
+        self.quad.add_rhs(x, g);
         crate::la::gemv(g, &self.b, u, 1.0, true);
         true
     }
