@@ -228,7 +228,9 @@ pub fn sweep_cost(path: &Path, name: &str, runs: &[SweepRun]) -> Result<()> {
                 let pts: Vec<(f64, f64)> = runs
                     .iter()
                     .filter(|r| r.controller == *k && r.model == *m)
-                    .filter_map(|r| r.result.as_ref().ok().map(|res| (r.omega0, res.summary.v_ratio_final)))
+                    .filter_map(|r| {
+                        r.result.as_ref().ok().map(|res| (r.omega0, res.summary.v_ratio_final))
+                    })
                     .collect();
                 if pts.is_empty() {
                     continue;

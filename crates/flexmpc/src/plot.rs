@@ -254,8 +254,17 @@ fn draw_styled<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let style = |k: usize| styles.get(k).copied().unwrap_or(Style { color: color(k), dashed: false });
-    let mark = |s: Style| if axes.points { Mark::Dot } else if s.dashed { Mark::Dashed } else { Mark::Line };
+    let style =
+        |k: usize| styles.get(k).copied().unwrap_or(Style { color: color(k), dashed: false });
+    let mark = |s: Style| {
+        if axes.points {
+            Mark::Dot
+        } else if s.dashed {
+            Mark::Dashed
+        } else {
+            Mark::Line
+        }
+    };
     let mut entries: Vec<(String, RGBColor, Mark)> = Vec::new();
     if let Some(l) = legend {
         entries.extend(l.iter().map(|(name, s)| (name.clone(), s.color, mark(*s))));
