@@ -180,7 +180,10 @@ pub fn sweep_cost(path: &Path, name: &str, runs: &[SweepRun]) -> Result<()> {
         }
         models
             .iter()
-            .map(|m| (format!("{} model", m.name()), Style { color: c, dashed: dashed(m) }))
+            .map(|m| {
+                let line = if dashed(m) { "dashed" } else { "solid" };
+                (format!("{} model ({line})", m.name()), Style { color: c, dashed: dashed(m) })
+            })
             .collect()
     };
     let axes = |title: String| Axes {
@@ -210,7 +213,7 @@ pub fn sweep_cost(path: &Path, name: &str, runs: &[SweepRun]) -> Result<()> {
                 .enumerate()
                 .map(|(i, w)| (format!("ω0 = {w}"), Style { color: color(i), dashed: false }))
                 .collect();
-            legend.extend(model_legend(RGBColor(0, 0, 0)));
+            legend.extend(model_legend(RGBColor(90, 90, 90)));
             let title = if models.len() < 2 {
                 format!("{name}: {} — V(t)/V(0)", k.name().to_uppercase())
             } else {

@@ -99,7 +99,9 @@ pub struct Axes {
     pub points: bool,
 }
 
-const PALETTE: [RGBColor; 8] = [
+// twelve colours, so that a sweep of ten ω0 draws no two curves alike (the first eight are
+// the colours of every figure with at most eight curves)
+const PALETTE: [RGBColor; 12] = [
     RGBColor(31, 119, 180),
     RGBColor(214, 39, 40),
     RGBColor(44, 160, 44),
@@ -108,6 +110,10 @@ const PALETTE: [RGBColor; 8] = [
     RGBColor(23, 190, 207),
     RGBColor(140, 86, 75),
     RGBColor(0, 0, 0),
+    RGBColor(227, 119, 194),
+    RGBColor(188, 189, 34),
+    RGBColor(127, 127, 127),
+    RGBColor(0, 0, 128),
 ];
 
 /// The `i`-th colour of the plots' palette.
