@@ -14,6 +14,7 @@ pub mod exact_joints;
 pub mod kick;
 pub mod modal;
 pub mod mpc;
+pub mod mpc_2d;
 pub mod multibody;
 pub mod ocp;
 pub mod perf;
@@ -111,6 +112,7 @@ pub fn all_cases() -> Vec<Case> {
     cases.extend(exact_joints::cases());
     cases.extend(ocp::cases());
     cases.extend(mpc::cases());
+    cases.extend(mpc_2d::cases());
     cases.extend(kick::cases());
     cases.extend(reconfiguration::cases());
     cases.extend(stress::cases());

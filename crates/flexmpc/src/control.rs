@@ -241,27 +241,62 @@ pub fn run_sweep(
     out: &Path,
     opts: OutputOptions,
 ) -> Result<SweepOutput> {
+    run_sweep_models(scene, overrides, &[], omegas, kinds, out, opts)
+}
+
+/// [`run_sweep`] for several controller models: every `models` × `kinds` × `omegas` closed
+/// loop (models outermost) on the same plant, drawn on the same axes (`cost.svg`: one colour
+/// per ω0, one line style per model) and listed in the same table; the runs of the
+/// exact-joints model are `runs/<controller>-exact-w<ω0>.*`. Each model runs with the scene's
+/// settings and what `--model` implies for it ([`control_of`]); an empty `models` is the
+/// scene's model (or `overrides.model`).
+pub fn run_sweep_models(
+    scene: &Scene,
+    overrides: &Overrides,
+    models: &[mpc::ModelKind],
+    omegas: &[f64],
+    kinds: &[ControllerKind],
+    out: &Path,
+    opts: OutputOptions,
+) -> Result<SweepOutput> {
     if omegas.is_empty() || kinds.is_empty() {
         bail!("a sweep needs at least one ω0 and one controller");
     }
     let control = control_of(scene, overrides)?;
+    // one setup per model: the scene's own model (or `--model`) keeps `overrides` as given
+    let mut controls: Vec<Control> = Vec::new();
+    for &m in models {
+        if controls.iter().any(|c| c.controller.model == m) {
+            continue;
+        }
+        controls.push(if m == control.controller.model {
+            control.clone()
+        } else {
+            control_of(scene, &Overrides { model: Some(m), ..overrides.clone() })?
+        });
+    }
+    if controls.is_empty() {
+        controls.push(control.clone());
+    }
     std::fs::create_dir_all(out.join("runs"))
         .with_context(|| format!("creating {}", out.display()))?;
     let setup = Setup::new(&control.scenario)
         .with_context(|| format!("setting up the controller of {}", scene.file.display()))?;
-    let jobs: Vec<(ControllerKind, f64)> =
-        kinds.iter().flat_map(|&k| omegas.iter().map(move |&w| (k, w))).collect();
+    let jobs: Vec<(&Control, ControllerKind, f64)> = controls
+        .iter()
+        .flat_map(|c| kinds.iter().flat_map(move |&k| omegas.iter().map(move |&w| (c, k, w))))
+        .collect();
     let bar = progress_bar(Some(jobs.len() as u64), opts.quiet, "closed loops");
     let done = AtomicUsize::new(0);
     let runs: Vec<SweepRun> = jobs
         .par_iter()
-        .map(|&(kind, omega0)| {
-            let mut settings = control.controller.clone();
+        .map(|&(c, kind, omega0)| {
+            let mut settings = c.controller.clone();
             settings.kind = kind;
             let result =
                 mpc::run(&setup, omega0, &settings, control.plant).map_err(|e| e.to_string());
             bar.set_position(done.fetch_add(1, Ordering::SeqCst) as u64 + 1);
-            SweepRun { controller: kind, omega0, result }
+            SweepRun { controller: kind, model: settings.model, omega0, result }
         })
         .collect();
     bar.finish_and_clear();
@@ -273,8 +308,7 @@ pub fn run_sweep(
     for r in &runs {
         match &r.result {
             Ok(res) => {
-                let s = &res.summary;
-                let stem = format!("{}-w{}", s.controller, s.omega0);
+                let stem = r.stem();
                 write_timeseries(res, &out.join("runs").join(format!("{stem}.csv")))?;
                 crate::figures::snapshots_svg(
                     res,
@@ -287,6 +321,7 @@ pub fn run_sweep(
                 summaries.push(serde_json::json!({
                     "omega0": r.omega0,
                     "controller": r.controller.name(),
+                    "model": r.model.name(),
                     "plant": control.plant.name(),
                     "stabilised": false,
                     "error": e,

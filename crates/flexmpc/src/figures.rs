@@ -8,9 +8,9 @@ use anyhow::Result;
 use mpc::RunResult;
 use plotters::prelude::*;
 
-use crate::plot::{grid, panels, steps, Axes, Series};
+use crate::plot::{color, grid, steps, styled_panels, Axes, Series, Style, StyledChart};
 
-use crate::results::{sweep_kinds, SweepRun};
+use crate::results::{sweep_kinds, sweep_models, SweepRun};
 
 /// The planes in which snapshots are drawn: `(name, horizontal axis, vertical axis)`.
 pub fn planes(planar: bool) -> Vec<(&'static str, usize, usize)> {
@@ -139,7 +139,7 @@ pub fn sweep_snapshots_svg(runs: &[SweepRun], planar: bool, path: &Path) -> Resu
     let areas = root.split_evenly((rows, 3));
     let plane = planes(planar)[0];
     for (row, r) in runs.iter().enumerate() {
-        let title = format!("{} ω0 = {}", r.controller.name().to_uppercase(), r.omega0);
+        let title = format!("{} ω0 = {}", r.label().to_uppercase(), r.omega0);
         match &r.result {
             Ok(res) => {
                 for (col, win) in time_windows(res).into_iter().enumerate() {
@@ -159,39 +159,97 @@ pub fn sweep_snapshots_svg(runs: &[SweepRun], planar: bool, path: &Path) -> Resu
     Ok(())
 }
 
-/// Fig. 6 style: the scaled cost `V(t)/V(0)` (state part) against time, one curve per ω0,
-/// one panel per controller.
+/// Fig. 6 style: the scaled cost `V(t)/V(0)` (state part) against time, one curve per ω0
+/// (one colour each), one panel per controller. With several controller models (a sweep of
+/// `--model paper,exact-joints`), the models share the axes of their controller's panel, one
+/// line style each (the first model solid, the others dashed), and a last panel plots
+/// `V(T)/V(0)` against ω0 per controller and model.
 pub fn sweep_cost(path: &Path, name: &str, runs: &[SweepRun]) -> Result<()> {
     let kinds = sweep_kinds(runs);
-    let charts: Vec<(Axes, Vec<Series>)> = kinds
+    let models = sweep_models(runs);
+    let mut omegas: Vec<f64> = Vec::new();
+    for r in runs {
+        if !omegas.contains(&r.omega0) {
+            omegas.push(r.omega0);
+        }
+    }
+    let dashed = |m: &mpc::ModelKind| models.iter().position(|x| x == m).unwrap_or(0) > 0;
+    let model_legend = |c: RGBColor| -> Vec<(String, Style)> {
+        if models.len() < 2 {
+            return Vec::new();
+        }
+        models
+            .iter()
+            .map(|m| {
+                let line = if dashed(m) { "dashed" } else { "solid" };
+                (format!("{} model ({line})", m.name()), Style { color: c, dashed: dashed(m) })
+            })
+            .collect()
+    };
+    let axes = |title: String| Axes {
+        title,
+        x: "t (s)".into(),
+        y: "V/V(0) (dimensionless)".into(),
+        log_y: true,
+        references: vec![(0.1, "0.1 (criterion)".into())],
+        points: false,
+    };
+    let mut charts: Vec<StyledChart> = kinds
         .iter()
         .map(|k| {
-            let series = runs
+            let (mut series, mut styles) = (Vec::new(), Vec::new());
+            for r in runs.iter().filter(|r| r.controller == *k) {
+                let Ok(res) = &r.result else { continue };
+                let v0 = res.records.first().map_or(1.0, |x| x.v_state);
+                let i = omegas.iter().position(|w| *w == r.omega0).unwrap_or(0);
+                series.push((
+                    format!("ω0 = {}", r.omega0),
+                    res.records.iter().map(|x| (x.t, x.v_state / v0)).collect(),
+                ));
+                styles.push(Style { color: color(i), dashed: dashed(&r.model) });
+            }
+            let mut legend: Vec<(String, Style)> = omegas
                 .iter()
-                .filter(|r| r.controller == *k)
-                .filter_map(|r| r.result.as_ref().ok())
-                .map(|res| {
-                    let v0 = res.records.first().map_or(1.0, |x| x.v_state);
-                    (
-                        format!("ω0 = {}", res.summary.omega0),
-                        res.records.iter().map(|x| (x.t, x.v_state / v0)).collect(),
-                    )
-                })
+                .enumerate()
+                .map(|(i, w)| (format!("ω0 = {w}"), Style { color: color(i), dashed: false }))
                 .collect();
-            (
-                Axes {
-                    title: format!("{name}: {} — V(t)/V(0)", k.name().to_uppercase()),
-                    x: "t (s)".into(),
-                    y: "V/V(0) (dimensionless)".into(),
-                    log_y: true,
-                    references: vec![(0.1, "0.1 (criterion)".into())],
-                    points: false,
-                },
-                series,
-            )
+            legend.extend(model_legend(RGBColor(90, 90, 90)));
+            let title = if models.len() < 2 {
+                format!("{name}: {} — V(t)/V(0)", k.name().to_uppercase())
+            } else {
+                let m: Vec<&str> = models.iter().map(|m| m.name()).collect();
+                format!("{name}: {} ({}) — V(t)/V(0)", k.name().to_uppercase(), m.join(" vs "))
+            };
+            StyledChart { axes: axes(title), series, styles, legend }
         })
         .collect();
-    panels(path, (620 * charts.len().max(1) as u32, 460), &charts)
+    if models.len() > 1 {
+        // the end of each curve against ω0: where each model stops meeting the criterion
+        let (mut series, mut styles, mut legend) = (Vec::new(), Vec::new(), Vec::new());
+        for (ki, k) in kinds.iter().enumerate() {
+            for m in &models {
+                let pts: Vec<(f64, f64)> = runs
+                    .iter()
+                    .filter(|r| r.controller == *k && r.model == *m)
+                    .filter_map(|r| {
+                        r.result.as_ref().ok().map(|res| (r.omega0, res.summary.v_ratio_final))
+                    })
+                    .collect();
+                if pts.is_empty() {
+                    continue;
+                }
+                let st = Style { color: color(ki), dashed: dashed(m) };
+                legend.push((format!("{}, {} model", k.name().to_uppercase(), m.name()), st));
+                series.push((String::new(), pts));
+                styles.push(st);
+            }
+        }
+        let mut a = axes(format!("{name}: V(T)/V(0) at the end of each run"));
+        a.x = "ω0 (rad/s)".into();
+        a.y = "V(T)/V(0) (dimensionless)".into();
+        charts.push(StyledChart { axes: a, series, styles, legend });
+    }
+    styled_panels(path, (620 * charts.len().max(1) as u32, 460), &charts)
 }
 
 /// Fig. 10 style: the inputs of every run of a sweep against time, the panels of each
@@ -203,7 +261,13 @@ pub fn sweep_inputs(
     units: &[mpc::ControlInput],
     runs: &[SweepRun],
 ) -> Result<()> {
-    let kinds = sweep_kinds(runs);
+    // one group of panels per controller and model
+    let mut groups: Vec<(mpc::ControllerKind, mpc::ModelKind)> = Vec::new();
+    for r in runs {
+        if !groups.contains(&(r.controller, r.model)) {
+            groups.push((r.controller, r.model));
+        }
+    }
     let inputs: Vec<String> = runs
         .iter()
         .find_map(|r| r.result.as_ref().ok())
@@ -212,14 +276,14 @@ pub fn sweep_inputs(
     let cols = inputs.len().clamp(1, 3);
     let rows_per_kind = inputs.len().div_ceil(cols).max(1);
     let mut charts: Vec<(Axes, Vec<Series>)> = Vec::new();
-    for k in &kinds {
+    for &(k, m) in &groups {
         while charts.len() % cols != 0 {
             charts.push((Axes::default(), Vec::new()));
         }
         for (i, input) in inputs.iter().enumerate() {
             let series = runs
                 .iter()
-                .filter(|r| r.controller == *k)
+                .filter(|r| r.controller == k && r.model == m)
                 .filter_map(|r| r.result.as_ref().ok())
                 .map(|res| {
                     let pts: Vec<(f64, f64)> = res.records.iter().map(|x| (x.t, x.u[i])).collect();
@@ -228,7 +292,10 @@ pub fn sweep_inputs(
                 .collect();
             charts.push((
                 Axes {
-                    title: format!("{name}: {} — {input}", k.name().to_uppercase()),
+                    title: format!(
+                        "{name}: {} — {input}",
+                        crate::results::label(k, m).to_uppercase()
+                    ),
                     x: "t (s)".into(),
                     y: format!("u ({})", units.get(i).map_or("N or N·m", input_unit)),
                     ..Default::default()
@@ -237,7 +304,7 @@ pub fn sweep_inputs(
             ));
         }
     }
-    let rows = (rows_per_kind * kinds.len()).max(1);
+    let rows = (rows_per_kind * groups.len()).max(1);
     grid(path, (520 * cols as u32, 360 * rows as u32), cols, &charts)
 }
 

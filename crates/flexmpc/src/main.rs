@@ -155,8 +155,9 @@ enum Command {
         /// Controllers, comma-separated `nmpc,lmpc` (default: `[sweep] controllers`).
         #[arg(long)]
         controller: Option<String>,
-        /// Controller's reduced model (default: `[controller] model`).
-        #[arg(long, value_parser = ["paper", "exact-joints"])]
+        /// Controller's reduced models, comma-separated `paper,exact-joints` (default:
+        /// `[controller] model`); with two, both are drawn on the same axes (cost.svg).
+        #[arg(long)]
         model: Option<String>,
         /// Plant (default: `[scenario] plant`).
         #[arg(long, value_parser = ["fe", "rom"])]
@@ -195,6 +196,14 @@ fn model_tag(m: mpc::ModelKind) -> &'static str {
     }
 }
 
+/// [`model_tag`] of one model; `-paper+exact-joints` (the names joined by `+`) for several.
+fn models_tag(models: &[mpc::ModelKind]) -> String {
+    match models {
+        [m] => model_tag(*m).to_string(),
+        _ => format!("-{}", models.iter().map(|m| m.name()).collect::<Vec<_>>().join("+")),
+    }
+}
+
 /// The output folder of one closed loop: `--out`, else
 /// `out/<scene>/<controller>[-exact]-<plant>-w<ω0>/` (`-exact`: the exact-joints model).
 fn mpc_out(cli: &Cli, scene: &Path, c: &flexmpc::scene::Control) -> PathBuf {
@@ -210,13 +219,13 @@ fn mpc_out(cli: &Cli, scene: &Path, c: &flexmpc::scene::Control) -> PathBuf {
 }
 
 /// The output folder of a sweep: `--out`, else
-/// `out/<scene>/sweep-<controllers joined by +>-<plant>-w<ω0 joined by _>/` (more than eight
+/// `out/<scene>/sweep-<controllers joined by +>[<models tag>]-<plant>-w<ω0 joined by _>/` (more than eight
 /// ω0: first, last, count and a hash of the list).
 fn sweep_out(
     cli: &Cli,
     scene: &Path,
     kinds: &[mpc::ControllerKind],
-    model: mpc::ModelKind,
+    models: &[mpc::ModelKind],
     plant: mpc::PlantKind,
     omegas: &[f64],
 ) -> PathBuf {
@@ -235,7 +244,7 @@ fn sweep_out(
         scene_out(scene).join(format!(
             "sweep-{}{}-{}-w{w}",
             ctrl.join("+"),
-            model_tag(model),
+            models_tag(models),
             plant.name()
         ))
     })
@@ -690,24 +699,33 @@ fn run(cli: &Cli) -> Result<()> {
                     .collect::<Result<Vec<_>>>()?,
                 None => c.sweep_controllers.clone(),
             };
+            let models: Vec<mpc::ModelKind> = match model {
+                Some(list) => list
+                    .split(',')
+                    .map(|m| model_of(Some(m.trim())).map(|m| m.unwrap_or(c.controller.model)))
+                    .collect::<Result<Vec<_>>>()?,
+                None => vec![c.controller.model],
+            };
             let ov = Overrides {
                 controller: None,
                 plant: plant_of(plant.as_deref())?,
                 omega0: None,
                 duration: *duration,
-                model: model_of(model.as_deref())?,
+                // one model: as `--model` of `flexmpc mpc`; several: each run's own
+                model: if models.len() == 1 && model.is_some() { Some(models[0]) } else { None },
             };
             let plant = ov.plant.unwrap_or(c.plant);
-            let out = sweep_out(
-                cli,
-                scene,
-                &kinds,
-                ov.model.unwrap_or(c.controller.model),
-                plant,
-                &omegas,
-            );
+            let out = sweep_out(cli, scene, &kinds, &models, plant, &omegas);
             check_modal_size(&s)?;
-            let o = control::run_sweep(&s, &ov, &omegas, &kinds, &out, output_options(cli))?;
+            let o = control::run_sweep_models(
+                &s,
+                &ov,
+                &models,
+                &omegas,
+                &kinds,
+                &out,
+                output_options(cli),
+            )?;
             if cli.json {
                 let v: Vec<serde_json::Value> = o
                     .runs
@@ -715,7 +733,7 @@ fn run(cli: &Cli) -> Result<()> {
                     .map(|r| match &r.result {
                         Ok(res) => control::summary_json(res),
                         Err(e) => serde_json::json!({
-                            "omega0": r.omega0, "controller": r.controller.name(),
+                            "omega0": r.omega0, "controller": r.controller.name(), "model": r.model.name(),
                             "stabilised": false, "error": e,
                         }),
                     })
@@ -739,7 +757,7 @@ fn run(cli: &Cli) -> Result<()> {
                             let s = &res.summary;
                             say!(
                                 "{:>5} {:>6} {:>11.3e} {:>9.1} {:>12.2} {:>11.2e} {:>8} {:>8}  {}{}",
-                                s.controller,
+                                r.label(),
                                 s.omega0,
                                 s.v_ratio_final,
                                 s.max_joint_angle_deg,
@@ -755,7 +773,7 @@ fn run(cli: &Cli) -> Result<()> {
                             );
                         }
                         Err(e) => {
-                            say!("{:>5} {:>6} failed: {e}", r.controller.name(), r.omega0)
+                            say!("{:>5} {:>6} failed: {e}", r.label(), r.omega0)
                         }
                     }
                 }

@@ -99,7 +99,9 @@ pub struct Axes {
     pub points: bool,
 }
 
-const PALETTE: [RGBColor; 8] = [
+// twelve colours, so that a sweep of ten ω0 draws no two curves alike (the first eight are
+// the colours of every figure with at most eight curves)
+const PALETTE: [RGBColor; 12] = [
     RGBColor(31, 119, 180),
     RGBColor(214, 39, 40),
     RGBColor(44, 160, 44),
@@ -108,6 +110,10 @@ const PALETTE: [RGBColor; 8] = [
     RGBColor(23, 190, 207),
     RGBColor(140, 86, 75),
     RGBColor(0, 0, 0),
+    RGBColor(227, 119, 194),
+    RGBColor(188, 189, 34),
+    RGBColor(127, 127, 127),
+    RGBColor(0, 0, 128),
 ];
 
 /// The `i`-th colour of the plots' palette.
@@ -205,6 +211,28 @@ where
     Ok(plot)
 }
 
+/// How a curve of [`styled_panels`] is drawn: its colour and whether it is dashed.
+#[derive(Clone, Copy, Debug)]
+pub struct Style {
+    /// Colour.
+    pub color: RGBColor,
+    /// Dashed (else solid).
+    pub dashed: bool,
+}
+
+/// One chart of [`styled_panels`]: axes, curves with their styles (one per curve), and the
+/// legend entries `(label, style)` (in place of one entry per curve).
+pub struct StyledChart {
+    /// Axes.
+    pub axes: Axes,
+    /// Curves.
+    pub series: Vec<Series>,
+    /// One style per curve.
+    pub styles: Vec<Style>,
+    /// The legend (reference lines are added after it).
+    pub legend: Vec<(String, Style)>,
+}
+
 /// Draws `series` into one drawing area, the legend (when there is more than one curve or a
 /// reference line) in a column to the right of the plot, never on the data.
 fn draw_lines<DB: DrawingBackend>(
@@ -215,15 +243,43 @@ fn draw_lines<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let mut entries: Vec<(String, RGBColor, Mark)> = Vec::new();
-    if series.iter().any(|(n, _)| !n.is_empty()) || !axes.references.is_empty() {
-        for (k, (name, _)) in series.iter().enumerate() {
-            entries.push((
-                name.clone(),
-                color(k),
-                if axes.points { Mark::Dot } else { Mark::Line },
-            ));
+    let styles: Vec<Style> =
+        (0..series.len()).map(|k| Style { color: color(k), dashed: false }).collect();
+    draw_styled(area, axes, series, &styles, None)
+}
+
+/// [`draw_lines`] with a style per curve and, when `legend` is given, that legend instead of
+/// one entry per curve.
+fn draw_styled<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    axes: &Axes,
+    series: &[Series],
+    styles: &[Style],
+    legend: Option<&[(String, Style)]>,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let style =
+        |k: usize| styles.get(k).copied().unwrap_or(Style { color: color(k), dashed: false });
+    let mark = |s: Style| {
+        if axes.points {
+            Mark::Dot
+        } else if s.dashed {
+            Mark::Dashed
+        } else {
+            Mark::Line
         }
+    };
+    let mut entries: Vec<(String, RGBColor, Mark)> = Vec::new();
+    if let Some(l) = legend {
+        entries.extend(l.iter().map(|(name, s)| (name.clone(), s.color, mark(*s))));
+    } else if series.iter().any(|(n, _)| !n.is_empty()) || !axes.references.is_empty() {
+        for (k, (name, _)) in series.iter().enumerate() {
+            entries.push((name.clone(), style(k).color, mark(style(k))));
+        }
+    }
+    if !entries.is_empty() || !axes.references.is_empty() {
         for (k, (r, label)) in axes.references.iter().enumerate() {
             if !axes.log_y || *r > 0.0 {
                 entries.push((label.clone(), reference_color(k), Mark::Dashed));
@@ -264,7 +320,7 @@ where
             .y_label_formatter(&|v| format!("{v:.0e}"))
             .draw()?;
         for (k, (_, pts)) in pos.iter().enumerate() {
-            chart.draw_series(LineSeries::new(pts.iter().copied(), color(k).stroke_width(2)))?;
+            curve(&mut chart, pts, style(k))?;
         }
         for (k, (r, _)) in axes.references.iter().enumerate() {
             if *r > 0.0 {
@@ -300,11 +356,11 @@ where
             .y_label_formatter(&|v| short(*v))
             .draw()?;
         for (k, (_, pts)) in series.iter().enumerate() {
-            let c = color(k);
+            let c = style(k).color;
             if axes.points {
                 chart.draw_series(pts.iter().map(|&p| Circle::new(p, 3, c.filled())))?;
             } else {
-                chart.draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(2)))?;
+                curve(&mut chart, pts, style(k))?;
             }
         }
         for (k, (r, _)) in axes.references.iter().enumerate() {
@@ -316,6 +372,30 @@ where
                 c.stroke_width(1),
             ))?;
         }
+    }
+    Ok(())
+}
+
+/// Draws one curve, solid (width 2) or dashed (width 2, 8 px dashes).
+fn curve<DB: DrawingBackend, X, Y>(
+    chart: &mut ChartContext<'_, DB, Cartesian2d<X, Y>>,
+    pts: &[(f64, f64)],
+    s: Style,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+    X: Ranged<ValueType = f64>,
+    Y: Ranged<ValueType = f64>,
+{
+    if s.dashed {
+        chart.draw_series(DashedLineSeries::new(
+            pts.iter().copied(),
+            8,
+            5,
+            s.color.stroke_width(2),
+        ))?;
+    } else {
+        chart.draw_series(LineSeries::new(pts.iter().copied(), s.color.stroke_width(2)))?;
     }
     Ok(())
 }
@@ -367,6 +447,19 @@ pub fn grid(
         if !(axes.title.is_empty() && series.is_empty()) {
             draw_lines(area, axes, series)?;
         }
+    }
+    root.present()?;
+    Ok(())
+}
+
+/// Panels side by side, each with its own curve styles and legend ([`StyledChart`]), into
+/// an SVG file of `size` pixels.
+pub fn styled_panels(path: &Path, size: (u32, u32), charts: &[StyledChart]) -> Result<()> {
+    let root = SVGBackend::new(path, size).into_drawing_area();
+    root.fill(&WHITE)?;
+    let areas = root.split_evenly((1, charts.len().max(1)));
+    for (c, area) in charts.iter().zip(areas.iter()) {
+        draw_styled(area, &c.axes, &c.series, &c.styles, Some(&c.legend))?;
     }
     root.present()?;
     Ok(())

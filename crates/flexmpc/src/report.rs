@@ -584,11 +584,11 @@ pub fn write_sweep(
         match &r.result {
             Ok(res) => {
                 let s = &res.summary;
-                let stem = format!("{}-w{}", s.controller, s.omega0);
+                let stem = r.stem();
                 let _ = writeln!(
                     h,
                     r#"<tr><td>{}</td><td>{}</td><td class="{}">{}</td><td>{:.3e}</td><td>{:.1}</td><td>{:.2} / {:.1}</td><td>{:.2e}</td><td>{} / {} / {}</td><td>{}</td><td><a href="runs/{stem}.csv">csv</a>, <a href="runs/{stem}-snapshots.svg">snapshots</a></td></tr>"#,
-                    esc(&s.controller),
+                    esc(&r.label()),
                     s.omega0,
                     if s.stabilised { "ok" } else { "fail" },
                     if s.stabilised { "yes" } else { "no" },
@@ -610,7 +610,7 @@ pub fn write_sweep(
                 let _ = writeln!(
                     h,
                     r#"<tr><td>{}</td><td>{}</td><td class="fail">failed</td><td colspan="7">{}</td></tr>"#,
-                    r.controller.name(),
+                    r.label(),
                     r.omega0,
                     esc(e)
                 );

@@ -7,16 +7,40 @@
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use mpc::{ControllerKind, RunResult};
+use mpc::{ControllerKind, ModelKind, RunResult};
 
 /// One run of a sweep.
 pub struct SweepRun {
     /// Controller.
     pub controller: ControllerKind,
+    /// The controller's reduced model.
+    pub model: ModelKind,
     /// Disturbance.
     pub omega0: f64,
     /// The run, or why it could not run.
     pub result: std::result::Result<RunResult, String>,
+}
+
+impl SweepRun {
+    /// `nmpc`, `lmpc`, or with the exact-joints model `nmpc-exact`: the name of the run's
+    /// controller and model in tables and file names.
+    pub fn label(&self) -> String {
+        label(self.controller, self.model)
+    }
+
+    /// `<label>-w<ω0>`: the stem of the run's files in `runs/`.
+    pub fn stem(&self) -> String {
+        format!("{}-w{}", self.label(), self.omega0)
+    }
+}
+
+/// `nmpc`, `lmpc`, or with the exact-joints model `nmpc-exact` (the paper's model has no
+/// suffix, so paper-model sweeps keep their file names).
+pub fn label(controller: ControllerKind, model: ModelKind) -> String {
+    match model {
+        ModelKind::Paper => controller.name().to_string(),
+        ModelKind::ExactJoints => format!("{}-exact", controller.name()),
+    }
 }
 
 /// The controllers of a sweep in order of first appearance.
@@ -28,6 +52,17 @@ pub fn sweep_kinds(runs: &[SweepRun]) -> Vec<ControllerKind> {
         }
     }
     kinds
+}
+
+/// The models of a sweep in order of first appearance.
+pub fn sweep_models(runs: &[SweepRun]) -> Vec<ModelKind> {
+    let mut models: Vec<ModelKind> = Vec::new();
+    for r in runs {
+        if !models.contains(&r.model) {
+            models.push(r.model);
+        }
+    }
+    models
 }
 
 fn writer(path: &Path) -> Result<csv::Writer<std::fs::File>> {
@@ -58,8 +93,9 @@ pub fn write_timeseries(r: &RunResult, path: &Path) -> Result<()> {
 }
 
 /// Columns of `sweep.csv`.
-pub const SWEEP_COLUMNS: [&str; 18] = [
+pub const SWEEP_COLUMNS: [&str; 19] = [
     "controller",
+    "model",
     "plant",
     "omega0",
     "stabilised",
@@ -90,6 +126,7 @@ pub fn write_sweep_csv(runs: &[SweepRun], plant: &str, path: &Path) -> Result<()
                 let s = &res.summary;
                 f.write_record([
                     s.controller.clone(),
+                    s.model.clone(),
                     s.plant.clone(),
                     s.omega0.to_string(),
                     s.stabilised.to_string(),
@@ -112,6 +149,7 @@ pub fn write_sweep_csv(runs: &[SweepRun], plant: &str, path: &Path) -> Result<()
             Err(e) => {
                 let mut row = vec![
                     r.controller.name().to_string(),
+                    r.model.name().to_string(),
                     plant.to_string(),
                     r.omega0.to_string(),
                     "false".into(),

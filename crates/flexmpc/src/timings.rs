@@ -185,7 +185,7 @@ pub fn write_sweep(runs: &[SweepRun], sampling: f64, out: &Path) -> Result<Vec<P
             writeln!(
                 f,
                 "{},{},{},{:.6e},{:.6e},{:.6e}",
-                s.controller,
+                r.label(),
                 s.plant,
                 s.omega0,
                 res.wall_time_s,

@@ -436,3 +436,46 @@ fn default_output_folders_are_per_variant() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(base.join("sweep-lmpc-fe-w0.25_0.5/sweep.csv").exists());
 }
+
+/// `flexmpc sweep --model paper,exact-joints` (2D, 2 × 8 elements, 1 s, two ω0): both models'
+/// runs in one sweep, models outer, the `model` column in `sweep.csv`, the exact-joints runs
+/// under their own file names, both models in the legend of `cost.svg`; the paper model's
+/// runs are the same as those of the single-model sweep.
+#[test]
+fn sweep_of_both_models() {
+    let (scene, out) = small_2d_scene("sweep-models");
+    let dir = out.parent().unwrap().to_path_buf();
+    let sweep = |models: &str| {
+        let o = flexmpc()
+            .current_dir(&dir)
+            .args(["--json", "--no-timings", "sweep"])
+            .arg(&scene)
+            .args(["--model", models, "--controller", "nmpc", "--omega0", "0.5,1"])
+            .args(["--duration", "1"])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "stderr: {}", String::from_utf8_lossy(&o.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("stdout is only JSON");
+        v.as_array().expect("an array of runs").clone()
+    };
+    let both = sweep("paper,exact-joints");
+    let models: Vec<&str> = both.iter().map(|r| r["model"].as_str().unwrap()).collect();
+    assert_eq!(models, ["paper", "paper", "exact-joints", "exact-joints"]);
+    for r in &both {
+        assert!(r["error"].is_null(), "{r}");
+    }
+    let folder = dir.join("out/small-2d/sweep-nmpc-paper+exact-joints-fe-w0.5_1");
+    let csv = std::fs::read_to_string(folder.join("sweep.csv")).unwrap();
+    assert!(csv.lines().next().unwrap().starts_with("controller,model,plant,omega0"), "{csv}");
+    assert_eq!(csv.lines().filter(|l| l.starts_with("nmpc,exact-joints,fe,")).count(), 2);
+    for f in ["runs/nmpc-w0.5.csv", "runs/nmpc-exact-w1.csv", "runs/nmpc-exact-w1-snapshots.svg"] {
+        assert!(folder.join(f).exists(), "{f} missing");
+    }
+    let cost = std::fs::read_to_string(folder.join("cost.svg")).unwrap();
+    assert!(cost.contains("paper model (solid)") && cost.contains("exact-joints model (dashed)"));
+    let paper = sweep("paper");
+    assert_eq!(paper.len(), 2);
+    for (a, b) in paper.iter().zip(&both) {
+        assert_eq!(a["v_ratio_final"], b["v_ratio_final"], "{a} vs {b}");
+    }
+}
