@@ -310,51 +310,73 @@ fn stabilisation_3d() -> CaseOutcome {
     Ok(out)
 }
 
-/// The exact-joints NMPC of `scenes/paper-3d-mpc.toml` (`ControllerSettings::exact_joints`:
-/// full SQP, no linear MPC fallback, no plan joint-angle limit) with the paper's weights
-/// (`k_u = 0.1`) on the paper's 3D two-link: the criterion at the scene's ω0 = 1 on the FE
-/// plant and with the exact-joints model itself as the plant (asserted); ω0 = 1.5 on the FE
-/// plant, where the SQP's QPs fail (docs/mpc.md), is reported, not asserted. Also reports the
-/// largest elbow angle and the samples whose SQP was not accepted.
+/// The exact-joints NMPC of `scenes/paper-3d-mpc.toml` as the scene sets it up (full SQP, no
+/// linear MPC fallback, no plan joint-angle limit, paper weights `k_u = 0.1`, implicit-midpoint
+/// shooting intervals) on the paper's 3D two-link: the criterion at the listed ω0 (with the
+/// exact-joints model itself as the plant), an ω0 of the scene's sweep that failed before the
+/// two changes of docs/mpc.md ("The exact-joints model in the
+/// closed loop", 3D: implicit-midpoint shooting intervals, the `Auto` QP form's sparse switch
+/// on a condensed Hessian without Cholesky factor). Also reports the samples whose SQP was
+/// not accepted, the largest elbow angle and the worst / median per-sample solve time
+/// (thread CPU).
 fn exact_joints_3d() -> CaseOutcome {
-    let setup = Setup::new(&Scenario::paper_3d(ELEMENTS).map_err(err)?).map_err(err)?;
-    let c = ControllerSettings::exact_joints();
+    let name = "paper-3d-mpc.toml";
+    let text = include_str!("../../scenes/paper-3d-mpc.toml");
+    let scene = flexmpc::scene::load_str(std::path::Path::new(name), text).map_err(err)?;
+    let control = scene.control.as_ref().ok_or("the scene has no [scenario]")?;
+    let setup = Setup::new(&control.scenario).map_err(err)?;
+    let c = &control.controller;
     let mut out = Vec::new();
-    for (plant, omegas) in [(PlantKind::Fe, &[1.0, 1.5][..]), (PlantKind::Rom, &[1.0][..])] {
+    for (plant, omegas) in EXACT_JOINTS_3D_OMEGAS {
         let name = match plant {
             PlantKind::Fe => "FE",
             PlantKind::Rom => "ROM",
         };
-        for r in sweep(&setup, omegas, &c, plant, &|| {}) {
+        for r in sweep(&setup, omegas, c, *plant, &|| {}) {
             let r = r.map_err(err)?;
             let s = &r.summary;
             let w = s.omega0;
-            let (note, bound, v_bound) =
-                if w <= 1.0 { ("", 1.0, 0.1) } else { (" (report)", 0.0, f64::INFINITY) };
+            if let Some(e) = &s.error {
+                return Err(format!("{name} plant ω0={w}: run stopped at t = {}: {e}", s.t_end));
+            }
             out.push(Metric::at_least(
-                format!("{name} plant ω0={w}: stabilised (1) or not (0){note}"),
+                format!("{name} plant ω0={w}: stabilised (1) or not (0)"),
                 f64::from(u8::from(s.stabilised)),
-                bound,
+                1.0,
             ));
             out.push(Metric::at_most(
-                format!("{name} plant ω0={w}: V(7.5)/V(0){note}"),
+                format!("{name} plant ω0={w}: V(7.5)/V(0)"),
                 s.v_ratio_final,
-                v_bound,
-            ));
-            out.push(Metric::at_most(
-                format!("{name} plant ω0={w}: largest elbow angle (deg, report)"),
-                s.max_joint_angle_deg,
-                f64::INFINITY,
+                0.1,
             ));
             out.push(Metric::at_most(
                 format!("{name} plant ω0={w}: samples whose SQP was not accepted (report)"),
                 s.fallback_samples as f64,
                 f64::INFINITY,
             ));
+            out.push(Metric::at_most(
+                format!("{name} plant ω0={w}: largest elbow angle (deg, report)"),
+                s.max_joint_angle_deg,
+                f64::INFINITY,
+            ));
+            for (what, t) in [("worst", s.solve_time_worst_s), ("median", s.solve_time_median_s)] {
+                out.push(Metric::at_most(
+                    format!(
+                        "{name} plant ω0={w}: {what} sample solve time (s, thread CPU, report)"
+                    ),
+                    t,
+                    f64::INFINITY,
+                ));
+            }
         }
     }
     Ok(out)
 }
+
+/// The ω0 that `mpc/3d-exact-joints` runs per plant: ROM 1.375 (✗ before the changes, ✓
+/// after; one loop ≈ 2 min CPU). The FE plant's figures are in docs/mpc.md (FE 1.375 still
+/// just misses the criterion).
+const EXACT_JOINTS_3D_OMEGAS: &[(PlantKind, &[f64])] = &[(PlantKind::Rom, &[1.375])];
 
 /// The real-time goal on the real-time NMPC of the shipped scenes, FE plant: 2D
 /// `ControllerSettings::real_time(false)` (RTI, no relaxed retry, full steps;

@@ -16,7 +16,8 @@ use nalgebra::{DMatrix, DVector};
 pub enum QpForm {
     /// Condensed; the dense interior-point solver when only control bounds are present,
     /// Clarabel otherwise; the sparse multiple-shooting QP when the condensed Hessian's
-    /// condition estimate exceeds [`crate::AUTO_SPARSE_CONDITION`]. The default.
+    /// condition estimate exceeds [`crate::AUTO_SPARSE_CONDITION`] or it has no Cholesky
+    /// factor (semidefinite Hessian blocks). The default.
     Auto,
     /// Condensed, dense primal–dual interior point on box constraints (faer Cholesky).
     /// With state bounds it falls back to [`QpForm::CondensedClarabel`].

@@ -24,12 +24,14 @@ impl<D: Dynamics> SqpSolver<D> {
             self.cond.condense(&self.lin);
             self.stats.time_condensing += t.elapsed().as_secs_f64();
             // Auto: an ill-conditioned condensed Hessian (unstable dynamics over the horizon)
-            // loses digits in any condensed solve; the multiple-shooting QP does not
+            // loses digits in any condensed solve; the multiple-shooting QP does not. With
+            // semidefinite blocks an estimate of ∞ (no Cholesky factor) is the extreme of
+            // this, round-off on a condition number beyond 1/ε, so it switches too.
             if self.settings.qp_form == QpForm::Auto && !self.indefinite_blocks_now() {
                 let t = Instant::now();
                 let cond = self.boxqp.condition_estimate(&self.cond.hc);
                 self.stats.time_qp += t.elapsed().as_secs_f64();
-                if cond.is_finite() && cond > AUTO_SPARSE_CONDITION {
+                if cond > AUTO_SPARSE_CONDITION {
                     form = QpForm::SparseClarabel;
                 }
             }
