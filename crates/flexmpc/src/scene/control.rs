@@ -191,7 +191,7 @@ fn controller_of(
         c.fallback_to_lmpc = false;
     }
     set(&mut c.link_elastic_modes, cs.link_elastic_modes.map(Some));
-    set(&mut c.integrator.kind, cs.integrator.map(|i| i.kind()));
+    set(&mut c.integrator.kind, cs.integrator);
     set(&mut c.integrator.substeps, cs.substeps);
     if let Some(w) = &cs.weights {
         let w = w.get_ref();

@@ -5,7 +5,7 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use super::names::{
-    ComponentsName, FreedomName, Integrator, JointKindName, LoadFrameName, ModeSet, SectionPreset,
+    ComponentsName, FreedomName, JointKindName, LoadFrameName, ModeSet, SectionPreset,
 };
 
 /// A section: a preset of the paper or explicit diagonals.
@@ -298,9 +298,10 @@ pub struct ControllerSpec {
     /// Range of validity of the controller model for that check (deg, in (0, 180]) \[20\].
     pub plan_joint_limit_deg: Option<f64>,
     /// Integrator in each shooting interval: `lawson-rk4`, `rk4` or `implicit-midpoint`
-    /// [lawson-rk4].
-    pub integrator: Option<Integrator>,
-    /// Integrator substeps per shooting interval `τp/Nc` (≥ 1) (default 16).
+    /// (the library's [`ocp_transcription::IntegratorKind`]; default that of
+    /// [`mpc::ControllerSettings`]).
+    pub integrator: Option<ocp_transcription::IntegratorKind>,
+    /// Integrator substeps per shooting interval `τp/Nc` (≥ 1).
     pub substeps: Option<usize>,
     /// Weights of the cost, the paper's by default.
     pub weights: Option<Spanned<WeightsSpec>>,
