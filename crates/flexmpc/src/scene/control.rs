@@ -122,13 +122,9 @@ pub fn plant_kind(name: &str) -> Option<mpc::PlantKind> {
     mpc::PlantKind::deserialize(IntoDeserializer::<value::Error>::into_deserializer(name)).ok()
 }
 
-/// `[controller]` → `mpc::ControllerSettings` and the weights part of `mpc::MpcSettings`
-/// (unset keys keep the library's defaults; the library's `validate` checks the values).
-fn controller_of(
-    ctx: &Ctx<'_>,
-    spec: &SceneSpec,
-    m: &mut mpc::MpcSettings,
-) -> Result<mpc::ControllerSettings, SceneError> {
+/// `[controller]` → `mpc::ControllerSettings` (unset keys keep the library's defaults; the
+/// library's `validate` checks the values).
+fn controller_of(ctx: &Ctx<'_>, spec: &SceneSpec) -> Result<mpc::ControllerSettings, SceneError> {
     let mut c = mpc::ControllerSettings::default();
     let Some(cs) = &spec.controller else { return Ok(c) };
     let span = Some(cs.span());
@@ -193,16 +189,6 @@ fn controller_of(
     set(&mut c.link_elastic_modes, cs.link_elastic_modes.map(Some));
     set(&mut c.integrator.kind, cs.integrator);
     set(&mut c.integrator.substeps, cs.substeps);
-    if let Some(w) = &cs.weights {
-        let w = w.get_ref();
-        set(&mut m.kx1, w.kx1);
-        set(&mut m.kx2, w.kx2);
-        set(&mut m.k_dxi, w.k_dxi);
-        set(&mut m.ku, w.ku);
-        set(&mut m.k_xi_rigid, w.k_xi_rigid);
-        set(&mut m.k_xi_elastic, w.k_xi_elastic);
-        set(&mut m.u_max, w.u_max);
-    }
     c.validate().or_else(|e| ctx.library(spec, Owner::Controller, e))?;
     Ok(c)
 }
@@ -244,17 +230,13 @@ pub(super) fn control_of(
         );
     }
     let selection = selection_of(ctx, spec)?;
-    let mut m = mpc::MpcSettings::default();
-    if let Some(v) = ss.horizon {
-        m.horizon = v;
-    }
-    if let Some(v) = ss.sampling {
-        m.sampling = v;
-    }
-    if let Some(v) = ss.intervals {
-        m.intervals = v;
-    }
-    let controller = controller_of(ctx, spec, &mut m)?;
+    let controller = controller_of(ctx, spec)?;
+    let cost = spec.controller.as_ref().and_then(|c| c.get_ref().weights.as_ref());
+    let m = mpc::MpcSettings {
+        timing: ss.timing,
+        cost: cost.map_or_else(Default::default, |w| *w.get_ref()),
+        ..Default::default()
+    };
     let omega0 = ss.omega0.unwrap_or(1.0);
     if !omega0.is_finite() {
         return ctx.err(span, "scenario.omega0", format!("must be finite, got {omega0}"));
