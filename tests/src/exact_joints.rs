@@ -448,13 +448,14 @@ pub fn closed_loop_2d() -> CaseOutcome {
         let dynamics = ExactDynamics::new(rom.clone()).map_err(err)?;
         let w = dynamics.weights(&settings, 2.0, &[1.0], None, &[None]).map_err(err)?;
         let (nx, nu) = (rom.n_state(), rom.n_inputs());
-        let mut ocp = Ocp::new(nx, nu, settings.horizon, settings.intervals).map_err(err)?;
+        let mut ocp =
+            Ocp::new(nx, nu, settings.timing.horizon, settings.timing.intervals).map_err(err)?;
         ocp.q = w.q.clone();
         ocp.r = w.r.clone();
         ocp.x_ref = w.x_ref.clone();
         ocp.u_ref = nalgebra::DVector::zeros(nu);
-        ocp.u_min = nalgebra::DVector::from_element(nu, -settings.u_max);
-        ocp.u_max = nalgebra::DVector::from_element(nu, settings.u_max);
+        ocp.u_min = nalgebra::DVector::from_element(nu, -settings.cost.u_max);
+        ocp.u_max = nalgebra::DVector::from_element(nu, settings.cost.u_max);
         let sqp = SqpSettings {
             mode: SqpMode::Sqp,
             integrator: ctrl.integrator.clone(),
@@ -470,8 +471,8 @@ pub fn closed_loop_2d() -> CaseOutcome {
             Plant::new(s.clone(), PlantSettings { dt: 1e-3, ..PlantSettings::default() })
                 .map_err(err)?;
         plant.set_state(&run.initial(&s)).map_err(err)?;
-        let steps = (settings.sampling / 1e-3).round() as usize;
-        let samples = (duration / settings.sampling).round() as usize;
+        let steps = (settings.timing.sampling / 1e-3).round() as usize;
+        let samples = (duration / settings.timing.sampling).round() as usize;
         let mut v0 = 0.0;
         let mut failures = 0;
         let mut max_angle = 0.0f64;
@@ -481,7 +482,7 @@ pub fn closed_loop_2d() -> CaseOutcome {
                 v0 = w.state_cost(&x0);
                 solver.initialize_constant(&x0, &vec![0.0; nu]).map_err(err)?;
             } else {
-                solver.shift_time(settings.sampling).map_err(err)?;
+                solver.shift_time(settings.timing.sampling).map_err(err)?;
             }
             if solver.solve(&x0).is_err() {
                 failures += 1;

@@ -206,7 +206,7 @@ fn sweep_3d_nmpc() -> CaseOutcome {
 /// [`mpc::SPATIAL_INPUT_WEIGHT`] (`scenes/paper-3d-mpc-ku1.toml`).
 fn setup_3d_ku_option() -> Result<Setup, String> {
     let mut sc = Scenario::paper_3d(ELEMENTS).map_err(err)?;
-    sc.mpc.ku = mpc::SPATIAL_INPUT_WEIGHT;
+    sc.mpc.cost.ku = mpc::SPATIAL_INPUT_WEIGHT;
     Setup::new(&sc).map_err(err)
 }
 

@@ -78,7 +78,7 @@ pub fn problem(root: &Path, scene: &'static str, omega0: f64) -> Result<Problem>
     let mpc = &control.scenario.mpc;
     let nu = p.u_min.len();
     let nx = p.x0.len();
-    let mut ocp = Ocp::new(nx, nu, mpc.horizon, mpc.intervals)?;
+    let mut ocp = Ocp::new(nx, nu, mpc.timing.horizon, mpc.timing.intervals)?;
     ocp.q = setup.weights.q.clone();
     ocp.r = setup.weights.r.clone();
     ocp.x_ref = setup.weights.x_ref.clone();

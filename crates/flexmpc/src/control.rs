@@ -167,7 +167,7 @@ pub fn run_mpc(
         serde_json::to_string_pretty(&crate::timings::summary_without_timings(&result))?,
     )?;
     let timings = if opts.timings {
-        crate::timings::write_run(&result, control.scenario.mpc.sampling, out)?
+        crate::timings::write_run(&result, control.scenario.mpc.timing.sampling, out)?
     } else {
         crate::timings::remove(out)?;
         Vec::new()
@@ -338,7 +338,7 @@ pub fn run_sweep_models(
     let snapshots = out.join("snapshots.svg");
     crate::figures::sweep_snapshots_svg(&runs, planar, &snapshots)?;
     let timings = if opts.timings {
-        crate::timings::write_sweep(&runs, control.scenario.mpc.sampling, out)?
+        crate::timings::write_sweep(&runs, control.scenario.mpc.timing.sampling, out)?
     } else {
         crate::timings::remove(out)?;
         Vec::new()
@@ -452,14 +452,14 @@ fn solve_first<D: ocp_transcription::Dynamics + Clone>(
     let mut ocp = ocp_transcription::Ocp::new(
         first.x0.len(),
         nu,
-        mpc_settings.horizon,
-        mpc_settings.intervals,
+        mpc_settings.timing.horizon,
+        mpc_settings.timing.intervals,
     )?;
     ocp.q = first.weights.q.clone();
     ocp.r = first.weights.r.clone();
     ocp.x_ref = first.weights.x_ref.clone();
-    ocp.u_min = nalgebra::DVector::from_element(nu, -mpc_settings.u_max);
-    ocp.u_max = nalgebra::DVector::from_element(nu, mpc_settings.u_max);
+    ocp.u_min = nalgebra::DVector::from_element(nu, -mpc_settings.cost.u_max);
+    ocp.u_max = nalgebra::DVector::from_element(nu, mpc_settings.cost.u_max);
     if let Some(s) = first.schedule {
         // the plan starts at t = 0: references at the nodes' times, as in the closed loop
         ocp.x_ref = nalgebra::DVector::from_vec(s.at(0.0));

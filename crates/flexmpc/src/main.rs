@@ -353,7 +353,7 @@ fn print_mpc(o: &control::MpcOutput, cli: &Cli) -> Result<()> {
         o.result.samples.len(),
         s.solve_time_median_s,
         s.solve_time_worst_s,
-        o.control.scenario.mpc.sampling,
+        o.control.scenario.mpc.timing.sampling,
         s.relaxed_samples,
         failed,
         s.held_samples,

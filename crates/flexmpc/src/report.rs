@@ -235,14 +235,14 @@ pub fn write(
         .collect();
     plot::grid(&out.join("inputs.svg"), (1000, 380 * charts.len().max(1) as u32), 1, &charts)?;
     // which path produced each sample, energy and the model against the plant
-    crate::figures::strategy_timeline(&out.join("strategies.svg"), result, sc.mpc.sampling)?;
+    crate::figures::strategy_timeline(&out.join("strategies.svg"), result, sc.mpc.timing.sampling)?;
     let prediction_error = match rom {
         Some(rom) => crate::figures::energy_and_prediction(
             &out.join("energy.svg"),
             &out.join("prediction.svg"),
             result,
             rom,
-            sc.mpc.sampling,
+            sc.mpc.timing.sampling,
         )?,
         None => None,
     };
@@ -384,7 +384,7 @@ pub fn write(
             "solve_times.svg",
             &format!(
                 "Wall time of each sample's solve (all attempts) against the sampling time τs = {} s and the {} ms goal.",
-                sc.mpc.sampling,
+                sc.mpc.timing.sampling,
                 crate::timings::SOLVE_TIME_GOAL_S * 1e3
             ),
         );
@@ -460,17 +460,17 @@ pub fn write(
             "weights (34)–(36)",
             format!(
                 "kx1 = {}, kx2 = {}, kΔξ = {}, ku = {}, Kξ rigid = {}, Kξ elastic = {}, |u| ≤ {}{}",
-                m.kx1,
-                m.kx2,
-                m.k_dxi,
-                m.ku,
-                m.k_xi_rigid,
-                m.k_xi_elastic,
-                m.u_max,
+                m.cost.kx1,
+                m.cost.kx2,
+                m.cost.k_dxi,
+                m.cost.ku,
+                m.cost.k_xi_rigid,
+                m.cost.k_xi_elastic,
+                m.cost.u_max,
                 if *m == mpc::MpcSettings::default() { " (the paper's)" } else { " (NOT the paper's)" }
             ),
         ),
-        ("timing", format!("τp = {} s, τs = {} s, Nc = {}, duration {} s, plant dt = {} s", m.horizon, m.sampling, m.intervals, sc.duration, sc.plant.dt)),
+        ("timing", format!("τp = {} s, τs = {} s, Nc = {}, duration {} s, plant dt = {} s", m.timing.horizon, m.timing.sampling, m.timing.intervals, sc.duration, sc.plant.dt)),
         ("controller modes", selection_text(&sc.selection)),
     ] {
         row(&mut h, k, &v);
@@ -566,7 +566,7 @@ pub fn write_sweep(
         runs.len(),
         control.plant.name(),
         control.scenario.duration,
-        control.scenario.mpc.sampling,
+        control.scenario.mpc.timing.sampling,
         if timings {
             r#"; measured timings: <a href="timings.json">timings.json</a>, <a href="timings.csv">timings.csv</a>"#
         } else {
@@ -646,7 +646,7 @@ pub fn write_sweep(
             "solve_times.svg",
             &format!(
                 "Measured wall time of each sample's solve against τs = {} s and the {} ms goal (timings.json, timings.csv).",
-                control.scenario.mpc.sampling,
+                control.scenario.mpc.timing.sampling,
                 crate::timings::SOLVE_TIME_GOAL_S * 1e3
             ),
         );

@@ -179,6 +179,26 @@ pub enum ModeSelection {
     Indices(Vec<usize>),
 }
 
+impl ModeSelection {
+    /// At least one mode: `Lowest(n)` with `n ≥ 1`, `ByKind` with a positive total, `Indices`
+    /// non-empty. Errors name the form (`lowest`, `kinds`, `indices`); whether the basis has
+    /// the modes is checked by [`ModalBasis::select`].
+    pub fn validate(&self) -> Result<()> {
+        match self {
+            ModeSelection::Lowest(0) => Err(invalid("lowest", 0, "must be at least 1")),
+            ModeSelection::ByKind(k)
+                if k.rigid + k.axial + k.torsion + k.bending_e2 + k.bending_e3 + k.mixed == 0 =>
+            {
+                Err(invalid("kinds", "0 modes", "select at least one mode"))
+            }
+            ModeSelection::Indices(v) if v.is_empty() => {
+                Err(invalid("indices", "[]", "give at least one mode index"))
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
 /// Constrained modes of a structure (paper §3.2, theory.md §4).
 ///
 /// Modes are columns: `phi1` (n1 × m, node values of `x1`, `B1`-orthonormal) and `phi2`
@@ -373,6 +393,7 @@ impl ModalBasis {
 
     /// The modes picked by `selection`, in basis order (rigid first, then by frequency).
     pub fn select(&self, selection: &ModeSelection) -> Result<ModalBasis> {
+        selection.validate()?;
         let m = self.n_modes();
         let idx: Vec<usize> = match selection {
             ModeSelection::Lowest(n) => {

@@ -338,7 +338,7 @@ pub fn run(
     let start = Instant::now();
     let sc = &setup.scenario;
     // checked in this order before any work (`drive` reads the same ratios)
-    ratio("output_interval per sampling", sc.mpc.sampling, sc.output_interval)?;
+    ratio("output_interval per sampling", sc.mpc.timing.sampling, sc.output_interval)?;
     ratio("output_interval per duration", sc.duration, sc.output_interval)?;
     let steps = ratio("plant.dt per output_interval", sc.output_interval, sc.plant.dt)?;
     ratio("output_interval per snapshot", sc.snapshot_interval, sc.output_interval)?;
@@ -422,7 +422,8 @@ fn drive<D: ocp_transcription::Dynamics + Clone>(
     measure: impl Fn(&SimPlant, &Observation) -> Result<Vec<f64>>,
 ) -> Result<RunResult> {
     let sc = &setup.scenario;
-    let per_sample = ratio("output_interval per sampling", sc.mpc.sampling, sc.output_interval)?;
+    let per_sample =
+        ratio("output_interval per sampling", sc.mpc.timing.sampling, sc.output_interval)?;
     let n_out = ratio("output_interval per duration", sc.duration, sc.output_interval)?;
     let per_snap = ratio("output_interval per snapshot", sc.snapshot_interval, sc.output_interval)?;
     let nu = sc.inputs.len();

@@ -373,13 +373,13 @@ impl<D: Dynamics + Clone> Controller<D> {
         settings.validate()?;
         let nu = model.nu();
         let nx = model.nx();
-        let mut ocp = Ocp::new(nx, nu, mpc.horizon, mpc.intervals)?;
+        let mut ocp = Ocp::new(nx, nu, mpc.timing.horizon, mpc.timing.intervals)?;
         ocp.q = weights.q.clone();
         ocp.r = weights.r.clone();
         ocp.x_ref = weights.x_ref.clone();
         ocp.u_ref = DVector::zeros(nu);
-        ocp.u_min = DVector::from_element(nu, -mpc.u_max);
-        ocp.u_max = DVector::from_element(nu, mpc.u_max);
+        ocp.u_min = DVector::from_element(nu, -mpc.cost.u_max);
+        ocp.u_max = DVector::from_element(nu, mpc.cost.u_max);
         let base = SqpSettings {
             hessian: HessianApproximation::GaussNewton,
             qp_form: settings.qp_form,
@@ -468,7 +468,7 @@ impl<D: Dynamics + Clone> Controller<D> {
     fn apply_schedule(&mut self, start: f64) -> Result<()> {
         let Some(s) = &self.schedule else { return Ok(()) };
         let x_ref = s.at(start);
-        let nodes = s.nodes(start, self.interval(), self.mpc.intervals);
+        let nodes = s.nodes(start, self.interval(), self.mpc.timing.intervals);
         let u_ref = vec![0.0; self.predictor.nu()];
         for solver in
             [Some(&mut self.lmpc), self.nmpc.as_mut(), self.relaxed.as_mut()].into_iter().flatten()
@@ -494,7 +494,7 @@ impl<D: Dynamics + Clone> Controller<D> {
 
     /// Length of the plan's control intervals `Δt = τp / Nc` (s).
     pub fn interval(&self) -> f64 {
-        self.mpc.horizon / self.mpc.intervals as f64
+        self.mpc.timing.horizon / self.mpc.timing.intervals as f64
     }
 
     /// Predicts the modal state `x` forward by `duration` (s, ≥ 0) under the constant control

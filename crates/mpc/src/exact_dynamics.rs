@@ -108,17 +108,17 @@ impl ExactDynamics {
         }
         let mut q = DMatrix::zeros(n, n);
         for i in 0..rom.n_p() {
-            q[(i, i)] = settings.kx1;
+            q[(i, i)] = settings.cost.kx1;
         }
         for i in 0..rom.n_p2() {
             let k = rom.n_p() + i;
-            q[(k, k)] = settings.kx2;
+            q[(k, k)] = settings.cost.kx2;
         }
         let mut x_ref = rom.reference_state();
         if rom.has_root() {
             let o = rom.root_offset();
             for i in 0..4 {
-                q[(o + i, o + i)] = settings.k_xi_rigid * total_length;
+                q[(o + i, o + i)] = settings.cost.k_xi_rigid * total_length;
             }
             if let Some(r) = root_ref {
                 x_ref[o..o + 4].copy_from_slice(r.as_slice());
@@ -127,7 +127,7 @@ impl ExactDynamics {
         for j in 0..rom.n_joints() {
             let o = rom.joint_offset(j);
             for i in 0..4 {
-                q[(o + i, o + i)] = settings.k_xi_rigid * outboard[j] + settings.k_dxi;
+                q[(o + i, o + i)] = settings.cost.k_xi_rigid * outboard[j] + settings.cost.k_dxi;
             }
             if let Some(r) = joint_refs[j] {
                 x_ref[o..o + 4].copy_from_slice(r.as_slice());
@@ -136,7 +136,7 @@ impl ExactDynamics {
         let nu = rom.n_inputs();
         Ok(Weights {
             q,
-            r: DMatrix::identity(nu, nu) * settings.ku,
+            r: DMatrix::identity(nu, nu) * settings.cost.ku,
             x_ref: DVector::from_vec(x_ref),
             k_xi: Vec::new(),
             a_xi: DMatrix::zeros(0, 0),
@@ -380,13 +380,13 @@ mod tests {
         );
         let x0 = d.rom().project_fe(&x_fe, s.reference()).unwrap();
         let (nx, nu) = (d.nx(), d.nu());
-        let mut ocp = Ocp::new(nx, nu, settings.horizon, settings.intervals).unwrap();
+        let mut ocp = Ocp::new(nx, nu, settings.timing.horizon, settings.timing.intervals).unwrap();
         ocp.q = w.q.clone();
         ocp.r = w.r.clone();
         ocp.x_ref = w.x_ref.clone();
         ocp.u_ref = DVector::zeros(nu);
-        ocp.u_min = DVector::from_element(nu, -settings.u_max);
-        ocp.u_max = DVector::from_element(nu, settings.u_max);
+        ocp.u_min = DVector::from_element(nu, -settings.cost.u_max);
+        ocp.u_max = DVector::from_element(nu, settings.cost.u_max);
         let sqp = SqpSettings {
             integrator: crate::ControllerSettings::default().integrator,
             levenberg_marquardt: crate::ControllerSettings::default().levenberg_marquardt,

@@ -62,7 +62,7 @@
 //! let mut x0: Vec<f64> = setup.weights.x_ref.iter().copied().collect();
 //! x0[0] = 0.5; // velocity of the first (rigid) mode
 //! let report = controller.step(0.0, &x0)?;
-//! assert!(report.u.iter().all(|u| u.abs() <= scenario.mpc.u_max + 1e-9));
+//! assert!(report.u.iter().all(|u| u.abs() <= scenario.mpc.cost.u_max + 1e-9));
 //! # Ok::<(), mpc::MpcError>(())
 //! ```
 //!
@@ -212,4 +212,4 @@ pub use plant::{ControlInput, PlantKind};
 pub use reference::{JointCommand, ReferenceSchedule};
 pub use scenario::{Scenario, Setup, MAX_PLANT_STEPS};
 pub use validity::JointMonitor;
-pub use weights::{ControlGrid, MpcSettings, Weights, SPATIAL_INPUT_WEIGHT};
+pub use weights::{ControlGrid, CostWeights, MpcSettings, Timing, Weights, SPATIAL_INPUT_WEIGHT};

@@ -149,15 +149,15 @@ impl Scenario {
             return Err(invalid("rom_plant_substeps", 0, "must be at least 1"));
         }
         let out = ("output_interval", self.output_interval);
-        multiple("mpc.sampling", self.mpc.sampling, out)?;
-        let dt_plan = self.mpc.horizon / self.mpc.intervals as f64;
+        multiple("mpc.sampling", self.mpc.timing.sampling, out)?;
+        let dt_plan = self.mpc.timing.horizon / self.mpc.timing.intervals as f64;
         if self.mpc.control_grid == crate::weights::ControlGrid::Absolute
-            || self.mpc.sampling > dt_plan + 1e-12
+            || self.mpc.timing.sampling > dt_plan + 1e-12
         {
             // the plan's switching times must fall on output-interval boundaries
             multiple("mpc.intervals", dt_plan, out).map_err(|e| {
                 let e = e.with_reason(|r| format!("gives τp/Nc = {dt_plan} s, which {r}"));
-                e.with_value(self.mpc.intervals)
+                e.with_value(self.mpc.timing.intervals)
             })?;
         }
         multiple("duration", self.duration, out)?;
@@ -319,7 +319,7 @@ impl Setup {
             .filter(|(j, n)| !j.ground && n.len() == 2)
             .map(|(_, n)| (n[0], n[1]))
             .collect();
-        let weights = Weights::new(&rom, &scenario.mpc, &pairs)?;
+        let weights = Weights::new(&rom, &scenario.mpc.cost, &pairs)?;
         let root_joint = structure
             .joint_index(&scenario.root)
             .ok_or_else(|| invalid("root", &scenario.root, "no such support"))?;
@@ -356,11 +356,11 @@ mod tests {
         let base = Scenario::paper_2d(4).unwrap();
         base.validate().unwrap();
         let cases: [(&str, Edit); 16] = [
-            ("mpc.horizon", |s| s.mpc.horizon = -1.0),
-            ("mpc.sampling", |s| s.mpc.sampling = 0.33),
-            ("mpc.sampling", |s| s.mpc.sampling = 7.0),
-            ("mpc.intervals", |s| s.mpc.intervals = 7),
-            ("mpc.ku", |s| s.mpc.ku = 0.0),
+            ("mpc.horizon", |s| s.mpc.timing.horizon = -1.0),
+            ("mpc.sampling", |s| s.mpc.timing.sampling = 0.33),
+            ("mpc.sampling", |s| s.mpc.timing.sampling = 7.0),
+            ("mpc.intervals", |s| s.mpc.timing.intervals = 7),
+            ("mpc.ku", |s| s.mpc.cost.ku = 0.0),
             ("duration", |s| s.duration = 1.01),
             ("duration", |s| s.duration = 1e5),
             ("output_interval", |s| s.output_interval = 0.0),

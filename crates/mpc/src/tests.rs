@@ -200,9 +200,11 @@ fn initial_cost_is_the_weighted_kinetic_energy() {
 
 #[test]
 fn settings_validation_names_the_field() {
-    let bad = MpcSettings { ku: 0.0, ..MpcSettings::default() };
+    let mut bad = MpcSettings::default();
+    bad.cost.ku = 0.0;
     assert!(bad.validate().unwrap_err().to_string().contains("ku"));
-    let bad = MpcSettings { sampling: 7.0, ..MpcSettings::default() };
+    let mut bad = MpcSettings::default();
+    bad.timing.sampling = 7.0;
     assert!(bad.validate().unwrap_err().to_string().contains("sampling"));
     let bad = ControllerSettings { retry_relaxation: Some(1.5), ..ControllerSettings::full_sqp() };
     assert!(bad.validate().unwrap_err().to_string().contains("retry_relaxation"));
@@ -289,7 +291,7 @@ fn nmpc_on_the_fe_plant_short_run() {
 #[test]
 fn spatial_nmpc_stabilises_the_3d_two_link_at_omega_one() {
     let mut sc = Scenario::paper_3d(50).unwrap();
-    sc.mpc.ku = SPATIAL_INPUT_WEIGHT;
+    sc.mpc.cost.ku = SPATIAL_INPUT_WEIGHT;
     let setup = Setup::new(&sc).unwrap();
     let r = run(&setup, 1.0, &ControllerSettings::real_time_spatial(), PlantKind::Fe).unwrap();
     let s = &r.summary;
@@ -360,7 +362,7 @@ fn absolute_grid_switches_only_on_the_control_grid() {
     let setup = Setup::new(&sc).unwrap();
     let r =
         run(&setup, 0.5, &ControllerSettings::of(ControllerKind::Lmpc), PlantKind::Rom).unwrap();
-    let dt = sc.mpc.horizon / sc.mpc.intervals as f64;
+    let dt = sc.mpc.timing.horizon / sc.mpc.timing.intervals as f64;
     for s in &r.samples {
         let k = s.plan_start / dt;
         assert!((k - k.round()).abs() < 1e-9, "{s:?}");
@@ -383,7 +385,7 @@ fn absolute_grid_switches_only_on_the_control_grid() {
 fn sample_grid_applies_the_plan_between_samples() {
     let mut sc = setup_2d().scenario.clone();
     sc.duration = 1.0;
-    sc.mpc.intervals = 60; // Δt = 0.1 s, τs = 0.2 s
+    sc.mpc.timing.intervals = 60; // Δt = 0.1 s, τs = 0.2 s
     sc.mpc.control_grid = ControlGrid::Sample;
     let setup = Setup::new(&sc).unwrap();
     let r =
@@ -482,7 +484,7 @@ fn without_fallback_the_nmpc_iterate_is_applied() {
     let d = without.u.iter().zip(&lmpc.u).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
     // one SQP step from the linear plan moves the first control by O(0.1) at this rate
     assert!(d > 1e-6, "NMPC iterate {:?} equals the linear plan {:?}", without.u, lmpc.u);
-    assert!(without.u.iter().all(|u| u.is_finite() && u.abs() <= s.mpc.u_max + 1e-9));
+    assert!(without.u.iter().all(|u| u.is_finite() && u.abs() <= s.mpc.cost.u_max + 1e-9));
 }
 
 /// The chord orientation of a link bent into a circular arc: the root node turns by the
@@ -757,7 +759,7 @@ fn exact_joints_closed_loop_slows_the_spin() {
     assert!(a.summary.error.is_none(), "{:?}", a.summary.error);
     assert_eq!(a.samples.len(), 8);
     for s in &a.samples {
-        assert!(s.u.iter().all(|v| v.is_finite() && v.abs() <= sc.mpc.u_max + 1e-9), "{s:?}");
+        assert!(s.u.iter().all(|v| v.is_finite() && v.abs() <= sc.mpc.cost.u_max + 1e-9), "{s:?}");
     }
     let r = &a.summary;
     eprintln!(

@@ -1,5 +1,5 @@
 //! The paper's cost (34)–(36): weights `Q`, `R`, references and timing, with the paper's
-//! values as defaults ([`MpcSettings`]), and their assembly for a reduced model ([`Weights`]).
+//! values as defaults ([`MpcSettings`]: [`Timing`], [`CostWeights`]), and their assembly for a reduced model ([`Weights`]).
 
 use crate::error::{invalid, Result};
 use modal_rom::ModalRom;
@@ -14,36 +14,58 @@ use serde::{Deserialize, Serialize};
 /// elbow within 25° (paper weights: 92°), where the 0°-mode model still predicts the plant.
 pub const SPATIAL_INPUT_WEIGHT: f64 = 1.0;
 
-/// Weights, references, bounds and timing of the MPC (paper §5.2, eqs. 34–36). Defaults are
-/// the paper's values; any other value is a deliberate, documented deviation.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+/// Settings of the MPC (paper §5.2, eqs. 33–36): the horizon and sampling ([`Timing`]), the
+/// cost weights and input bound ([`CostWeights`]) and the control grid. Defaults are the
+/// paper's values; any other value is a deliberate, documented deviation. Serialised flat
+/// (the fields of `timing` and `cost` at the top level).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct MpcSettings {
-    /// `k_x1`, weight of the velocity coordinates `q1` [0.01].
-    pub kx1: f64,
-    /// `k_x2`, weight of the strain coordinates `q2` [0.01].
-    pub kx2: f64,
-    /// `k_Δξ`, weight of the quaternion jump across the joints (36) [2.0].
-    pub k_dxi: f64,
-    /// `k_u`, `R = k_u I` [0.1]. In 3D the paper's 0.1 lets the NMPC's plans drive the
-    /// elbow outside the 0°-mode model's range at ω0 = 1 (the FE plant then reaches 92°);
-    /// [`SPATIAL_INPUT_WEIGHT`] is the documented option that stabilises it there.
-    pub ku: f64,
-    /// Entries of `Kξ` for the shifting-equilibrium mode `φξ0` and the rigid modes' quaternion
-    /// modes (the paper's leading ones: 3 in 2D, 5 in 3D) [1.0].
-    pub k_xi_rigid: f64,
-    /// Entries of `Kξ` for the elastic modes' quaternion modes [0.01].
-    pub k_xi_elastic: f64,
-    /// Prediction horizon `τp` (s) \[6\].
-    pub horizon: f64,
-    /// Sampling time `τs` (s): each control is held on the plant for `τs` [0.2].
-    pub sampling: f64,
-    /// Number of piecewise-constant control intervals `Nc` over `τp` \[24\].
-    pub intervals: usize,
-    /// Input bound: `|u_i| ≤ u_max` \[5\].
-    pub u_max: f64,
+    /// Horizon `τp`, sampling time `τs` and control intervals `Nc`.
+    #[serde(flatten)]
+    pub timing: Timing,
+    /// Weights of the cost (34)–(36) and the input bound.
+    #[serde(flatten)]
+    pub cost: CostWeights,
     /// Where the control intervals of each sample's plan start [`ControlGrid::Absolute`].
     pub control_grid: ControlGrid,
+}
+
+/// Horizon and sampling of the MPC (paper §5.2, eq. 33); the scene file's `[scenario]`
+/// `horizon`, `sampling`, `intervals`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Timing {
+    /// Prediction horizon `τp` (s, finite, > 0) \[6\].
+    pub horizon: f64,
+    /// Sampling time `τs` (s, in (0, τp]): each control is held on the plant for `τs` [0.2].
+    pub sampling: f64,
+    /// Number of piecewise-constant control intervals `Nc` over `τp` (≥ 1) \[24\].
+    pub intervals: usize,
+}
+
+/// Weights of the cost (34)–(36) and the input bound (paper §5.2); the scene file's
+/// `[controller.weights]`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CostWeights {
+    /// `k_x1`, weight of the velocity coordinates `q1` (finite, ≥ 0) [0.01].
+    pub kx1: f64,
+    /// `k_x2`, weight of the strain coordinates `q2` (finite, ≥ 0) [0.01].
+    pub kx2: f64,
+    /// `k_Δξ`, weight of the quaternion jump across the joints (36) (finite, ≥ 0) [2.0].
+    pub k_dxi: f64,
+    /// `k_u`, `R = k_u I` (finite, > 0) [0.1]. In 3D the paper's 0.1 lets the NMPC's plans
+    /// drive the elbow outside the 0°-mode model's range at ω0 = 1 (the FE plant then reaches
+    /// 92°); [`SPATIAL_INPUT_WEIGHT`] is the documented option that stabilises it there.
+    pub ku: f64,
+    /// Entries of `Kξ` for the shifting-equilibrium mode `φξ0` and the rigid modes' quaternion
+    /// modes (the paper's leading ones: 3 in 2D, 5 in 3D) (finite, ≥ 0) [1.0].
+    pub k_xi_rigid: f64,
+    /// Entries of `Kξ` for the elastic modes' quaternion modes (finite, ≥ 0) [0.01].
+    pub k_xi_elastic: f64,
+    /// Input bound: `|u_i| ≤ u_max` (N or N·m, finite, > 0) \[5\].
+    pub u_max: f64,
 }
 
 /// Placement of the plan's piecewise-constant control intervals (length `Δt = τp/Nc`)
@@ -61,7 +83,7 @@ pub struct MpcSettings {
 /// 0.75 (neither with `Sample`); it is worse for the 3D LMPC at ω0 = 0.5 (orientation 20.6%
 /// of its excursion against the criterion's 20%; ✓ with `Sample`) and the 3D NMPC at ω0 = 1
 /// (diverges; with `Sample` controlled but `V(7.5)/V(0)` = 1.85).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ControlGrid {
     /// Intervals on the fixed grid `t = kΔt` ("a piecewise-constant parametrisation of the
@@ -70,13 +92,20 @@ pub enum ControlGrid {
     /// already being applied) to the next grid time `t_g`, the problem is solved from there,
     /// and its plan takes over at `t_g`. Feedback still comes every `τs`; when `τs` is a
     /// multiple of `Δt` this is the same as [`ControlGrid::Sample`].
+    #[default]
     Absolute,
     /// Intervals start at each sample `t_i`; the plan's `u*(t)` is applied on
     /// `[t_i, t_i + τs)` (its first piece when `τs ≤ Δt`).
     Sample,
 }
 
-impl Default for MpcSettings {
+impl Default for Timing {
+    fn default() -> Self {
+        Self { horizon: 6.0, sampling: 0.2, intervals: 24 }
+    }
+}
+
+impl Default for CostWeights {
     fn default() -> Self {
         Self {
             kx1: 0.01,
@@ -85,18 +114,44 @@ impl Default for MpcSettings {
             ku: 0.1,
             k_xi_rigid: 1.0,
             k_xi_elastic: 0.01,
-            horizon: 6.0,
-            sampling: 0.2,
-            intervals: 24,
             u_max: 5.0,
-            control_grid: ControlGrid::Absolute,
         }
     }
 }
 
 impl MpcSettings {
-    /// Checks every field: weights finite and `≥ 0` (`k_u > 0`), times positive,
-    /// `τs ≤ τp`, `Nc ≥ 1`, `u_max > 0`.
+    /// Checks every field ([`Timing::validate`], [`CostWeights::validate`]); errors name the
+    /// field as in the flat serialisation (`horizon`, `ku`, …).
+    pub fn validate(&self) -> Result<()> {
+        self.timing.validate()?;
+        self.cost.validate()
+    }
+}
+
+impl Timing {
+    /// `τp` finite and positive, `τs` in `(0, τp]`, `Nc ≥ 1`; errors name the field.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.horizon.is_finite() && self.horizon > 0.0) {
+            return Err(invalid("horizon", self.horizon, "must be finite and > 0"));
+        }
+        if !(self.sampling.is_finite() && self.sampling > 0.0 && self.sampling <= self.horizon) {
+            return Err(invalid("sampling", self.sampling, "must be in (0, horizon]"));
+        }
+        if self.intervals == 0 {
+            return Err(invalid("intervals", 0, "must be at least 1"));
+        }
+        Ok(())
+    }
+
+    /// Length `Δt = τp/Nc` of one control interval (s).
+    pub fn interval(&self) -> f64 {
+        self.horizon / self.intervals as f64
+    }
+}
+
+impl CostWeights {
+    /// Weights finite and `≥ 0` (`k_u > 0`: `R` positive definite), `u_max` finite and
+    /// positive; errors name the field.
     pub fn validate(&self) -> Result<()> {
         for (name, v) in [
             ("kx1", self.kx1),
@@ -111,15 +166,6 @@ impl MpcSettings {
         }
         if !(self.ku.is_finite() && self.ku > 0.0) {
             return Err(invalid("ku", self.ku, "must be finite and > 0 (R positive definite)"));
-        }
-        if !(self.horizon.is_finite() && self.horizon > 0.0) {
-            return Err(invalid("horizon", self.horizon, "must be finite and > 0"));
-        }
-        if !(self.sampling.is_finite() && self.sampling > 0.0 && self.sampling <= self.horizon) {
-            return Err(invalid("sampling", self.sampling, "must be in (0, horizon]"));
-        }
-        if self.intervals == 0 {
-            return Err(invalid("intervals", 0, "must be at least 1"));
         }
         if !(self.u_max.is_finite() && self.u_max > 0.0) {
             return Err(invalid("u_max", self.u_max, "must be finite and > 0"));
@@ -154,7 +200,7 @@ impl Weights {
     /// Builds the weights of `rom` for `settings`; `joints` lists, per joint penalised by
     /// `AΔξ`, the global node indices (all beams' nodes in order) of the two joined ends
     /// `(a at L, b at 0)`. The model must carry quaternion states.
-    pub fn new(rom: &ModalRom, settings: &MpcSettings, joints: &[(usize, usize)]) -> Result<Self> {
+    pub fn new(rom: &ModalRom, settings: &CostWeights, joints: &[(usize, usize)]) -> Result<Self> {
         settings.validate()?;
         let qm = rom.quaternion().ok_or_else(|| {
             invalid("rom", "without quaternion states", "the cost (35) needs the augmented model")

@@ -68,7 +68,7 @@ pub use joint::{
     rows, Axis, End, EndRef, Frame, Freedom, Joint, JointKind, Part, Row, RowKind, Support,
 };
 pub use nullspace::{null_space, RANK_TOLERANCE};
-pub use plant::{Plant, PlantSettings, StepReport};
+pub use plant::{JointBalance, Plant, PlantSettings, StepReport};
 pub use structure::{
     ConstraintMatrix, JointInfo, Placement, RowLabel, Structure, StructureBeam, StructureSettings,
 };

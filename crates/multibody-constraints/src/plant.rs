@@ -76,6 +76,20 @@ impl PlantSettings {
     }
 }
 
+/// The loads a joint applies on its ends over a run ([`Plant::run_joint_balance`]), each the
+/// largest over the steps.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct JointBalance {
+    /// Norm of the sum of the end forces (zero in balance, eq. 12).
+    pub force_sum: f64,
+    /// Norm of an end moment (zero for a ball joint).
+    pub moment: f64,
+    /// Norm of an end load `[force, moment]`: the load scale.
+    pub load_scale: f64,
+    /// Velocity-compatibility violation of a step ([`StepReport::velocity_violation`]).
+    pub velocity_violation: f64,
+}
+
 /// What one step did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct StepReport {
@@ -795,6 +809,24 @@ impl Plant {
                 )
             })
             .collect()
+    }
+
+    /// Takes `steps` steps and returns the worst balance, over them, of the loads that
+    /// joint/support `j` applies on its ends ([`Plant::reactions`]): a joint in balance (12)
+    /// applies forces that sum to zero, and a ball joint applies no moment (paper Fig. 2).
+    /// Panics if `j` is not a joint index, as [`Plant::reactions`].
+    pub fn run_joint_balance(&mut self, j: usize, steps: usize) -> Result<JointBalance> {
+        let mut b = JointBalance::default();
+        for _ in 0..steps {
+            let r = self.step()?;
+            b.velocity_violation = b.velocity_violation.max(r.velocity_violation);
+            let loads = self.reactions(j);
+            let total: Vector6<f64> = loads.iter().sum();
+            b.load_scale = loads.iter().fold(b.load_scale, |s, l| s.max(l.norm()));
+            b.force_sum = b.force_sum.max(total.fixed_rows::<3>(0).norm());
+            b.moment = loads.iter().fold(b.moment, |m, l| m.max(l.fixed_rows::<3>(3).norm()));
+        }
+        Ok(b)
     }
 
     /// Global position of node `n` of beam `b`.

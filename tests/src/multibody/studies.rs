@@ -165,17 +165,8 @@ pub fn ball_joint_balance(n: usize, steps: usize) -> Result<(f64, f64, f64, f64)
     let mut plant = Plant::new(structure, settings)?;
     plant.set_gravity(Vector3::new(0.0, 0.0, -9.81))?;
     let ball = plant.structure().joint_index("ball").expect("sample has a ball joint");
-    let (mut sum, mut moment, mut vv, mut scale) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-    for _ in 0..steps {
-        let r = plant.step()?;
-        vv = vv.max(r.velocity_violation);
-        let loads = plant.reactions(ball);
-        let total: Vector6<f64> = loads.iter().sum();
-        scale = loads.iter().fold(scale, |s, l| s.max(l.norm()));
-        sum = sum.max(total.fixed_rows::<3>(0).norm());
-        moment = loads.iter().fold(moment, |m, l| m.max(l.fixed_rows::<3>(3).norm()));
-    }
-    Ok((sum / scale, moment / scale, vv, scale))
+    let b = plant.run_joint_balance(ball, steps)?;
+    Ok((b.force_sum / b.load_scale, b.moment / b.load_scale, b.velocity_violation, b.load_scale))
 }
 
 /// Rotating the ball-joint structure, its gravity and global axes by a fixed rotation: the

@@ -72,7 +72,7 @@ pub fn figures(r: &RunResult, ku: f64) -> Figures {
 pub fn setups_3d(elements: usize) -> Result<(Setup, Setup)> {
     let paper = Setup::new(&Scenario::paper_3d(elements)?)?;
     let mut option_sc = Scenario::paper_3d(elements)?;
-    option_sc.mpc.ku = mpc::SPATIAL_INPUT_WEIGHT;
+    option_sc.mpc.cost.ku = mpc::SPATIAL_INPUT_WEIGHT;
     Ok((paper, Setup::new(&option_sc)?))
 }
 

@@ -23,7 +23,7 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
     ctx.plan((1 + omegas.len() * configs.len() + if quick { 2 } else { 8 }) as u64);
     ctx.progress(&format!("(d) setup of the paper's 2D scenario, 2×{elements} elements"));
     let setup = ok(setup_2d(elements))?;
-    let ku = setup.scenario.mpc.ku;
+    let ku = setup.scenario.mpc.cost.ku;
     ctx.tick();
     let mut table = Table::new(
         "closed-loop",
@@ -31,9 +31,9 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
             "Closed loops of the paper's 2D scenario (FE plant 2×{elements}, {} s, τs = {} s, \
              τp = {} s, Nc = {})",
             setup.scenario.duration,
-            setup.scenario.mpc.sampling,
-            setup.scenario.mpc.horizon,
-            setup.scenario.mpc.intervals
+            setup.scenario.mpc.timing.sampling,
+            setup.scenario.mpc.timing.horizon,
+            setup.scenario.mpc.timing.intervals
         ),
         &[
             ("ω0 (rad/s)", Fmt::Fix(2)),
@@ -132,8 +132,8 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
     notes.push(format!(
         "Real time: the sampling time is τs = {} s; a worst solve below τs/4 = {:.0} ms is the \
          issue's goal.",
-        setup.scenario.mpc.sampling,
-        setup.scenario.mpc.sampling * 250.0
+        setup.scenario.mpc.timing.sampling,
+        setup.scenario.mpc.timing.sampling * 250.0
     ));
     let mut study = Study::new(
         "d-control",
@@ -169,7 +169,7 @@ fn run_3d(ctx: &mut Ctx, elements: usize) -> Result<(Table, Chart, Vec<String>)>
     let omegas: &[f64] = if quick { &[0.5] } else { &[0.5, 1.0] };
     ctx.progress(&format!("(d) setup of the paper's 3D scenario, 2×{elements} elements"));
     let (paper, option) = ok(setups_3d(elements))?;
-    let ku = paper.scenario.mpc.ku;
+    let ku = paper.scenario.mpc.cost.ku;
     let configs = configs_3d(quick, &paper, &option);
     let mut table = Table::new(
         "closed-loop-3d",
@@ -177,9 +177,9 @@ fn run_3d(ctx: &mut Ctx, elements: usize) -> Result<(Table, Chart, Vec<String>)>
             "Closed loops of the paper's 3D scenario (FE plant 2×{elements}, {} s, τs = {} s, \
              τp = {} s, Nc = {}); paper k_u = {ku} unless stated, J measured with k_u = {ku}",
             paper.scenario.duration,
-            paper.scenario.mpc.sampling,
-            paper.scenario.mpc.horizon,
-            paper.scenario.mpc.intervals
+            paper.scenario.mpc.timing.sampling,
+            paper.scenario.mpc.timing.horizon,
+            paper.scenario.mpc.timing.intervals
         ),
         &[
             ("ω0 (rad/s)", Fmt::Fix(3)),

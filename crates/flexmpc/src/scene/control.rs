@@ -60,26 +60,20 @@ fn selection_of(ctx: &Ctx<'_>, spec: &SceneSpec) -> Result<modal_rom::ModeSelect
             )
         }
     }
-    if let Some(p) = ms.selection {
-        return Ok(p.selection());
-    }
-    if let Some(k) = ms.kinds {
-        let total = k.rigid + k.axial + k.torsion + k.bending_e2 + k.bending_e3 + k.mixed;
-        if total == 0 {
-            return ctx.err(span, "modes.kinds", "select at least one mode");
+    let selection = match (ms.selection, ms.kinds, ms.lowest, &ms.indices) {
+        (Some(p), ..) => p.selection(),
+        (_, Some(k), ..) => ModeSelection::ByKind(k),
+        (_, _, Some(n), _) => ModeSelection::Lowest(n),
+        (.., v) => ModeSelection::Indices(v.clone().unwrap_or_default()),
+    };
+    // the library's rule (at least one mode); its error names the form = the scene key
+    selection.validate().or_else(|e| match e {
+        modal_rom::ModalError::Invalid { field, value, reason } => {
+            ctx.err(span, format!("modes.{field}"), format!("{reason}, got {value}"))
         }
-        return Ok(ModeSelection::ByKind(k));
-    }
-    if let Some(n) = ms.lowest {
-        if n == 0 {
-            return ctx.err(span, "modes.lowest", "must be at least 1");
-        }
-        return Ok(ModeSelection::Lowest(n));
-    }
-    match &ms.indices {
-        Some(v) if !v.is_empty() => Ok(ModeSelection::Indices(v.clone())),
-        _ => ctx.err(span, "modes.indices", "give at least one mode index"),
-    }
+        e => ctx.err(span, "modes", e.to_string()),
+    })?;
+    Ok(selection)
 }
 
 /// A `[controller]` value behind an on/off switch (`retry` / `retry_relaxation`,
@@ -122,13 +116,9 @@ pub fn plant_kind(name: &str) -> Option<mpc::PlantKind> {
     mpc::PlantKind::deserialize(IntoDeserializer::<value::Error>::into_deserializer(name)).ok()
 }
 
-/// `[controller]` → `mpc::ControllerSettings` and the weights part of `mpc::MpcSettings`
-/// (unset keys keep the library's defaults; the library's `validate` checks the values).
-fn controller_of(
-    ctx: &Ctx<'_>,
-    spec: &SceneSpec,
-    m: &mut mpc::MpcSettings,
-) -> Result<mpc::ControllerSettings, SceneError> {
+/// `[controller]` → `mpc::ControllerSettings` (unset keys keep the library's defaults; the
+/// library's `validate` checks the values).
+fn controller_of(ctx: &Ctx<'_>, spec: &SceneSpec) -> Result<mpc::ControllerSettings, SceneError> {
     let mut c = mpc::ControllerSettings::default();
     let Some(cs) = &spec.controller else { return Ok(c) };
     let span = Some(cs.span());
@@ -191,18 +181,8 @@ fn controller_of(
         c.fallback_to_lmpc = false;
     }
     set(&mut c.link_elastic_modes, cs.link_elastic_modes.map(Some));
-    set(&mut c.integrator.kind, cs.integrator.map(|i| i.kind()));
+    set(&mut c.integrator.kind, cs.integrator);
     set(&mut c.integrator.substeps, cs.substeps);
-    if let Some(w) = &cs.weights {
-        let w = w.get_ref();
-        set(&mut m.kx1, w.kx1);
-        set(&mut m.kx2, w.kx2);
-        set(&mut m.k_dxi, w.k_dxi);
-        set(&mut m.ku, w.ku);
-        set(&mut m.k_xi_rigid, w.k_xi_rigid);
-        set(&mut m.k_xi_elastic, w.k_xi_elastic);
-        set(&mut m.u_max, w.u_max);
-    }
     c.validate().or_else(|e| ctx.library(spec, Owner::Controller, e))?;
     Ok(c)
 }
@@ -244,17 +224,13 @@ pub(super) fn control_of(
         );
     }
     let selection = selection_of(ctx, spec)?;
-    let mut m = mpc::MpcSettings::default();
-    if let Some(v) = ss.horizon {
-        m.horizon = v;
-    }
-    if let Some(v) = ss.sampling {
-        m.sampling = v;
-    }
-    if let Some(v) = ss.intervals {
-        m.intervals = v;
-    }
-    let controller = controller_of(ctx, spec, &mut m)?;
+    let controller = controller_of(ctx, spec)?;
+    let cost = spec.controller.as_ref().and_then(|c| c.get_ref().weights.as_ref());
+    let m = mpc::MpcSettings {
+        timing: ss.timing,
+        cost: cost.map_or_else(Default::default, |w| *w.get_ref()),
+        ..Default::default()
+    };
     let omega0 = ss.omega0.unwrap_or(1.0);
     if !omega0.is_finite() {
         return ctx.err(span, "scenario.omega0", format!("must be finite, got {omega0}"));
@@ -282,27 +258,7 @@ pub(super) fn control_of(
         references: super::reference::references_of(ctx, spec, structure, controller.model)?,
     };
     scenario.validate().or_else(|e| ctx.library(spec, Owner::Scenario, e))?;
-    let (sweep_omegas, sweep_controllers) = match &spec.sweep {
-        None => (Vec::new(), vec![controller.kind]),
-        Some(sw) => {
-            let span = Some(sw.span());
-            let s = sw.get_ref();
-            if s.omega0.is_empty() {
-                return ctx.err(span, "sweep.omega0", "give at least one ω0 (rad/s)");
-            }
-            if let Some(w) = s.omega0.iter().find(|w| !w.is_finite()) {
-                return ctx.err(span, "sweep.omega0", format!("must be finite, got {w}"));
-            }
-            let kinds = match &s.controllers {
-                None => vec![controller.kind],
-                Some(v) if v.is_empty() => {
-                    return ctx.err(span, "sweep.controllers", "give at least one of nmpc, lmpc")
-                }
-                Some(v) => v.clone(),
-            };
-            (s.omega0.clone(), kinds)
-        }
-    };
+    let (sweep_omegas, sweep_controllers) = sweep_of(ctx, spec, controller.kind)?;
     Ok(Some(Control {
         scenario,
         controller,
@@ -311,6 +267,33 @@ pub(super) fn control_of(
         sweep_omegas,
         sweep_controllers,
     }))
+}
+
+/// `[sweep]`'s runs: the `ω0` values (finite, at least one; empty without `[sweep]`) and the
+/// controllers (at least one; default `kind`, the `[controller]`'s). The sweep has no settings
+/// type in the library ([`mpc::sweep`] takes the values), so its rules live here, once.
+fn sweep_of(
+    ctx: &Ctx<'_>,
+    spec: &SceneSpec,
+    kind: mpc::ControllerKind,
+) -> Result<(Vec<f64>, Vec<mpc::ControllerKind>), SceneError> {
+    let Some(sw) = &spec.sweep else { return Ok((Vec::new(), vec![kind])) };
+    let span = Some(sw.span());
+    let s = sw.get_ref();
+    if s.omega0.is_empty() {
+        return ctx.err(span, "sweep.omega0", "give at least one ω0 (rad/s)");
+    }
+    if let Some(w) = s.omega0.iter().find(|w| !w.is_finite()) {
+        return ctx.err(span, "sweep.omega0", format!("must be finite, got {w}"));
+    }
+    let kinds = match &s.controllers {
+        None => vec![kind],
+        Some(v) if v.is_empty() => {
+            return ctx.err(span, "sweep.controllers", "give at least one of nmpc, lmpc")
+        }
+        Some(v) => v.clone(),
+    };
+    Ok((s.omega0.clone(), kinds))
 }
 
 /// The setup that `mpc`, `sweep` and `ocp` build first ([`mpc::Setup::new`]: the modes, the

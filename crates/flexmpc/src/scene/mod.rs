@@ -158,6 +158,9 @@ pub fn parse_str(file: &Path, text: &str) -> Result<SceneSpec, SceneError> {
         let line = e.span().map(|s| ctx.line(s.start));
         // toml's message names the field (e.g. "missing field `dt`", "unknown field `lenght`").
         let message = e.message().trim().to_string();
+        if let Some(err) = e.span().and_then(|s| flattened(&ctx, s, &message)) {
+            return err;
+        }
         // "invalid type/value/length: … `-4` …" and "unknown variant `pid`, expected …" quote
         // the value, not the field: take the key at the span for those.
         let quotes_field =
@@ -172,6 +175,33 @@ pub fn parse_str(file: &Path, text: &str) -> Result<SceneSpec, SceneError> {
             .unwrap_or_else(|| "(syntax)".into());
         SceneError { file: file.to_path_buf(), line, field, message }
     })
+}
+
+/// An error in a table that flattens a library type (`[scenario]`: [`mpc::Timing`]): serde
+/// reports it at the table's header and, for a wrong value, without the key. The key is the
+/// one named by an unknown-field message, or the table's key whose value the library type
+/// alone refuses; the line is that key's line.
+fn flattened(ctx: &Ctx<'_>, span: std::ops::Range<usize>, message: &str) -> Option<SceneError> {
+    if !ctx.text.get(span.start..)?.starts_with('[') {
+        return None;
+    }
+    let table = table_at(ctx.text, span.start)?;
+    let key = if message.starts_with("unknown field") {
+        field_from_message(message)?
+    } else if table == "scenario" {
+        let doc: toml::Table = toml::from_str(ctx.text).ok()?;
+        let entries = doc.get("scenario")?.as_table()?;
+        entries.iter().find_map(|(k, v)| {
+            let one = toml::Table::from_iter([(k.clone(), v.clone())]);
+            match toml::Value::Table(one).try_into::<mpc::Timing>() {
+                Err(e) if !e.message().starts_with("unknown field") => Some(k.clone()),
+                _ => None,
+            }
+        })?
+    } else {
+        return None;
+    };
+    ctx.err::<()>(Some(span), format!("{table}.{key}"), message).err()
 }
 
 /// Builds a scene from a file.

@@ -1,5 +1,4 @@
-//! The names a scene file may give (joint kinds, frames, presets, controller and integrator
-//! names): serde enums, so that an unknown name is refused at parse time with the list of
+//! The names a scene file may give (joint kinds, frames, presets): serde enums, so that an unknown name is refused at parse time with the list of
 //! the accepted ones, and each maps to its library type.
 
 use serde::Deserialize;
@@ -21,30 +20,6 @@ impl ModeSet {
         match self {
             ModeSet::Paper2d => modal_rom::samples::paper_2d_selection(),
             ModeSet::Paper3d => modal_rom::samples::paper_3d_selection(),
-        }
-    }
-}
-
-/// The integrator of the shooting intervals (`[controller] integrator`).
-#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
-#[serde(rename_all = "kebab-case")]
-pub enum Integrator {
-    /// Lawson exponential RK4.
-    LawsonRk4,
-    /// Classical RK4.
-    Rk4,
-    /// Implicit midpoint rule.
-    ImplicitMidpoint,
-}
-
-impl Integrator {
-    /// The library's integrator kind.
-    pub fn kind(self) -> ocp_transcription::IntegratorKind {
-        use ocp_transcription::IntegratorKind;
-        match self {
-            Integrator::LawsonRk4 => IntegratorKind::LawsonRk4,
-            Integrator::Rk4 => IntegratorKind::Rk4,
-            Integrator::ImplicitMidpoint => IntegratorKind::ImplicitMidpoint,
         }
     }
 }

@@ -5,7 +5,7 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use super::names::{
-    ComponentsName, FreedomName, Integrator, JointKindName, LoadFrameName, ModeSet, SectionPreset,
+    ComponentsName, FreedomName, JointKindName, LoadFrameName, ModeSet, SectionPreset,
 };
 
 /// A section: a preset of the paper or explicit diagonals.
@@ -240,77 +240,61 @@ pub struct ModesSpec {
     pub indices: Option<Vec<usize>>,
 }
 
-/// `[controller.weights]`: the cost (34)–(36). Every field defaults to the paper's value
-/// (§5.2; `mpc::MpcSettings`); any other value is a deliberate deviation.
-#[derive(Debug, Deserialize, Default)]
-#[serde(deny_unknown_fields)]
-pub struct WeightsSpec {
-    /// `k_x1`, weight of the velocity coordinates `q1` (≥ 0) [0.01].
-    pub kx1: Option<f64>,
-    /// `k_x2`, weight of the strain coordinates `q2` (≥ 0) [0.01].
-    pub kx2: Option<f64>,
-    /// `k_Δξ`, weight of the quaternion jump across the joints (36) (≥ 0) (default 2).
-    pub k_dxi: Option<f64>,
-    /// `k_u`, `R = k_u I` (> 0) [0.1].
-    pub ku: Option<f64>,
-    /// `Kξ` entries of the shifting-equilibrium and rigid modes' quaternion modes (≥ 0) (default 1).
-    pub k_xi_rigid: Option<f64>,
-    /// `Kξ` entries of the elastic modes' quaternion modes (≥ 0) [0.01].
-    pub k_xi_elastic: Option<f64>,
-    /// Input bound `|u_i| ≤ u_max` (N or N·m, > 0) (default 5).
-    pub u_max: Option<f64>,
-}
-
-/// `[controller]`: which MPC and its solver settings (the defaults are those of
-/// `mpc::ControllerSettings`).
+/// `[controller]`: which MPC and its solver settings. An absent key keeps the default of
+/// [`mpc::ControllerSettings`] (the library's `Default`, with the exact-joints model's own
+/// defaults for `joint_limit` and `fallback_to_lmpc`); the ranges are its `validate()`'s. The
+/// keys that are the library's fields carry its names; `line_search`, `retry`,
+/// `joint_limit`, `integrator` and `substeps` are the scene's switches onto them.
 #[derive(Debug, Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 pub struct ControllerSpec {
     /// `nmpc` (SQP on the augmented modal model) or `lmpc` (one QP on the model linearised
-    /// at the reference) (default nmpc). `--controller` overrides.
+    /// at the reference). `--controller` overrides.
     pub kind: Option<mpc::ControllerKind>,
     /// One SQP iteration per sample from the shifted plan instead of iterating to the KKT
-    /// tolerance [false].
+    /// tolerance.
     pub real_time_iteration: Option<bool>,
     /// Step of the NMPC's first attempt: `true` merit line search, `false` full Gauss–Newton
-    /// step (default true).
+    /// step.
     pub line_search: Option<bool>,
-    /// SQP iteration limit per sample (≥ 1) (default 10).
+    /// SQP iteration limit per sample (≥ 1).
     pub max_iterations: Option<usize>,
-    /// KKT tolerance of the SQP (> 0) [1e-4].
+    /// KKT tolerance of the SQP (> 0).
     pub kkt_tolerance: Option<f64>,
     /// An iteration-limit plan is accepted when its shooting defects are at most this
-    /// (> 0) [1e-2].
+    /// (> 0).
     pub accept_violation: Option<f64>,
-    /// Levenberg–Marquardt term of the first SQP attempt (≥ 0) (default 0).
+    /// Levenberg–Marquardt term of the first SQP attempt (≥ 0).
     pub levenberg_marquardt: Option<f64>,
-    /// On failure, retry from the linear MPC plan with the paper's sub-relaxation [true].
+    /// On failure, retry from the linear MPC plan with the paper's sub-relaxation.
     pub retry: Option<bool>,
-    /// Sub-relaxation factor `α` of the retry, in (0, 1] [0.5].
+    /// Sub-relaxation factor `α` of the retry, in (0, 1].
     pub retry_relaxation: Option<f64>,
-    /// Levenberg–Marquardt term of the retry (≥ 0) [1e-3].
+    /// Levenberg–Marquardt term of the retry (≥ 0).
     pub retry_levenberg_marquardt: Option<f64>,
-    /// When every NMPC attempt fails, apply the linear MPC plan [true].
+    /// When every NMPC attempt fails, apply the linear MPC plan.
     pub fallback_to_lmpc: Option<bool>,
     /// Check each NMPC plan's predicted joint angles against `plan_joint_limit_deg` and treat
-    /// a plan beyond it as a failed attempt [true].
+    /// a plan beyond it as a failed attempt.
     pub joint_limit: Option<bool>,
-    /// Range of validity of the controller model for that check (deg, in (0, 180]) \[20\].
+    /// Range of validity of the controller model for that check (deg, in (0, 180]).
     pub plan_joint_limit_deg: Option<f64>,
     /// Integrator in each shooting interval: `lawson-rk4`, `rk4` or `implicit-midpoint`
-    /// [lawson-rk4].
-    pub integrator: Option<Integrator>,
-    /// Integrator substeps per shooting interval `τp/Nc` (≥ 1) (default 16).
+    /// (the library's [`ocp_transcription::IntegratorKind`]; default that of
+    /// [`mpc::ControllerSettings`]).
+    pub integrator: Option<ocp_transcription::IntegratorKind>,
+    /// Integrator substeps per shooting interval `τp/Nc` (≥ 1).
     pub substeps: Option<usize>,
-    /// Weights of the cost, the paper's by default.
-    pub weights: Option<Spanned<WeightsSpec>>,
+    /// Weights of the cost (34)–(36) and the input bound: the library's own settings
+    /// ([`mpc::CostWeights`], the paper's values by default).
+    pub weights: Option<Spanned<mpc::CostWeights>>,
     /// The controller's reduced model: `paper` (the paper's augmented modal model) or
     /// `exact-joints` (joint rows at the current relative rotation, docs/theory.md §10; NMPC
     /// on the FE plant only, and without the joint-angle check, which is off by default with
-    /// it) (default paper). `--model` overrides.
+    /// it). `--model` overrides.
     pub model: Option<mpc::ModelKind>,
     /// `exact-joints` only: elastic modes per link of its basis (rigid link motions + this
-    /// many of the lowest constrained modes, split per link) (default 4 planar, 16 spatial).
+    /// many of the lowest constrained modes, split per link).
     pub link_elastic_modes: Option<usize>,
 }
 
@@ -332,13 +316,11 @@ pub struct ScenarioSpec {
     /// Duration of the closed loop (s, > 0, a multiple of `output_interval`) [7.5].
     /// `--duration` overrides.
     pub duration: Option<f64>,
-    /// Sampling time `τs` (s, in (0, horizon], a multiple of `output_interval`): each control
-    /// is held for `τs` [0.2].
-    pub sampling: Option<f64>,
-    /// Prediction horizon `τp` (s, > 0) (default 6).
-    pub horizon: Option<f64>,
-    /// Number `Nc` of piecewise-constant control intervals over `τp` (≥ 1) (default 24).
-    pub intervals: Option<usize>,
+    /// `horizon` (`τp`), `sampling` (`τs`, also a multiple of `output_interval`) and
+    /// `intervals` (`Nc`): the library's own settings ([`mpc::Timing`], the paper's by
+    /// default).
+    #[serde(flatten)]
+    pub timing: mpc::Timing,
     /// Plant: `fe` (the constrained FE model, the paper's) or `rom` (the modal model
     /// itself, fast studies) (default fe). `--plant` overrides.
     pub plant: Option<mpc::PlantKind>,

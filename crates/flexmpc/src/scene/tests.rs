@@ -320,6 +320,25 @@ controllers = ["nmpc"]
         "supports: root",
     );
     check("[scenario]", "[scenario]\nspeed = 1.0", "speed", "speed", "unknown field");
+    // keys of the library types the scene deserialises directly: [scenario] flattens
+    // `mpc::Timing`, [controller.weights] is `mpc::CostWeights`
+    check(
+        "sampling = 0.2",
+        "sampling = \"fast\"",
+        "sampling = \"fast\"",
+        "scenario.sampling",
+        "invalid type",
+    );
+    check(
+        "[scenario]",
+        "[scenario]\nintervals = 0",
+        "intervals = 0",
+        "scenario.intervals",
+        "at least 1",
+    );
+    check("ku = 0.1", "ku = 0.1\nkq = 1.0", "kq = 1.0", "kq", "unknown field");
+    check("ku = 0.1", "ku = \"high\"", "ku = \"high\"", "controller.weights.ku", "invalid type");
+    check("selection = \"paper-2d\"", "lowest = 0", "lowest = 0", "modes.lowest", "at least 1");
 }
 
 /// Every shipped scene builds and takes a few steps (the full runs are in CI via the CLI).
@@ -357,7 +376,7 @@ fn shipped_mpc_scenes_match_the_mpc_presets() {
         ("paper-3d-mpc-paper-model.toml", mpc::Scenario::paper_3d(50).unwrap()),
         ("paper-3d-mpc-ku1.toml", {
             let mut p = mpc::Scenario::paper_3d(50).unwrap();
-            p.mpc.ku = mpc::SPATIAL_INPUT_WEIGHT;
+            p.mpc.cost.ku = mpc::SPATIAL_INPUT_WEIGHT;
             p
         }),
     ] {

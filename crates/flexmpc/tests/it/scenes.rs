@@ -140,11 +140,17 @@ struct SpecStruct {
 
 /// Library settings types that the scene deserialises directly (the type's last path segment,
 /// as spec.rs writes it, and its source file relative to this crate).
-const LIBRARY_TYPES: [(&str, &str); 1] = [("KindCounts", "../modal-rom/src/basis.rs")];
+const LIBRARY_TYPES: [(&str, &str); 3] = [
+    ("KindCounts", "../modal-rom/src/basis.rs"),
+    ("CostWeights", "../mpc/src/weights.rs"),
+    ("Timing", "../mpc/src/weights.rs"),
+];
 
 /// The spec structs of crates/flexmpc/src/scene/spec.rs and the [`LIBRARY_TYPES`] (by a simple
 /// parse of `pub name: Type,` lines between `pub struct XxxSpec {` (or `pub struct KindCounts {`)
-/// and the closing `}`; `#[serde(rename = "…")]` and `rename_all = "kebab-case"` are honoured).
+/// and the closing `}`; `#[serde(rename = "…")]`, `#[serde(flatten)]` (the field's name is then
+/// empty: its type's fields sit in the same table) and `rename_all = "kebab-case"` are
+/// honoured).
 fn spec_structs() -> BTreeMap<String, SpecStruct> {
     let mut out = BTreeMap::new();
     let src = std::fs::read_to_string(manifest_dir().join("src/scene/spec.rs")).unwrap();
@@ -163,6 +169,7 @@ fn parse_structs(src: &str, wanted: impl Fn(&str) -> bool, out: &mut BTreeMap<St
     let mut current: Option<(String, SpecStruct, bool)> = None;
     let mut kebab_next = false;
     let mut rename: Option<String> = None;
+    let mut flatten = false;
     for line in src.lines() {
         let t = line.trim();
         if current.is_none() {
@@ -190,12 +197,19 @@ fn parse_structs(src: &str, wanted: impl Fn(&str) -> bool, out: &mut BTreeMap<St
             rename = r.split('"').next().map(str::to_string);
             continue;
         }
+        if t == "#[serde(flatten)]" {
+            flatten = true;
+            continue;
+        }
         if let Some(rest) = t.strip_prefix("pub ") {
             if let Some((name, ty)) = rest.split_once(':') {
                 let (_, s, kebab) = current.as_mut().unwrap();
                 let mut name = rename.take().unwrap_or_else(|| name.trim().to_string());
                 if *kebab {
                     name = name.replace('_', "-");
+                }
+                if std::mem::take(&mut flatten) {
+                    name.clear();
                 }
                 s.fields.push((name, ty.trim().trim_end_matches(',').to_string()));
             }
@@ -219,6 +233,7 @@ fn parser_fields() -> (BTreeSet<String>, BTreeSet<String>) {
                 .split(|c: char| !c.is_alphanumeric() && c != '_')
                 .find(|tok| structs.contains_key(*tok));
             match child {
+                Some(c) if field.is_empty() => walk(prefix, c, structs, leaves, tables),
                 Some(c) => {
                     let p = if ty.contains("Vec<") {
                         format!("{path}[]")

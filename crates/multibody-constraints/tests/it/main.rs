@@ -103,17 +103,9 @@ fn ball_joint_three_beams_balance() {
         Plant::new(structure, PlantSettings { dt: 2e-3, ..Default::default() }).unwrap();
     plant.set_gravity(Vector3::new(0.0, 0.0, -9.81)).unwrap();
     let ball = plant.structure().joint_index("ball").unwrap();
-    let (mut worst_sum, mut worst_moment, mut worst_v, mut scale) =
-        (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-    for _ in 0..300 {
-        let r = plant.step().unwrap();
-        worst_v = worst_v.max(r.velocity_violation);
-        let loads = plant.reactions(ball);
-        let sum: Vector6<f64> = loads.iter().sum();
-        scale = loads.iter().fold(scale, |s, l| s.max(l.norm()));
-        worst_sum = worst_sum.max(sum.fixed_rows::<3>(0).norm());
-        worst_moment = loads.iter().fold(worst_moment, |m, l| m.max(l.fixed_rows::<3>(3).norm()));
-    }
+    let b = plant.run_joint_balance(ball, 300).unwrap();
+    let (worst_sum, worst_moment, worst_v, scale) =
+        (b.force_sum, b.moment, b.velocity_violation, b.load_scale);
     assert!(scale > 1.0, "the joint carries load ({scale})");
     // Balance is a row of the Newton system: round-off of O(1) entries times the load scale.
     assert!(worst_sum < 1e-11 * scale, "force sum {worst_sum} (scale {scale})");

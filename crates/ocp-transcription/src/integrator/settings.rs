@@ -6,8 +6,11 @@ use crate::error::{invalid, Result};
 use crate::la::norm_inf;
 use nalgebra::DMatrix;
 
-/// Which one-step method runs inside a shooting interval.
+/// Which one-step method runs inside a shooting interval. With the `serde` feature it reads
+/// and writes as `rk4`, `implicit-midpoint`, `lawson-rk4`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "kebab-case"))]
 #[non_exhaustive]
 pub enum IntegratorKind {
     /// Classical explicit Runge–Kutta of order 4.
