@@ -201,12 +201,19 @@ impl ControllerSettings {
     /// ω0 ≥ 1 one Gauss–Newton step per sample never reaches the optimal plan (KKT residual
     /// ≈ 1 in every sample) and the elbow folds (88–180°), also with the exact-joints model
     /// itself as the plant; the SQP's plans keep it within ≈ 20° and stabilise ω0 = 1 with the
-    /// paper's weights on both plants. Above, its QPs start failing in every sample from some
-    /// point on, and the loop is lost at some ω0 ≥ 1.125 (docs/mpc.md, "The exact-joints
-    /// model in the closed loop", for the measured range).
+    /// paper's weights on both plants. The shooting intervals use the implicit midpoint rule
+    /// (16 substeps): Lawson RK4 takes its exact linear part at the reference angle, and with
+    /// the joints bent the remainder carries elastic frequencies beyond the stability limit of
+    /// its substeps, so its plans degrade from ω0 ≈ 1.5 (docs/mpc.md, "The exact-joints model
+    /// in the closed loop", for the measured range and the cost: about 3× Lawson per
+    /// iteration).
     pub fn exact_joints() -> Self {
         Self {
             model: ModelKind::ExactJoints,
+            integrator: ocp_transcription::IntegratorSettings {
+                kind: ocp_transcription::IntegratorKind::ImplicitMidpoint,
+                ..Self::full_sqp().integrator
+            },
             retry_relaxation: None,
             fallback_to_lmpc: false,
             plan_joint_limit_deg: None,
