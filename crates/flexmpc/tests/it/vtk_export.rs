@@ -182,7 +182,7 @@ fn simulate_3d_ribbons_match_the_csv() {
     assert!(turned > 1e-3, "the tip section's e2 axis leaves the y direction: {turned}");
 }
 
-/// The 3D closed loop (`paper-3d-mpc-paper-model.toml` on 8 elements per link, 0.6 s) under `mpc --vtk`,
+/// The 3D closed loop (`paper-3d-mpc-paper-model.toml` on 8 elements per link, ω0 = 1, 0.6 s) under `mpc --vtk`,
 /// on the FE plant and on the ROM plant: one `.vtu` per snapshot with its time; ribbons of
 /// two points per node and one quad per element whose centreline is the snapshot's node
 /// positions (`snapshots.json`) and whose last node is the CSV's `tip` at that time; the
@@ -205,7 +205,10 @@ fn mpc_3d_ribbons(plant: &str) {
     let scene = dir.join("small-3d.toml");
     std::fs::write(&scene, text.replace("elements = 50", "elements = 8")).unwrap();
     let out = dir.join("out");
-    run(&["mpc", scene.to_str().unwrap(), "--duration", "0.6", "--plant", plant], &out);
+    run(
+        &["mpc", scene.to_str().unwrap(), "--duration", "0.6", "--plant", plant, "--omega0", "1"],
+        &out,
+    );
     let snaps: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("snapshots.json")).unwrap())
             .unwrap();
