@@ -690,20 +690,26 @@ mod tests {
     use super::*;
     use rand::Rng;
 
-    /// A Jacobian with the modal ROM's zero blocks (dense-ish, > 30 % nonzero) goes through
-    /// the block-range path and gives the dense product, scattered zeros and all.
-    #[test]
-    fn block_range_product_matches_dense() {
-        let n = 30;
-        let mut rng = crate::samples::seeded(5);
-        let j = DMatrix::from_fn(n, n, |r, c| {
+    /// An `n × n` Jacobian with the modal ROM's zero blocks: rows below 18 read columns below
+    /// 18, the others skip columns 7..18; 80 % of the allowed entries are nonzero.
+    fn rom_like_jacobian(n: usize, rng: &mut impl Rng) -> DMatrix<f64> {
+        DMatrix::from_fn(n, n, |r, c| {
             let inside = if r < 18 { c < 18 } else { !(7..18).contains(&c) };
             if inside && rng.random_range(0.0..1.0) < 0.8 {
                 rng.random_range(-1.0..1.0)
             } else {
                 0.0
             }
-        });
+        })
+    }
+
+    /// A Jacobian with the modal ROM's zero blocks (dense-ish, > 30 % nonzero) goes through
+    /// the block-range path and gives the dense product, scattered zeros and all.
+    #[test]
+    fn block_range_product_matches_dense() {
+        let n = 30;
+        let mut rng = crate::samples::seeded(5);
+        let j = rom_like_jacobian(n, &mut rng);
         let src = DMatrix::from_fn(35, n, |_, _| rng.random_range(-1.0..1.0));
         let mut rows = SparseRows::with_capacity(n);
         let mut dst = DMatrix::from_element(35, n, f64::NAN);
@@ -720,14 +726,7 @@ mod tests {
     fn block_pattern_reuse_and_change() {
         let n = 30;
         let mut rng = crate::samples::seeded(8);
-        let j1 = DMatrix::from_fn(n, n, |r, c| {
-            let inside = if r < 18 { c < 18 } else { !(7..18).contains(&c) };
-            if inside && rng.random_range(0.0..1.0) < 0.8 {
-                rng.random_range(-1.0..1.0)
-            } else {
-                0.0
-            }
-        });
+        let j1 = rom_like_jacobian(n, &mut rng);
         let src = DMatrix::from_fn(35, n, |_, _| rng.random_range(-1.0..1.0));
         let mut rows = SparseRows::with_capacity(n);
         let mut dst = DMatrix::zeros(35, n);

@@ -415,16 +415,8 @@ mod tests {
                 .collect();
             let q = QuadraticTerms::new(n, &terms).unwrap();
             let x: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
-            let mut fx = vec![0.0; n * n];
-            q.add_jacobian(&x, &mut fx);
-            let mut direct = vec![0.0; n * n];
-            for &(i, l, j, v) in &terms {
-                direct[i + l * n] += v * x[j];
-                direct[i + j * n] += v * x[l];
-            }
             // sums of ≤ ~60 terms of size ≤ 1: round-off ≤ 1e-13
-            let dev = fx.iter().zip(&direct).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
-            assert!(dev < 1e-13, "n = {n}: {dev}");
+            let fx = jacobian_against_terms(&q, &terms, &x, n);
             let mut f = vec![0.0; n];
             q.add_rhs(&x, &mut f);
             let mut f_direct = vec![0.0; n];
@@ -439,6 +431,25 @@ mod tests {
             }
         }
         assert!(QuadraticTerms::new(3, &[(0, 3, 1, 1.0)]).is_err());
+    }
+
+    /// `q`'s Jacobian at `x` against the term list summed directly (to 1e-13); returns it.
+    fn jacobian_against_terms(
+        q: &QuadraticTerms,
+        terms: &[(usize, usize, usize, f64)],
+        x: &[f64],
+        n: usize,
+    ) -> Vec<f64> {
+        let mut fx = vec![0.0; n * n];
+        q.add_jacobian(x, &mut fx);
+        let mut direct = vec![0.0; n * n];
+        for &(i, l, j, v) in terms {
+            direct[i + l * n] += v * x[j];
+            direct[i + j * n] += v * x[l];
+        }
+        let dev = fx.iter().zip(&direct).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        assert!(dev < 1e-13, "n = {n}: {dev}");
+        fx
     }
 
     /// Terms under a selection rule (4 symmetry classes, `c_i ⊕ c_l ⊕ c_j = 0`, as a modal
@@ -464,15 +475,7 @@ mod tests {
             q.jac.dense.iter().flat_map(|c| &c.pos).filter(|&&p| p != u32::MAX).count();
         assert!(dense * 2 > q.jacobian_nonzeros(), "{dense} of {}", q.jacobian_nonzeros());
         let x: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
-        let mut fx = vec![0.0; n * n];
-        q.add_jacobian(&x, &mut fx);
-        let mut direct = vec![0.0; n * n];
-        for &(i, l, j, v) in &terms {
-            direct[i + l * n] += v * x[j];
-            direct[i + j * n] += v * x[l];
-        }
-        let dev = fx.iter().zip(&direct).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
-        assert!(dev < 1e-13, "{dev}");
+        jacobian_against_terms(&q, &terms, &x, n);
         assert!(QuadraticTerms::new(3, &[(0, 1, 1, f64::NAN)]).is_err());
     }
 }
