@@ -84,6 +84,20 @@ fn state(rom: &ExactJointsRom, seed: f64, angle: f64, axis: [f64; 3], scale: f64
     x
 }
 
+/// The paper's damped two-link (3D on 6, 2D on 8 elements per link) at the reference angle
+/// with the paper's mode set, and that set's basis.
+fn paper_sample(spatial: bool) -> (samples::Sample, ModalBasis) {
+    let (sample, selection) = if spatial {
+        let selection = paper_3d_selection();
+        (samples::paper_3d(6, 0.0, true, &selection, &paper_options()).unwrap(), selection)
+    } else {
+        let selection = paper_2d_selection();
+        (samples::paper_2d(8, 0.0, true, &selection, &paper_options()).unwrap(), selection)
+    };
+    let modes = sample.basis.select(&selection).unwrap();
+    (sample, modes)
+}
+
 fn max_abs(v: &[f64]) -> f64 {
     v.iter().fold(0.0f64, |m, x| m.max(x.abs()))
 }
@@ -93,13 +107,7 @@ fn max_abs(v: &[f64]) -> f64 {
 #[test]
 fn reduces_to_the_paper_model_at_the_reference_rotation() {
     for spatial in [false, true] {
-        let sample = if spatial {
-            samples::paper_3d(6, 0.0, true, &paper_3d_selection(), &paper_options()).unwrap()
-        } else {
-            samples::paper_2d(8, 0.0, true, &paper_2d_selection(), &paper_options()).unwrap()
-        };
-        let selection = if spatial { paper_3d_selection() } else { paper_2d_selection() };
-        let modes = sample.basis.select(&selection).unwrap();
+        let (sample, modes) = paper_sample(spatial);
         let inputs = if spatial {
             samples::inputs_3d(&sample.structure, &sample.model).unwrap()
         } else {
@@ -301,13 +309,7 @@ fn paper_basis_is_orthonormal_and_reexpanded_exactly() {
             .fold(0.0f64, |a, (i, j)| a.max(m[(i, j)].abs()))
     };
     for spatial in [false, true] {
-        let sample = if spatial {
-            samples::paper_3d(6, 0.0, true, &paper_3d_selection(), &paper_options()).unwrap()
-        } else {
-            samples::paper_2d(8, 0.0, true, &paper_2d_selection(), &paper_options()).unwrap()
-        };
-        let selection = if spatial { paper_3d_selection() } else { paper_2d_selection() };
-        let modes = sample.basis.select(&selection).unwrap();
+        let (sample, modes) = paper_sample(spatial);
         let settings = LinkBasisSettings { rigid_links: false, ..LinkBasisSettings::default() };
         let el: Vec<usize> = (modes.n_rigid()..modes.n_modes()).collect();
         let phi2 = Mat::from_fn(modes.phi2().nrows(), el.len(), |i, j| modes.phi2()[(i, el[j])]);
