@@ -314,7 +314,7 @@ pub struct SampleReport {
     /// [`ocp_transcription::thread_cpu_time`]: not inflated by other processes sharing the
     /// cores. The controller runs every solve on the calling thread (its SQP settings keep
     /// `parallel_intervals` off), so this is all the solve's CPU time. Wall time where the
-    /// thread clock is unavailable (no `/proc/thread-self/schedstat`).
+    /// thread clock is unavailable (off Unix).
     pub solve_time: f64,
     /// Optimal cost of the accepted plan.
     pub cost: f64,

@@ -1,8 +1,10 @@
 //! CPU time of the calling thread: the measure of solve and iteration times on a shared
 //! machine, where wall time counts the time other processes hold the core.
 
-/// CPU time (s) the calling thread has run so far, from Linux's
-/// `/proc/thread-self/schedstat` (nanoseconds on CPU); `None` where that file does not exist.
+/// CPU time (s) the calling thread has run so far: POSIX `clock_gettime` with
+/// `CLOCK_THREAD_CPUTIME_ID` (nanoseconds, brought up to date at the call; through `rustix`);
+/// `None` off Unix. (Linux's `/proc/thread-self/schedstat` is not used: it is brought up to
+/// date only at scheduler ticks, so a span shorter than a tick can read 0.)
 /// Differences of two readings on the same thread time the work between them; work done on
 /// other threads (e.g. [`crate::SqpSettings::parallel_intervals`]) is not counted.
 ///
@@ -14,9 +16,15 @@
 /// }
 /// ```
 pub fn thread_cpu_time() -> Option<f64> {
-    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
-    let ns: f64 = s.split_whitespace().next()?.parse().ok()?;
-    Some(ns * 1e-9)
+    #[cfg(unix)]
+    {
+        let ts = rustix::time::clock_gettime(rustix::time::ClockId::ThreadCPUTime);
+        Some(ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9)
+    }
+    #[cfg(not(unix))]
+    {
+        None
+    }
 }
 
 /// Runs `f` and returns the CPU seconds of the calling thread it took ([`thread_cpu_time`]),
