@@ -17,15 +17,7 @@
 /// }
 /// ```
 pub fn thread_cpu_time() -> Option<f64> {
-    #[cfg(unix)]
-    {
-        let ts = rustix::time::clock_gettime(rustix::time::ClockId::ThreadCPUTime);
-        Some(ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9)
-    }
-    #[cfg(not(unix))]
-    {
-        None
-    }
+    cpu_seconds(CpuClock::Thread)
 }
 
 /// Runs `f` and returns the CPU seconds of the calling thread it took ([`thread_cpu_time`]),
@@ -58,13 +50,30 @@ pub fn thread_cpu_timed<R>(f: impl FnOnce() -> R) -> (f64, R) {
 /// }
 /// ```
 pub fn process_cpu_time() -> Option<f64> {
+    cpu_seconds(CpuClock::Process)
+}
+
+/// Whose CPU time a reading counts.
+#[derive(Clone, Copy)]
+enum CpuClock {
+    Thread,
+    Process,
+}
+
+/// Seconds of `clock_gettime` on the CPU clock `which`; `None` off Unix.
+fn cpu_seconds(which: CpuClock) -> Option<f64> {
     #[cfg(unix)]
     {
-        let ts = rustix::time::clock_gettime(rustix::time::ClockId::ProcessCPUTime);
+        use rustix::time::{clock_gettime, ClockId};
+        let ts = clock_gettime(match which {
+            CpuClock::Thread => ClockId::ThreadCPUTime,
+            CpuClock::Process => ClockId::ProcessCPUTime,
+        });
         Some(ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9)
     }
     #[cfg(not(unix))]
     {
+        let _ = which;
         None
     }
 }
