@@ -197,8 +197,8 @@ fn eb_beam(n: usize, clamped: bool) -> Result<Structure, String> {
     planar_beam(intrinsic_beam::samples::euler_bernoulli_section(), n, support)
 }
 
-/// The Euler–Bernoulli cantilever through the constrained route (issue 8's bench (a) defect:
-/// its bending modes were classified rigid from 50 elements on): closed form
+/// The Euler–Bernoulli cantilever through the constrained route (a rigid-mode tolerance too
+/// loose for its `max ω² ∝ N⁶` would classify its bending modes as rigid): closed form
 /// `ω1 = 1.8751²` at second order for 10…200 elements, the beam crate's dense route to
 /// round-off, and the free–free beam without spurious (missed massless) modes.
 fn euler_bernoulli() -> CaseOutcome {

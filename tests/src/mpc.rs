@@ -168,7 +168,7 @@ fn sweep_case_on(
         wall = wall.max(r.wall_time_s);
     }
     if time_goal {
-        // issue 6: worst sample under 50 ms (4× under τs = 0.2 s); whole loop under 10 s
+        // real-time goal: worst sample under 50 ms (4× under τs = 0.2 s); whole loop under 10 s
         out.push(Metric::at_most("worst per-sample solve time (s)", worst, 0.05));
         out.push(Metric::at_most("slowest closed loop wall time (s)", wall, 10.0));
     }

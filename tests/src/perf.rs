@@ -1,11 +1,13 @@
 //! The numerics of `cargo xtask bench` (docs/performance.md): the models, runs and error
-//! measures of the studies (a) FE mesh against frequency error ([`mesh`]), (c) time step
-//! against error per integrator ([`timestep`]) and (d) closed-loop cost against solve time per
-//! controller ([`control`]), and the timing harness of every study ([`timed`]). xtask calls
-//! them, times them and turns the numbers into tables and plots.
+//! measures of the studies (a) FE mesh against frequency error ([`mesh`]), (b) ROM mode count
+//! against trajectory error ([`modes`]), (c) time step against error per integrator
+//! ([`timestep`]) and (d) closed-loop cost against solve time per controller ([`control`]), and
+//! the timing harness of every study ([`timed`]). xtask calls them, times them and turns the
+//! numbers into tables and plots.
 
 pub mod control;
 pub mod mesh;
+pub mod modes;
 pub mod timestep;
 
 use std::time::Instant;

@@ -1,4 +1,4 @@
-//! Numerical stress experiments (issue 8): long runs, large disturbances, extreme stiffness
+//! Numerical stress experiments: long runs, large disturbances, extreme stiffness
 //! ratios, joint angles near singular configurations and randomly generated structures.
 //!
 //! Every experiment is a list of *sub-runs*, each of which must end with finite results or a

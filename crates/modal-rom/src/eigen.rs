@@ -51,8 +51,8 @@ pub struct EigenSettings {
     /// near `1e-7 · max ω²` for the paper's sections at any mesh, but an Euler–Bernoulli
     /// section (rigid shear, massless rotation) has `max ω² ∝ N⁶` (slaved node rotations) and
     /// its first bending mode near `0.5 N⁻⁶ · max ω²` (clamped) or `77 N⁻⁶` (free–free):
-    /// a looser default (the former `1e-10`) turned its low bending modes into "rigid" ones
-    /// from about 42 elements on. `1e-24` holds to about 9000 elements. Range `(0, 1e-4]`.
+    /// a looser tolerance such as `1e-10` turns its low bending modes into "rigid" ones from
+    /// about 42 elements on. `1e-24` holds to about 9000 elements. Range `(0, 1e-4]`.
     pub rigid_tolerance: f64,
     /// Relative singular-value cut-off for constraint rank and massless directions (singular
     /// values of `F Z`, `FᵀF = B1`: an Euler–Bernoulli section's clamped slaved rotations reach
@@ -296,9 +296,9 @@ fn mass_factor(b1: &Mat<f64>, tol: f64) -> Result<Mat<f64>> {
 /// shear rows, so that `F Z` has genuine singular values down to `≈ 0.74/N²` of its largest
 /// (measured, clamped and free ends, 10–400 elements) beside exact zeros (a free end's
 /// alternating rotation). Their squares, the eigenvalues of `ZᵀB1Z`, fall below a `1e-10`
-/// cut-off from about 270 elements on; the `F Z` test keeps them apart to `N ≈ 10⁵`. The former
-/// trigger, a failed Cholesky of `ZᵀB1Z`, missed exact zeros at 20, 50, 200 and 400 elements
-/// (round-off pivots), leaving spurious `ω² ≈ 1e20–1e23`. The massless
+/// cut-off from about 270 elements on; the `F Z` test keeps them apart to `N ≈ 10⁵`. A failed
+/// Cholesky of `ZᵀB1Z` is no test: it misses exact zeros at 20, 50, 200 and 400 elements
+/// (round-off pivots) and leaves spurious `ω² ≈ 1e20–1e23`. The massless
 /// coordinates `b` are then eliminated by least squares on the strain map
 /// `S = L2⁻¹D_eᵀZ` (minimum strain energy, `(ZN)ᵀKφ1 = 0`, without forming `K`), and the
 /// returned `L1` (lower, `L1L1ᵀ = ZᵀB1Z` on the new `Z`) comes from the QR factor of `F Z`,

@@ -9,7 +9,7 @@ use crate::exact_dynamics::{default_link_elastic_modes, ExactDynamics, ModelKind
 use crate::plant::{relative_angle, ExactPlant, PlantKind, SimPlant};
 use crate::scenario::{ratio, Setup};
 use crate::validity::JointMonitor;
-use crate::weights::ControlGrid;
+use crate::weights::{ControlGrid, Weights};
 use intrinsic_beam::Kinematics;
 use nalgebra::Vector4;
 use rayon::prelude::*;
@@ -176,7 +176,6 @@ impl Plan {
     }
 }
 
-/// Node positions per beam.
 /// Observation of the plant in modal and physical terms.
 struct Observation {
     q: Vec<f64>,
@@ -184,6 +183,23 @@ struct Observation {
     tip: [f64; 3],
     energy: f64,
     command_errors: Vec<f64>,
+}
+
+impl Observation {
+    /// The record at time `t`, with the control `u` held from there and the state part of the
+    /// cost under `weights`.
+    fn record(self, t: f64, u: &[f64], weights: &Weights) -> Record {
+        Record {
+            t,
+            v_state: weights.state_cost(&self.q),
+            u: u.to_vec(),
+            joint_angles: self.joint_angles,
+            tip: self.tip,
+            energy: self.energy,
+            command_errors: self.command_errors,
+            q: self.q,
+        }
+    }
 }
 
 fn observe(
@@ -466,16 +482,7 @@ fn drive<D: ocp_transcription::Dynamics + Clone>(
                     // from a state far outside the model's range) stops the run like a plant
                     // failure does
                     error = Some(format!("controller at t = {t}: {e}"));
-                    records.push(Record {
-                        t,
-                        v_state: setup.weights.state_cost(&obs.q),
-                        u: u.clone(),
-                        joint_angles: obs.joint_angles,
-                        tip: obs.tip,
-                        energy: obs.energy,
-                        command_errors: obs.command_errors,
-                        q: obs.q,
-                    });
+                    records.push(obs.record(t, &u, &setup.weights));
                     break;
                 }
             };
@@ -495,17 +502,7 @@ fn drive<D: ocp_transcription::Dynamics + Clone>(
             };
             u.copy_from_slice(active.piece(t, dt_plan));
         }
-        let v_state = setup.weights.state_cost(&obs.q);
-        records.push(Record {
-            t,
-            v_state,
-            u: u.clone(),
-            joint_angles: obs.joint_angles,
-            tip: obs.tip,
-            energy: obs.energy,
-            command_errors: obs.command_errors,
-            q: obs.q,
-        });
+        records.push(obs.record(t, &u, &setup.weights));
         if k == n_out {
             break;
         }
@@ -557,16 +554,7 @@ pub fn open_loop(
     for k in 0..=inputs.len() {
         let (obs, _) = observe(setup, &plant, false, k as f64 * sc.output_interval)?;
         let u = inputs.get(k).cloned().unwrap_or_else(|| vec![0.0; nu]);
-        records.push(Record {
-            t: k as f64 * sc.output_interval,
-            v_state: setup.weights.state_cost(&obs.q),
-            u: u.clone(),
-            joint_angles: obs.joint_angles,
-            tip: obs.tip,
-            energy: obs.energy,
-            command_errors: obs.command_errors,
-            q: obs.q,
-        });
+        records.push(obs.record(k as f64 * sc.output_interval, &u, &setup.weights));
         if k < inputs.len() {
             plant.advance(&u)?;
         }

@@ -73,16 +73,13 @@ pub struct CostWeights {
 ///
 /// The paper's `τs = 0.2 s` is not a multiple of its `Δt = 0.25 s`. With intervals starting at
 /// each sample ([`ControlGrid::Sample`]) the previous plan's tail is then not a feasible plan
-/// of the next problem (its switching times fall between the new ones), the optimal cost is
-/// no longer a Lyapunov function of the closed loop (measured: it rises in 7–14 of 37 sample
-/// pairs in 2D even with the modal model as plant, against 0 with aligned intervals), and
-/// the lightly damped modes (periods 0.1–0.55 s, comparable to `Δt`) are re-excited; see
-/// docs/mpc.md. [`ControlGrid::Absolute`] (the default) fixes that: in 2D the LMPC on the FE
-/// plant meets the stabilisation criterion at every ω0 = 0.25…2 (4 of 8 with `Sample`), the NMPC
-/// (with its safeguards) at every ω0 (1 of 8 with `Sample`), in 3D the NMPC at ω0 = 0.5 and
-/// 0.75 (neither with `Sample`); it is worse for the 3D LMPC at ω0 = 0.5 (orientation 20.6%
-/// of its excursion against the criterion's 20%; ✓ with `Sample`) and the 3D NMPC at ω0 = 1
-/// (diverges; with `Sample` controlled but `V(7.5)/V(0)` = 1.85).
+/// of the next problem (its switching times fall between the new ones), so the optimal cost
+/// need not decrease from sample to sample, even with the controller's own model as plant,
+/// and every re-plan shifts the switching times of the lightly damped modes (periods
+/// 0.1–0.55 s, comparable to `Δt`) and re-excites them. [`ControlGrid::Absolute`] (the
+/// default) keeps the intervals on one grid, so the shifted plan stays feasible. The closed
+/// loops of both placements, per scene and ω0, are in docs/mpc.md ("Sampling and the control
+/// grid").
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ControlGrid {

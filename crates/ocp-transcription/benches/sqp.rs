@@ -1,16 +1,19 @@
-//! Criterion benches of the SQP on a model with the modal ROM's structure, plus the tables
-//! of docs/ocp-transcription.md (integrator error against cost, QP forms, time per iteration
-//! against nx and Nc). Run: `cargo bench -p ocp-transcription` (tables are printed first;
-//! `OCP_BENCH_TABLES=int,qp,sweep,iter3d,criterion` selects parts, `OCP_BENCH_TABLES=0`
-//! runs only the criterion benches; `cargo bench -p ocp-transcription -- sqp_iteration_3d`
-//! runs the 3D-sized iteration with line search on one and two threads, timed in CPU time).
+//! Criterion benches of the SQP on a model with the modal ROM's structure, and the tables of
+//! docs/ocp-transcription.md (integrator error against cost, QP forms, time per iteration
+//! against nx and Nc, adaptive substeps, the 3D-sized iteration).
+//!
+//! `cargo bench -p ocp-transcription --bench sqp` runs the criterion benches (criterion's own
+//! arguments after `--`, e.g. `-- sqp_iteration_3d`: the 3D-sized iteration with line search
+//! on one and two threads, timed in CPU time).
+//! `cargo bench -p ocp-transcription --bench sqp -- --tables LIST` prints the tables instead;
+//! see [`USAGE`].
 
 use criterion::Criterion;
 use nalgebra::{DMatrix, DVector};
 use ocp_transcription::samples::{seeded, ModalLike};
 use ocp_transcription::{
-    interval_error, AdaptiveSubsteps, Dynamics, Globalisation, Integrator, IntegratorKind,
-    IntegratorSettings, Ocp, QpForm, SqpMode, SqpSettings, SqpSolver, SqpStatus,
+    interval_error, process_cpu_time, AdaptiveSubsteps, Dynamics, Globalisation, Integrator,
+    IntegratorKind, IntegratorSettings, Ocp, QpForm, SqpMode, SqpSettings, SqpSolver, SqpStatus,
 };
 use rand::Rng;
 
@@ -125,15 +128,22 @@ fn integrator_table() {
     }
 }
 
-/// A solver at the rotating state of ω0 = 0.5 (reference: the rest state, `qξ_0 = 1`), warm
-/// started by simulation with u = 0. (From ω0 ≈ 1 on, this model's free rotation is unstable
-/// over τp = 6 s and the condensed QP fails: `Auto` then takes the sparse QP.)
-fn solver(nx: usize, nc: usize, settings: SqpSettings) -> (SqpSolver<ModalLike>, Vec<f64>) {
+/// The paper-sized problem on `model(nx)`: the rotating state of `omega0` and the OCP towards
+/// rest (reference: the rest state, `qξ_0 = 1`) on `nc` intervals.
+fn problem(nx: usize, nc: usize, omega0: f64) -> (ModalLike, Vec<f64>, Ocp) {
     let m = model(nx);
-    let x = m.rotating_state(0.5).expect("rom-like");
+    let x = m.rotating_state(omega0).expect("rom-like");
     let mut o = ocp(nx, nc);
     let (mm, nq2, _) = m.rom_blocks().expect("rom-like");
     o.x_ref[mm + nq2] = 1.0;
+    (m, x, o)
+}
+
+/// A solver at the rotating state of ω0 = 0.5, warm started by simulation with u = 0. (From
+/// ω0 ≈ 1 on, this model's free rotation is unstable over τp = 6 s and the condensed QP fails:
+/// `Auto` then takes the sparse QP.)
+fn solver(nx: usize, nc: usize, settings: SqpSettings) -> (SqpSolver<ModalLike>, Vec<f64>) {
+    let (m, x, o) = problem(nx, nc, 0.5);
     let mut s = SqpSolver::new(m, o, settings).expect("valid");
     s.initialize_by_simulation(&x, &[0.0; 5]).expect("finite");
     (s, x)
@@ -271,18 +281,20 @@ fn calibrated_table(m: &ModalLike) -> AdaptiveSubsteps {
     .expect("calibration")
 }
 
-/// A plan from the rotating state of `omega0` towards rest: 40 full-step SQP iterations with
-/// the sparse QP (the condensed Hessian of the free rotation is ill-conditioned), Lawson × 24.
-fn converged_plan(omega0: f64) -> (SqpSolver<ModalLike>, Vec<f64>, SqpStatus, f64) {
-    let m = model(61);
-    let x = m.rotating_state(omega0).expect("rom-like");
-    let mut o = ocp(61, 24);
-    let (mm, nq2, _) = m.rom_blocks().expect("rom-like");
-    o.x_ref[mm + nq2] = 1.0;
+/// A plan from the rotating state of `omega0` towards rest on `model(nx)`, Nc = 24: 40
+/// full-step SQP iterations with the sparse QP (the condensed Hessian of the free rotation is
+/// ill-conditioned), Lawson RK4 × `substeps`. The solver, the initial state, the status and
+/// the KKT residual.
+fn converged_plan(
+    nx: usize,
+    omega0: f64,
+    substeps: usize,
+) -> (SqpSolver<ModalLike>, Vec<f64>, SqpStatus, f64) {
+    let (m, x, o) = problem(nx, 24, omega0);
     let settings = SqpSettings {
         qp_form: QpForm::SparseClarabel,
         globalisation: Globalisation::FullStep,
-        integrator: integrator(IntegratorKind::LawsonRk4, 24),
+        integrator: integrator(IntegratorKind::LawsonRk4, substeps),
         max_iterations: 40,
         ..SqpSettings::default()
     };
@@ -328,7 +340,7 @@ fn adaptive_table() {
         );
     }
     for omega0 in [0.5, 1.0, 2.0] {
-        let (plan, x, status, kkt) = converged_plan(omega0);
+        let (plan, x, status, kkt) = converged_plan(61, omega0, 24);
         println!("\nplan from ω0 = {omega0}: {status:?}, KKT {kkt:.1e}");
         let states: Vec<DVector<f64>> = plan.states().to_vec();
         let controls: Vec<DVector<f64>> = plan.controls().to_vec();
@@ -406,47 +418,20 @@ fn adaptive_table() {
     }
 }
 
-/// CPU seconds of every thread of this process so far (sum of
-/// `/proc/self/task/*/schedstat`), `None` where unavailable: the work of an iteration that
-/// runs on a thread pool.
-fn process_cpu_time() -> Option<f64> {
-    let mut ns = 0.0;
-    for e in std::fs::read_dir("/proc/self/task").ok()? {
-        let s = std::fs::read_to_string(e.ok()?.path().join("schedstat")).ok()?;
-        ns += s.split_whitespace().next()?.parse::<f64>().ok()?;
-    }
-    Some(ns * 1e-9)
-}
-
 /// The 3D-sized problem of the paper (nx = 53 = the real 3D ROM's size, nu = 5, Nc = 24,
 /// τp = 6 s, Lawson × 16) on the ROM-structured sample, and a plan from the rotating state
-/// of ω0 = 1 (40 full-step SQP iterations, sparse QP) to iterate from: the solver (settings
-/// `settings`), the initial state and the plan.
+/// of ω0 = 1 ([`converged_plan`]) to iterate from: the solver (settings `settings`), the
+/// initial state and the plan.
 #[allow(clippy::type_complexity)]
 fn plan_3d(
     settings: SqpSettings,
 ) -> (SqpSolver<ModalLike>, Vec<f64>, Vec<DVector<f64>>, Vec<DVector<f64>>) {
-    let (nx, nc) = (53, 24);
-    let m = model(nx);
-    let x = m.rotating_state(1.0).expect("rom-like");
-    let mut o = ocp(nx, nc);
-    let (mm, nq2, _) = m.rom_blocks().expect("rom-like");
-    o.x_ref[mm + nq2] = 1.0;
-    let plan = SqpSettings {
-        qp_form: QpForm::SparseClarabel,
-        globalisation: Globalisation::FullStep,
-        integrator: integrator(IntegratorKind::LawsonRk4, 16),
-        max_iterations: 40,
-        ..SqpSettings::default()
-    };
-    let mut p = SqpSolver::new(m.clone(), o.clone(), plan).expect("valid");
-    p.initialize_by_simulation(&x, &[0.0; 5]).expect("finite");
-    p.solve(&x).expect("valid x0");
+    let (p, x, _, _) = converged_plan(53, 1.0, 16);
     // one real-time iteration from a perturbed plan: the merit line search has work to do
     let states: Vec<DVector<f64>> =
         p.states().iter().map(|s| s.map(|v| v * 1.02)).collect::<Vec<_>>();
     let controls: Vec<DVector<f64>> = p.controls().iter().map(|u| u.map(|v| 0.9 * v)).collect();
-    let s = SqpSolver::new(m, o, settings).expect("valid");
+    let s = SqpSolver::new(p.model().clone(), p.ocp().clone(), settings).expect("valid");
     (s, x, states, controls)
 }
 
@@ -467,17 +452,16 @@ fn iteration_3d_settings(parallel: bool) -> SqpSettings {
 /// Table: CPU ms of one 3D-sized iteration (see [`iteration_3d_settings`]) on one thread and
 /// on a pool of two, with the split integration (linearisation and line-search trials) /
 /// condensing / QP (wall-clock shares of the solver's timers scaled to the CPU total) and the
-/// trial passes of the line search.
-fn iteration_3d_table() {
+/// trial passes of the line search. At least `seconds` of CPU time per row; with `dump`, the
+/// iterate after one iteration, every value in round-trip precision, to `<dump>.<threads>`
+/// (to compare implementations bit for bit).
+fn iteration_3d_table(seconds: f64, dump: Option<&str>) {
     println!(
         "\n## One SQP iteration with merit line search, nx = 53, nu = 5, Nc = 24, Lawson × 16, \
          from a plan of ω0 = 1 (ms CPU; two threads: all threads' CPU)"
     );
     println!("| threads | CPU total | CPU per thread | integration | condensing | QP | line-search trials |");
     println!("|---|---|---|---|---|---|---|");
-    // `OCP_BENCH_ITER3D_SECONDS`: CPU seconds per row (default 1; longer for profiling)
-    let seconds: f64 =
-        std::env::var("OCP_BENCH_ITER3D_SECONDS").ok().and_then(|s| s.parse().ok()).unwrap_or(1.0);
     for threads in [1usize, 2] {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("pool");
         pool.install(|| {
@@ -497,9 +481,7 @@ fn iteration_3d_table() {
                 trials += st.integrator_calls as f64 / 24.0 - 1.0;
                 runs += 1;
             }
-            // `OCP_BENCH_ITER3D_DUMP=path`: the iterate after one iteration, every value in
-            // round-trip precision, to `path.<threads>` (to compare implementations)
-            if let Ok(path) = std::env::var("OCP_BENCH_ITER3D_DUMP") {
+            if let Some(path) = dump {
                 s.states_mut().clone_from_slice(&states);
                 s.controls_mut().clone_from_slice(&controls);
                 s.solve(&x).expect("valid x0");
@@ -622,24 +604,98 @@ fn benches() {
     c.final_summary();
 }
 
+/// The bench's own arguments (criterion's are passed on to criterion).
+const USAGE: &str = "\
+usage: cargo bench -p ocp-transcription --bench sqp -- [CRITERION ARGS]
+       cargo bench -p ocp-transcription --bench sqp -- --tables LIST [--iter3d-seconds S]
+                                                      [--iter3d-dump PATH]
+
+  (no --tables)        the criterion benches, with criterion's arguments (filter, --list, ...)
+  --tables LIST        print these tables instead, comma-separated, in this order: int
+                       (one-interval error against cost), qp (QP forms), adaptive (adaptive
+                       substeps), sweep (time per iteration against nx and Nc), iter3d (the
+                       3D-sized iteration on one and two threads); `all` for every one
+  --iter3d-seconds S   iter3d: at least S s of CPU time per row (default 1; longer to profile)
+  --iter3d-dump PATH   iter3d: also write the iterate after one iteration, every value in
+                       round-trip precision, to PATH.1 and PATH.2 (one and two threads)";
+
+/// The tables to print and the options of `iter3d`, read from the bench's arguments.
+#[derive(Debug, PartialEq)]
+struct Tables {
+    which: Vec<&'static str>,
+    iter3d_seconds: f64,
+    iter3d_dump: Option<String>,
+}
+
+/// The table names `--tables` accepts, in the order they are printed.
+const TABLE_NAMES: [&str; 5] = ["int", "qp", "adaptive", "sweep", "iter3d"];
+
+/// `Ok(None)`: no `--tables`, run criterion; `Err`: a message naming the argument.
+fn parse_tables(args: &[String]) -> Result<Option<Tables>, String> {
+    let (mut list, mut seconds, mut dump) = (None, None, None);
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        let mut value =
+            |name: &str| it.next().cloned().ok_or_else(|| format!("`{name}` needs a value"));
+        match a.as_str() {
+            "--tables" => list = Some(value("--tables")?),
+            "--iter3d-seconds" => {
+                let v = value("--iter3d-seconds")?;
+                let s: f64 =
+                    v.parse().ok().filter(|s: &f64| s.is_finite() && *s >= 0.0).ok_or_else(
+                        || format!("`--iter3d-seconds {v}`: not a number of seconds ≥ 0"),
+                    )?;
+                seconds = Some(s);
+            }
+            "--iter3d-dump" => dump = Some(value("--iter3d-dump")?),
+            _ => {}
+        }
+    }
+    let Some(list) = list else {
+        return match (seconds, dump) {
+            (None, None) => Ok(None),
+            _ => Err("`--iter3d-seconds` and `--iter3d-dump` go with `--tables iter3d`".into()),
+        };
+    };
+    let mut which = Vec::new();
+    for name in list.split(',').map(str::trim) {
+        match TABLE_NAMES.iter().find(|t| **t == name) {
+            Some(t) => which.push(*t),
+            None if name == "all" => which.extend(TABLE_NAMES),
+            None => {
+                return Err(format!(
+                    "`--tables {list}`: unknown table `{name}` (one of {}, all)",
+                    TABLE_NAMES.join(", ")
+                ))
+            }
+        }
+    }
+    which.sort_by_key(|w| TABLE_NAMES.iter().position(|t| t == w));
+    which.dedup();
+    Ok(Some(Tables { which, iter3d_seconds: seconds.unwrap_or(1.0), iter3d_dump: dump }))
+}
+
 fn main() {
-    let tables = std::env::var("OCP_BENCH_TABLES").unwrap_or_else(|_| "all".to_string());
-    if tables == "all" || tables.contains("int") {
-        integrator_table();
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.iter().any(|a| a == "--help" || a == "-h") && !args.iter().any(|a| a == "--tables") {
+        println!("{USAGE}\n\ncriterion's arguments:");
     }
-    if tables == "all" || tables.contains("qp") {
-        qp_table();
-    }
-    if tables == "all" || tables.contains("adaptive") {
-        adaptive_table();
-    }
-    if tables == "all" || tables.contains("sweep") {
-        sweep_table();
-    }
-    if tables == "all" || tables.contains("iter3d") {
-        iteration_3d_table();
-    }
-    if tables == "all" || tables == "0" || tables.contains("criterion") {
-        benches();
+    let tables = match parse_tables(&args) {
+        Ok(Some(t)) => t,
+        Ok(None) => return benches(),
+        Err(e) => {
+            eprintln!("error: {e}\n\n{USAGE}");
+            std::process::exit(2);
+        }
+    };
+    for table in &tables.which {
+        match *table {
+            "int" => integrator_table(),
+            "qp" => qp_table(),
+            "adaptive" => adaptive_table(),
+            "sweep" => sweep_table(),
+            "iter3d" => iteration_3d_table(tables.iter3d_seconds, tables.iter3d_dump.as_deref()),
+            _ => unreachable!("names come from TABLE_NAMES"),
+        }
     }
 }

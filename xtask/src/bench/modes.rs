@@ -1,172 +1,18 @@
-//! Study (b): ROM mode count against trajectory error (against the FE plant) and time. The
-//! paper's 2D two-link (2×20 elements, damped paper section) spun up by a rigid rotation ω0
-//! about the root and kicked by a transverse follower tip force; the FE plant (implicit
-//! midpoint, `multibody-constraints`) and the modal model on rigid + N elastic modes (implicit
-//! midpoint, `ModalRom::midpoint_step`) with the same step, from the same projected state.
-//! (The same experiment as the verification case `modal-rom/rom-vs-fe`, rebuilt here on the
-//! public crate APIs: the case's helpers are private to the verification crate.)
+//! Study (b), ROM mode count against trajectory error and time (the runs and error measures
+//! are `flexmpc_verification::perf::modes`), and study `modes-scaling`, the time and memory of
+//! the modal basis against the mesh.
 
 use super::plot::{Chart, Legend, Series};
 use super::report::{Fmt, Study, Table};
-use super::{timed, Ctx};
+use super::{ok, timed, Ctx};
 use anyhow::Result;
-use intrinsic_beam::rotation::{quat_conj, quat_mul};
-use intrinsic_beam::{Amplitude, LoadFrame, PointLoad, Section};
-use modal_rom::{BasisSettings, ModalBasis, ModalRom, ModeSelection, RomOptions, StructureModel};
-use multibody_constraints::Structure;
-use multibody_constraints::{Plant, PlantSettings};
-use nalgebra::{Vector3, Vector4, Vector6};
+use flexmpc_verification::perf::modes::{
+    build_rom, fe_track, initial_state, lawson_tip_error, rom_lawson, rom_run, track_errors, DT,
+    FE_ELEMENTS, IMPULSE, LAWSON_SUBSTEPS,
+};
+use intrinsic_beam::Section;
+use modal_rom::{BasisSettings, StructureModel};
 use ocp_transcription::{Integrator, IntegratorKind, IntegratorSettings};
-
-const FE_ELEMENTS: usize = 20;
-const DT: f64 = 2e-3;
-/// Transverse follower tip force (N) and how long it is held (s).
-const IMPULSE: (f64, f64) = (0.05, 0.05);
-const SAMPLE_EVERY: usize = 5;
-
-/// Time, tip position, elbow angle.
-type Track = Vec<(f64, [f64; 3], f64)>;
-
-/// Elbow angle (planar, about e2) from the end quaternions of the two links.
-fn hinge_angle(xa: &Vector4<f64>, xb: &Vector4<f64>) -> f64 {
-    let rel = quat_mul(&quat_conj(xa), xb);
-    2.0 * rel[2].atan2(rel[0])
-}
-
-fn initial_state(structure: &Structure, omega0: f64) -> Vec<f64> {
-    structure.rigid_rotation_state(Vector3::new(0.0, omega0, 0.0), Vector3::zeros())
-}
-
-fn fe_track(structure: &Structure, omega0: f64, horizon: f64) -> Result<Track> {
-    let mut plant = Plant::new(structure.clone(), PlantSettings { dt: DT, ..Default::default() })?;
-    plant.set_state(&initial_state(structure, omega0))?;
-    let tip = FE_ELEMENTS;
-    plant.loads_mut(1).point.push(PointLoad {
-        node: tip,
-        frame: LoadFrame::Follower,
-        value: Vector6::new(0.0, 0.0, IMPULSE.0, 0.0, 0.0, 0.0),
-        amplitude: Amplitude::Constant,
-    });
-    let steps = (horizon / DT).round() as usize;
-    let on = (IMPULSE.1 / DT).round() as usize;
-    let mut track = Vec::new();
-    for s in 0..=steps {
-        if s % SAMPLE_EVERY == 0 {
-            let k = plant.kinematics();
-            let r = k[1].r[tip];
-            track.push((s as f64 * DT, [r.x, r.y, r.z], hinge_angle(&k[0].xi[tip], &k[1].xi[0])));
-        }
-        if s == on {
-            plant.loads_mut(1).point.clear();
-        }
-        if s < steps {
-            plant.step()?;
-        }
-    }
-    Ok(track)
-}
-
-struct Rom {
-    rom: ModalRom,
-    /// Row giving the elbow's relative rotation rate from `q1` (planar: rates add).
-    rate_row: Vec<f64>,
-}
-
-fn build_rom(
-    basis: &ModalBasis,
-    model: &StructureModel,
-    structure: &Structure,
-    n_elastic: usize,
-) -> Result<Rom> {
-    let sel = basis.select(&ModeSelection::Lowest(basis.n_rigid() + n_elastic))?;
-    let inputs = modal_rom::samples::inputs_2d(structure, model)?;
-    let rom = ModalRom::new(&sel, Some(&model.damping), &inputs, &RomOptions::default())?;
-    let layout = rom.layout();
-    let (ia, ib) = (layout.x1_index(0, FE_ELEMENTS, 2), layout.x1_index(1, 0, 2));
-    let rate_row = (0..rom.n_modes()).map(|j| sel.phi1()[(ib, j)] - sel.phi1()[(ia, j)]).collect();
-    Ok(Rom { rom, rate_row })
-}
-
-/// Integrates the ROM over the horizon; with `track` samples tip and elbow angle.
-fn rom_run(r: &Rom, q0: &[f64], horizon: f64, track: bool) -> Result<Track> {
-    let mut q = q0.to_vec();
-    let steps = (horizon / DT).round() as usize;
-    let on = (IMPULSE.1 / DT).round() as usize;
-    let m = r.rom.n_modes();
-    let mut u = vec![0.0, 0.0, IMPULSE.0];
-    let mut angle = 0.0;
-    let mut out = Vec::new();
-    for s in 0..=steps {
-        if track && s % SAMPLE_EVERY == 0 {
-            let pos = r.rom.positions(&q)?;
-            out.push((s as f64 * DT, pos[1][FE_ELEMENTS], angle));
-        }
-        if s == on {
-            u = vec![0.0; 3];
-        }
-        if s < steps {
-            let old: Vec<f64> = q[..m].to_vec();
-            r.rom.midpoint_step(&mut q, &u, DT, 1e-12, 30)?;
-            angle += DT * (0..m).map(|j| r.rate_row[j] * 0.5 * (old[j] + q[j])).sum::<f64>();
-        }
-    }
-    Ok(out)
-}
-
-/// Lawson RK4 (the controller's integrator, `L = W`) over intervals of the kick's length with
-/// `LAWSON_SUBSTEPS` substeps: the states at the interval ends.
-fn rom_lawson(
-    model: &mpc::RomDynamics,
-    integ: &mut Integrator,
-    q0: &[f64],
-    horizon: f64,
-) -> Result<Vec<Vec<f64>>> {
-    let intervals = (horizon / IMPULSE.1).round() as usize;
-    let mut x = q0.to_vec();
-    let mut next = vec![0.0; x.len()];
-    let mut out = Vec::with_capacity(intervals);
-    for i in 0..intervals {
-        let u = if i == 0 { [0.0, 0.0, IMPULSE.0] } else { [0.0; 3] };
-        integ.integrate(model, &x, &u, &mut next)?;
-        std::mem::swap(&mut x, &mut next);
-        out.push(x.clone());
-    }
-    Ok(out)
-}
-
-/// Substeps of the Lawson RK4 runs per 0.05 s interval (dt = 3.1 ms).
-const LAWSON_SUBSTEPS: usize = 16;
-
-/// Tip error of states at the interval ends against the FE track (same times), relative to
-/// the FE tip excursion.
-fn lawson_tip_error(rom: &ModalRom, states: &[Vec<f64>], fe: &Track) -> Result<f64> {
-    let r0 = fe[0].1;
-    let d = |a: &[f64; 3], b: &[f64; 3]| (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt();
-    let scale = fe.iter().map(|t| d(&t.1, &r0)).fold(0.0, f64::max);
-    let per = (IMPULSE.1 / (DT * SAMPLE_EVERY as f64)).round() as usize;
-    let mut e = 0.0f64;
-    for (i, q) in states.iter().enumerate() {
-        let tip = rom.positions(q)?[1][FE_ELEMENTS];
-        e = e.max(d(&tip, &fe[(i + 1) * per].1));
-    }
-    Ok(e / scale)
-}
-
-/// `(tip error, joint-angle error)`: max over time, relative to the FE tip excursion and the
-/// largest FE elbow angle.
-fn track_errors(rom: &Track, fe: &Track) -> (f64, f64) {
-    let r0 = fe[0].1;
-    let (mut et, mut ea, mut st, mut sa) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-    for (a, b) in rom.iter().zip(fe) {
-        let d = (0..3).map(|i| (a.1[i] - b.1[i]).powi(2)).sum::<f64>().sqrt();
-        let s = (0..3).map(|i| (b.1[i] - r0[i]).powi(2)).sum::<f64>().sqrt();
-        et = et.max(d);
-        st = st.max(s);
-        ea = ea.max((a.2 - b.2).abs());
-        sa = sa.max(b.2.abs());
-    }
-    (et / st, ea / sa)
-}
 
 /// Runs study (b).
 pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
@@ -211,7 +57,7 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
     let mut notes = Vec::new();
     for &omega0 in &omegas {
         ctx.progress(&format!("(b) FE plant, ω0 = {omega0}"));
-        let (fe, t_fe) = timed(k, 4.0, || fe_track(&structure, omega0, horizon))?;
+        let (fe, t_fe) = ok(timed(k, 4.0, || fe_track(&structure, omega0, horizon)))?;
         ctx.tick();
         let amax = fe.iter().fold(0.0f64, |a, t| a.max(t.2.abs()));
         let q_full = initial_state(&structure, omega0);
@@ -221,16 +67,17 @@ pub(crate) fn run(ctx: &mut Ctx) -> Result<Study> {
         let mut errs = Vec::new();
         for &n in counts {
             ctx.progress(&format!("(b) ROM rigid + {n}, ω0 = {omega0}"));
-            let r = build_rom(&basis, &model, &structure, n)?;
+            let r = ok(build_rom(&basis, &model, &structure, n))?;
             let q0 = r.rom.project_full(&q_full, None)?;
-            let track = rom_run(&r, &q0, horizon, true)?;
-            let (_, t_rom) = timed(k, 4.0, || rom_run(&r, &q0, horizon, false))?;
+            let track = ok(rom_run(&r, &q0, horizon, true))?;
+            let (_, t_rom) = ok(timed(k, 4.0, || rom_run(&r, &q0, horizon, false)))?;
             let (et, ea) = track_errors(&track, &fe);
             let model = mpc::RomDynamics::new(&r.rom)?;
             let settings = IntegratorSettings::new(IntegratorKind::LawsonRk4, LAWSON_SUBSTEPS);
             let mut integ = Integrator::new(&model, &settings, IMPULSE.1)?;
-            let (states, t_law) = timed(k, 4.0, || rom_lawson(&model, &mut integ, &q0, horizon))?;
-            let el = lawson_tip_error(&r.rom, &states, &fe)?;
+            let (states, t_law) =
+                ok(timed(k, 4.0, || rom_lawson(&model, &mut integ, &q0, horizon)))?;
+            let el = ok(lawson_tip_error(&r.rom, &states, &fe))?;
             s_law.add(t_law, el, format!("{n}"));
             s_tip.add(t_rom, et, format!("{n}"));
             s_ang.add(t_rom, ea, format!("{n}"));

@@ -339,7 +339,7 @@ fn ocp_first_sample_and_export() {
     assert_eq!(ocp["omega0"].as_f64(), Some(0.5));
 }
 
-/// Issue 7: every shipped scene runs from the CLI (shortened: the full runs are `cargo run`
+/// Every shipped scene runs from the CLI (shortened: the full runs are `cargo run`
 /// and `cargo xtask` material). Closed-loop scenes run `mpc` for two samples; the others
 /// `simulate` for 20 ms; a scene with `[modes] angles` also runs `modes`.
 #[test]
