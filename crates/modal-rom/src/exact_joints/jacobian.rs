@@ -8,7 +8,8 @@
 //!   Z_c p   = −AᵀG(V_c p − A A_cᵀ W p) − A_cᵀ W p − Z Λ_cᵀ p
 //!   Z_cᵀ f1 = −V_cᵀ G A f1 − Wᵀ A_c P f1 − Λ_c Zᵀ f1
 //!   ∂V      = ∂Ȧ Z − ȦAᵀG V_c − (ȦA_cᵀ − ȦAᵀG A A_cᵀ) W − V Λ_cᵀ
-//!   ∂W      = ∂G B + G ∂B,  ∂G = −G(A_cAᵀ + AA_cᵀ)G,  ∂B = V_c + A_cAᵀ W − B Λ_cᵀ
+//!   ∂W      = ∂G B + G ∂B = G V_c − G A A_cᵀ W − W Λ_cᵀ
+//!             (∂G = −G(A_cAᵀ + AA_cᵀ)G, ∂B = V_c + A_cAᵀ W − B Λ_cᵀ, W = GB, B = AZ̃)
 //!   ∂(Kp)   = K(∂V, W) p + K(V, ∂W) p
 //! ```
 //!
@@ -386,62 +387,22 @@ impl ExactJointsRom {
                     -1.0,
                 );
                 right_phi_t(&ws.v, rj, vc, wjj, rjj, m, -1.0, &mut ws.dv, &mut ws.phitmp);
-                // ∂G = −G(Q + Qᵀ)G, Q = A_cAᵀ (rows j: ∂C_jc E_j Aᵀ)
+                // ∂W on the joint rows: ∂G B + G ∂B with ∂G = −G(Q + Qᵀ)G, Q = A_cAᵀ (rows j
+                // only), W = GB, ∂B = V_c + QW − BΛ_cᵀ (V_c, QW on rows j): the QW terms cancel,
+                // ∂W = G[:, j] V_c − (G Qᵀ) W − W Λ_cᵀ, and G Qᵀ = G A A_cᵀ is `gaac`.
                 gemm(
-                    view_mut(&mut ws.qj, rjj, r),
+                    view_mut(&mut ws.dw, rj, m),
                     false,
-                    view(dcj, rjj, kk),
-                    view(&ws.ta[j], kk, r),
-                    1.0,
-                );
-                ws.qq.fill(0.0);
-                for cc in 0..r {
-                    for i in 0..rjj {
-                        let v = ws.qj[cc * rjj + i];
-                        ws.qq[cc * r + o + i] += v;
-                        ws.qq[(o + i) * r + cc] += v;
-                    }
-                }
-                gemm(
-                    view_mut(&mut ws.big, r, r),
-                    false,
-                    view(&ws.qq, r, r),
-                    view(&ws.g, r, r),
+                    view(&ws.g, r, r).submatrix(rs, o, rj, rjj),
+                    view(vc, rjj, m),
                     1.0,
                 );
                 gemm(
-                    view_mut(&mut ws.dg, r, r),
-                    false,
-                    view(&ws.g, r, r),
-                    view(&ws.big, r, r),
+                    view_mut(&mut ws.dw, rj, m),
+                    true,
+                    view(&ws.gaac, r, rjj).subrows(rs, rj),
+                    view(wjj, rjj, m),
                     -1.0,
-                );
-                // ∂B = V_c + Q W − B Λ_cᵀ (the last term enters ∂W_J as −W_J Λ_cᵀ below)
-                ws.db.fill(0.0);
-                for k in 0..m {
-                    ws.db[k * r + o..k * r + o + rjj].copy_from_slice(&vc[k * rjj..(k + 1) * rjj]);
-                }
-                gemm(
-                    view_mut(&mut ws.db, r, m).subrows_mut(o, rjj),
-                    true,
-                    view(&ws.qj, rjj, r),
-                    view(&ws.w, r, m),
-                    1.0,
-                );
-                // ∂W on the joint rows
-                gemm(
-                    view_mut(&mut ws.dw, rj, m),
-                    false,
-                    view(&ws.dg, r, r).subrows(rs, rj),
-                    view(&ws.b, r, m),
-                    1.0,
-                );
-                gemm(
-                    view_mut(&mut ws.dw, rj, m),
-                    true,
-                    view(&ws.g, r, r).subrows(rs, rj),
-                    view(&ws.db, r, m),
-                    1.0,
                 );
                 // − G_J B Λ_cᵀ = − W_J Λ_cᵀ
                 right_phi_t(&ws.wj, rj, vc, wjj, rjj, m, -1.0, &mut ws.dw, &mut ws.phitmp);
