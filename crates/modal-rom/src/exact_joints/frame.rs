@@ -1,6 +1,6 @@
 //! Dense kernels of the null-space frame `Z(ξ)` (theory.md §10.4): column-major buffers viewed
-//! as faer matrices, Cholesky and triangular solves by columns, products (plain loops for the
-//! many small ones, faer's kernels for the large), and the O(r·m) forms of the skew `K` and of the Cholesky-derivative triangle `Φ`.
+//! as faer matrices, Cholesky (faer's in-place `llt`), triangular solves and products, and the
+//! O(r·m) forms of the skew `K` and of the Cholesky-derivative triangle `Φ`.
 //!
 //! With `M = aᵀb` (`a`, `b` of `r` rows, `m` columns), `K(a, b) = strictly upper(Mᵀ) − strictly
 //! lower(M)` is the skew matrix `−M − Φ(−(M + Mᵀ))ᵀ` of theory.md §10.4 (`K = −VᵀW − Λᵀ`,
@@ -8,7 +8,10 @@
 //! act on a vector by running sums of columns instead of forming the `m × m` matrix.
 
 use crate::error::{ModalError, Result};
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch};
 use faer::linalg::matmul::matmul;
+use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
 use faer::{Accum, MatMut, MatRef, Par};
 
 /// `r × c` column-major view of `d`.
@@ -23,7 +26,7 @@ pub(crate) fn view_mut(d: &mut [f64], r: usize, c: usize) -> MatMut<'_, f64> {
 
 /// `dst (+)= alpha · a b`.
 pub(crate) fn gemm(
-    mut dst: MatMut<'_, f64>,
+    dst: MatMut<'_, f64>,
     add: bool,
     a: MatRef<'_, f64>,
     b: MatRef<'_, f64>,
@@ -34,63 +37,12 @@ pub(crate) fn gemm(
     }
     if a.ncols() == 0 {
         if !add {
+            let mut dst = dst;
             dst.fill(0.0);
         }
         return;
     }
-    if a.nrows() * a.ncols() * b.ncols() <= SMALL_PRODUCT
-        && small_gemm(dst.as_mut(), add, a, b, alpha)
-    {
-        return;
-    }
     matmul(dst, if add { Accum::Add } else { Accum::Replace }, a, b, alpha, Par::Seq);
-}
-
-/// Largest `rows · inner · cols` of a product done by [`small_gemm`] (faer's kernels above):
-/// the frame's products are many and small (a few rows of joint coefficients times `m`
-/// columns), where the generic kernel's dispatch costs more than the arithmetic.
-const SMALL_PRODUCT: usize = 4096;
-
-/// `dst (+)= alpha · a b` by plain loops when `dst` and `b` are column-major and `a` is
-/// column- or row-major (axpy or dot form); `false` (nothing done) otherwise. Fixed
-/// summation order: the same bits on every call.
-fn small_gemm(
-    dst: MatMut<'_, f64>,
-    add: bool,
-    a: MatRef<'_, f64>,
-    b: MatRef<'_, f64>,
-    alpha: f64,
-) -> bool {
-    let (Some(mut dst), Some(b)) = (dst.try_as_col_major_mut(), b.try_as_col_major()) else {
-        return false;
-    };
-    let (n, kk) = (dst.nrows(), a.ncols());
-    if let Some(a) = a.try_as_col_major() {
-        for j in 0..dst.ncols() {
-            let bj = b.col(j).as_slice();
-            let d = dst.as_mut().col_mut(j).as_slice_mut();
-            if !add {
-                d.fill(0.0);
-            }
-            for (k, &bk) in bj.iter().enumerate().take(kk) {
-                let s = alpha * bk;
-                d.iter_mut().zip(a.col(k).as_slice()).for_each(|(d, a)| *d += s * a);
-            }
-        }
-        return true;
-    }
-    if let Some(at) = a.transpose().try_as_col_major() {
-        for j in 0..dst.ncols() {
-            let bj = b.col(j).as_slice();
-            let d = dst.as_mut().col_mut(j).as_slice_mut();
-            for (i, d) in d.iter_mut().enumerate().take(n) {
-                let v: f64 = at.col(i).as_slice().iter().zip(bj).map(|(a, b)| a * b).sum();
-                *d = if add { *d + alpha * v } else { alpha * v };
-            }
-        }
-        return true;
-    }
-    false
 }
 
 /// `y (+)= alpha · a x` for column-major `a` (`r × c`).
@@ -115,8 +67,8 @@ pub(crate) fn gemv_t(y: &mut [f64], add: bool, a: &[f64], r: usize, x: &[f64], a
 }
 
 /// Lower Cholesky factor of the symmetric `n × n` matrix in `a`, in place (strict upper
-/// triangle zeroed), left-looking by columns. Errors when a pivot `L_jj²` is not above
-/// `tol · max_i a_ii` (relative) or `tol` (when `relative` is false).
+/// triangle zeroed). Errors when a pivot `L_jj²` is not above `tol · max_i a_ii` (relative) or
+/// `tol` (when `relative` is false).
 pub(crate) fn cholesky(
     a: &mut [f64],
     n: usize,
@@ -127,43 +79,29 @@ pub(crate) fn cholesky(
 ) -> Result<()> {
     let scale = if relative { (0..n).fold(0.0f64, |m, i| m.max(a[i * n + i])) } else { 1.0 };
     let fail = || ModalError::Numerical { stage: stage.to_string(), reason: reason.to_string() };
+    if n == 0 {
+        return Ok(());
+    }
+    let mut mem = MemBuffer::new(cholesky_in_place_scratch::<f64>(n, Par::Seq, Default::default()));
+    let stack = MemStack::new(&mut mem);
+    cholesky_in_place(view_mut(a, n, n), Default::default(), Par::Seq, stack, Default::default())
+        .map_err(|_| fail())?;
     for j in 0..n {
-        let (done, rest) = a[..n * n].split_at_mut(j * n);
-        let col = &mut rest[..n];
-        for k in 0..j {
-            let ck = &done[k * n..(k + 1) * n];
-            let s = ck[j];
-            if s != 0.0 {
-                col[j..].iter_mut().zip(&ck[j..]).for_each(|(c, l)| *c -= s * l);
-            }
-        }
-        let d = col[j];
-        if d.is_nan() || d <= tol * scale {
+        let d = a[j * n + j];
+        if d.is_nan() || d * d <= tol * scale {
             return Err(fail());
         }
-        let l = d.sqrt();
-        col[j] = l;
-        col[j + 1..].iter_mut().for_each(|c| *c /= l);
-        col[..j].fill(0.0);
+        a[j * n..j * n + j].fill(0.0);
     }
     Ok(())
 }
 
-/// `M ← M L⁻ᵀ` for `M` (`r × n`, column-major) and lower `L` (`n × n`): column `j` of the
-/// result is `(M_j − Σ_{k<j} L_jk X_k) / L_jj`.
+/// `M ← M L⁻ᵀ` for `M` (`r × n`, column-major) and lower `L` (`n × n`).
 pub(crate) fn right_solve_lt(l: &[f64], n: usize, m: &mut [f64], r: usize) {
-    for j in 0..n {
-        let (done, rest) = m[..r * n].split_at_mut(j * r);
-        let col = &mut rest[..r];
-        for k in 0..j {
-            let s = l[k * n + j];
-            if s != 0.0 {
-                col.iter_mut().zip(&done[k * r..(k + 1) * r]).for_each(|(c, x)| *c -= s * x);
-            }
-        }
-        let d = l[j * n + j];
-        col.iter_mut().for_each(|c| *c /= d);
+    if r == 0 || n == 0 {
+        return;
     }
+    solve_lower_triangular_in_place(view(l, n, n), view_mut(m, r, n).transpose_mut(), Par::Seq);
 }
 
 /// `out (+)= K(a, b) p` with `K(a, b)_il = a_lᵀb_i (l > i)`, `−a_iᵀb_l (l < i)`, `0 (l = i)`
