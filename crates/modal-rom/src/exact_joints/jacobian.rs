@@ -23,6 +23,16 @@ use crate::exact_joints::frame::{
 use crate::exact_joints::model::{u_right, ExactJointsRom};
 use nalgebra::Vector4;
 
+/// The workspace pieces [`ExactJointsRom::dadot_z`] reads and writes.
+struct DadotZ<'a> {
+    dxd: &'a [Vector4<f64>],
+    xi_dot: &'a [Vector4<f64>],
+    dc: &'a [[Vec<f64>; 4]],
+    tz: &'a [Vec<f64>],
+    cdot2: &'a mut [Vec<f64>],
+    dv: &'a mut [f64],
+}
+
 impl ExactJointsRom {
     /// The Jacobians into `jx` (`n × n`) and `ju` (`n × inputs`), column-major, after
     /// [`ExactJointsRom::eval_into`] filled `ws` at the same state.
@@ -259,6 +269,39 @@ impl ExactJointsRom {
             );
             for c in 0..4 {
                 let col = self.joint_offset(j) + c;
+                if ws.dc[j][c].iter().all(|&v| v == 0.0) {
+                    // ∂A/∂ξ_jc = 0 (a planar joint's out-of-plane components): Z, W, V do not
+                    // move (Z_c = 0, so the p2, root and other joints' rows are 0), only ξ̇_j's
+                    // own dependence on ξ_j and the resulting ∂Ȧ remain.
+                    let oj = self.joint_offset(j);
+                    for (i, d) in ws.dxd.iter_mut().enumerate() {
+                        *d = if i == j {
+                            ws.mjs[j].column(c).into_owned()
+                        } else {
+                            Vector4::zeros()
+                        };
+                    }
+                    jx[col * n + oj..col * n + oj + 4].copy_from_slice(ws.dxd[j].as_slice());
+                    self.dadot_z(
+                        DadotZ {
+                            dxd: &ws.dxd,
+                            xi_dot: &ws.xi_dot,
+                            dc: &ws.dc,
+                            tz: &ws.tz,
+                            cdot2: &mut ws.cdot2,
+                            dv: &mut ws.dv,
+                        },
+                        j,
+                        c,
+                    );
+                    let t = &mut ws.dkp;
+                    t.fill(0.0);
+                    skew_apply(&ws.dv, &ws.wj, rj, p, t, &mut ws.rtmp);
+                    for i in 0..m {
+                        jx[col * n + i] = -t[i];
+                    }
+                    continue;
+                }
                 let vc = &ws.vc[j][c];
                 let dcj = &ws.dc[j][c];
                 let wjj = &ws.wjj[j];
@@ -307,30 +350,18 @@ impl ExactJointsRom {
                     jx[col * n + oi..col * n + oi + 4].copy_from_slice(d.as_slice());
                 }
                 // ∂Ȧ Z
-                for (i, ir) in self.cons.joints.iter().enumerate() {
-                    let cd = &mut ws.cdot2[i];
-                    cd.fill(0.0);
-                    for d in 0..4 {
-                        let s = ws.dxd[i][d];
-                        cd.iter_mut().zip(&ws.dc[i][d]).for_each(|(a, b)| *a += s * b);
-                    }
-                    if i == j {
-                        for d in 0..4 {
-                            let s = ws.xi_dot[j][d];
-                            if s != 0.0 {
-                                let c2 = &jr.c2[4 * c + d];
-                                cd.iter_mut().zip(c2.iter()).for_each(|(a, b)| *a += s * b);
-                            }
-                        }
-                    }
-                    gemm(
-                        view_mut(&mut ws.dv, rj, m).subrows_mut(self.row_offsets[i] - rs, ir.rows),
-                        false,
-                        view(cd, ir.rows, ir.e.nrows()),
-                        view(&ws.tz[i], ir.e.nrows(), m),
-                        1.0,
-                    );
-                }
+                self.dadot_z(
+                    DadotZ {
+                        dxd: &ws.dxd,
+                        xi_dot: &ws.xi_dot,
+                        dc: &ws.dc,
+                        tz: &ws.tz,
+                        cdot2: &mut ws.cdot2,
+                        dv: &mut ws.dv,
+                    },
+                    j,
+                    c,
+                );
                 // − ȦAᵀG V_c
                 gemm(
                     view_mut(&mut ws.dv, rj, m),
@@ -416,6 +447,39 @@ impl ExactJointsRom {
                     jx[col * n + i] = colp[i] - t[i];
                 }
             }
+        }
+    }
+
+    /// `∂Ȧ Z` on the joint rows into `ws.dv` for the column of `ξ_jc`, from the changes
+    /// `ws.dxd` of every joint's `ξ̇` and the constant `∂²A/∂ξ_jc∂ξ_jd`.
+    fn dadot_z(&self, ws: DadotZ<'_>, j: usize, c: usize) {
+        let m = self.n_p();
+        let rs = self.cons.support.nrows();
+        let rj = self.cons.n_rows() - rs;
+        let jr = &self.cons.joints[j];
+        for (i, ir) in self.cons.joints.iter().enumerate() {
+            let cd = &mut ws.cdot2[i];
+            cd.fill(0.0);
+            for d in 0..4 {
+                let s = ws.dxd[i][d];
+                cd.iter_mut().zip(&ws.dc[i][d]).for_each(|(a, b)| *a += s * b);
+            }
+            if i == j {
+                for d in 0..4 {
+                    let s = ws.xi_dot[j][d];
+                    if s != 0.0 {
+                        let c2 = &jr.c2[4 * c + d];
+                        cd.iter_mut().zip(c2.iter()).for_each(|(a, b)| *a += s * b);
+                    }
+                }
+            }
+            gemm(
+                view_mut(ws.dv, rj, m).subrows_mut(self.row_offsets[i] - rs, ir.rows),
+                false,
+                view(cd, ir.rows, ir.e.nrows()),
+                view(&ws.tz[i], ir.e.nrows(), m),
+                1.0,
+            );
         }
     }
 }
