@@ -14,7 +14,9 @@
 //! ```
 //!
 //! `∂Ȧ` from the change of every `ξ̇` (through `Z_c p` and, for joint `j`, `ξ_j` itself) and
-//! the constant `∂²A/∂ξ²`.
+//! the constant `∂²A/∂ξ²`. Where `A_c = 0` exactly (a planar model's out-of-plane quaternion
+//! components at an in-plane rotation) `Z_c = 0`, `∂W = 0`, and the column is `ξ̇_j`'s own
+//! term and `−K(∂Ȧ Z, W) p`.
 
 use crate::exact_joints::eval::{joint_rate_matrix, rates, Workspace};
 use crate::exact_joints::frame::{
