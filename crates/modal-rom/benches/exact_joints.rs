@@ -89,8 +89,9 @@ fn models(spatial: bool, elements: usize, elastic: usize) -> (ExactJointsRom, Mo
 }
 
 /// A state away from the reference: velocities and forces from a fixed pattern, every joint
-/// turned by 0.7 rad about a skew axis.
-fn exact_state(rom: &ExactJointsRom) -> Vec<f64> {
+/// turned by 0.7 rad about a skew axis (3D) or about the plane's normal `y` (2D: the planar
+/// model's joint rotations stay in the plane).
+fn exact_state(rom: &ExactJointsRom, spatial: bool) -> Vec<f64> {
     let mut x = rom.reference_state();
     let k = rom.n_p() + rom.n_p2();
     for (i, v) in x[..k].iter_mut().enumerate() {
@@ -100,7 +101,9 @@ fn exact_state(rom: &ExactJointsRom) -> Vec<f64> {
         let o = rom.joint_offset(j);
         let r = rom.joint_quaternion(&x, j);
         let (c, s) = ((0.35f64).cos(), (0.35f64).sin());
-        let a = nalgebra::Vector3::new(0.2, 1.0, 0.1).normalize() * s;
+        let axis =
+            if spatial { nalgebra::Vector3::new(0.2, 1.0, 0.1) } else { nalgebra::Vector3::y() };
+        let a = axis.normalize() * s;
         // r ⊗ (c, a)
         let (r0, rv) = (r[0], nalgebra::Vector3::new(r[1], r[2], r[3]));
         let v = a * r0 + rv * c + rv.cross(&a);
@@ -127,7 +130,7 @@ fn bench_pair(c: &mut Criterion, name: &str, spatial: bool, elastic: Option<usiz
         Some(e) => models(spatial, 20, e),
         None => paper_basis_models(spatial, 20),
     };
-    let x = exact_state(&exact);
+    let x = exact_state(&exact, spatial);
     let (n, nu) = (exact.n_state(), exact.n_inputs());
     let u: Vec<f64> = (0..nu).map(|i| 0.3 * (i as f64 + 1.0)).collect();
     let (mut f, mut jx, mut ju) = (vec![0.0; n], vec![0.0; n * n], vec![0.0; n * nu]);

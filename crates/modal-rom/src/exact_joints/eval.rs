@@ -35,7 +35,6 @@ pub(crate) struct Workspace {
     pub(super) g: Vec<f64>,
     pub(super) c0: Vec<f64>,
     pub(super) h: Vec<f64>,
-    pub(super) b: Vec<f64>,
     pub(super) w: Vec<f64>,
     /// `W` restricted to all joint rows (`rJ × m`) and to each joint's rows (`r_j × m`).
     pub(super) wj: Vec<f64>,
@@ -66,9 +65,6 @@ pub(crate) struct Workspace {
     pub(super) adat_g: Vec<f64>,
     pub(super) gaac: Vec<f64>,
     pub(super) x1: Vec<f64>,
-    pub(super) qq: Vec<f64>,
-    pub(super) dg: Vec<f64>,
-    pub(super) db: Vec<f64>,
     pub(super) dv: Vec<f64>,
     pub(super) dw: Vec<f64>,
     pub(super) rtmp: Vec<f64>,
@@ -97,7 +93,6 @@ pub(crate) struct Workspace {
     pub(super) aac: Vec<f64>,
     pub(super) x1tmp: Vec<f64>,
     pub(super) phitmp: Vec<f64>,
-    pub(super) qj: Vec<f64>,
     pub(super) dkp: Vec<f64>,
     pub(super) ambient_tmp: Vec<f64>,
 }
@@ -149,7 +144,6 @@ impl Workspace {
             g: zeros(r * r),
             c0: zeros(r * m),
             h: zeros(r * m),
-            b: zeros(r * m),
             w: zeros(r * m),
             wj: zeros(rj * m),
             wjj: per(&|rj, _| rj * m),
@@ -175,9 +169,6 @@ impl Workspace {
             adat_g: zeros(rj * rmax),
             gaac: zeros(r * rmax),
             x1: zeros(rj * rmax),
-            qq: zeros(r * r),
-            dg: zeros(r * r),
-            db: zeros(r * m),
             dv: zeros(rj * m),
             dw: zeros(rj * m),
             rtmp: zeros(r.max(kk).max(1) * 4),
@@ -204,7 +195,6 @@ impl Workspace {
             aac: zeros(r * rmax),
             x1tmp: zeros(kk * rmax),
             phitmp: zeros(2 * r * rmax),
-            qj: zeros(rmax * r),
             dkp: zeros(m),
             ambient_tmp: zeros(rom.ops.scratch_len()),
         }
@@ -229,7 +219,7 @@ pub(super) fn joint_rate_matrix(rom: &ExactJointsRom, e: &[f64]) -> Matrix4<f64>
 
 impl ExactJointsRom {
     /// The factors of `Z(ξ)` into `ws` for the joint rotations in `x` (theory.md §10.4), and
-    /// with `with_z` the `na × m` matrix `Z` itself and `B = C0 L⁻ᵀ` (the Jacobian needs them;
+    /// with `with_z` the `na × m` matrix `Z` itself (the Jacobian needs it;
     /// the right-hand side applies `Z` through its factors, [`ExactJointsRom::apply_z`]).
     pub(crate) fn frame_into(&self, ws: &mut Workspace, x: &[f64], with_z: bool) -> Result<()> {
         let (na, m) = (self.basis.n1(), self.n_p());
@@ -364,11 +354,6 @@ impl ExactJointsRom {
             "null-space basis Z(ξ)",
             "the joint rotation is outside the range of the fields (ZᵀP Z0 singular)",
         )?;
-        if with_z {
-            // B = C0 L⁻ᵀ, only the Jacobian's ∂W needs it
-            ws.b.copy_from_slice(&ws.c0);
-            right_solve_lt(&ws.l, m, &mut ws.b, r);
-        }
         ws.w.copy_from_slice(&ws.h);
         right_solve_lt(&ws.l, m, &mut ws.w, r);
         // T Z = (T Z0 − T Aᵀ H) L⁻ᵀ

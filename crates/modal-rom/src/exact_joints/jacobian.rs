@@ -8,12 +8,15 @@
 //!   Z_c p   = −AᵀG(V_c p − A A_cᵀ W p) − A_cᵀ W p − Z Λ_cᵀ p
 //!   Z_cᵀ f1 = −V_cᵀ G A f1 − Wᵀ A_c P f1 − Λ_c Zᵀ f1
 //!   ∂V      = ∂Ȧ Z − ȦAᵀG V_c − (ȦA_cᵀ − ȦAᵀG A A_cᵀ) W − V Λ_cᵀ
-//!   ∂W      = ∂G B + G ∂B,  ∂G = −G(A_cAᵀ + AA_cᵀ)G,  ∂B = V_c + A_cAᵀ W − B Λ_cᵀ
+//!   ∂W      = ∂G B + G ∂B = G V_c − G A A_cᵀ W − W Λ_cᵀ
+//!             (∂G = −G(A_cAᵀ + AA_cᵀ)G, ∂B = V_c + A_cAᵀ W − B Λ_cᵀ, W = GB, B = AZ̃)
 //!   ∂(Kp)   = K(∂V, W) p + K(V, ∂W) p
 //! ```
 //!
 //! `∂Ȧ` from the change of every `ξ̇` (through `Z_c p` and, for joint `j`, `ξ_j` itself) and
-//! the constant `∂²A/∂ξ²`.
+//! the constant `∂²A/∂ξ²`. Where `A_c = 0` exactly (a planar model's out-of-plane quaternion
+//! components at an in-plane rotation) `Z_c = 0`, `∂W = 0`, and the column is `ξ̇_j`'s own
+//! term and `−K(∂Ȧ Z, W) p`.
 
 use crate::exact_joints::eval::{joint_rate_matrix, rates, Workspace};
 use crate::exact_joints::frame::{
@@ -21,6 +24,16 @@ use crate::exact_joints::frame::{
 };
 use crate::exact_joints::model::{u_right, ExactJointsRom};
 use nalgebra::Vector4;
+
+/// The workspace pieces [`ExactJointsRom::dadot_z`] reads and writes.
+struct DadotZ<'a> {
+    dxd: &'a [Vector4<f64>],
+    xi_dot: &'a [Vector4<f64>],
+    dc: &'a [[Vec<f64>; 4]],
+    tz: &'a [Vec<f64>],
+    cdot2: &'a mut [Vec<f64>],
+    dv: &'a mut [f64],
+}
 
 impl ExactJointsRom {
     /// The Jacobians into `jx` (`n × n`) and `ju` (`n × inputs`), column-major, after
@@ -258,6 +271,39 @@ impl ExactJointsRom {
             );
             for c in 0..4 {
                 let col = self.joint_offset(j) + c;
+                if ws.dc[j][c].iter().all(|&v| v == 0.0) {
+                    // ∂A/∂ξ_jc = 0 (a planar joint's out-of-plane components): Z, W, V do not
+                    // move (Z_c = 0, so the p2, root and other joints' rows are 0), only ξ̇_j's
+                    // own dependence on ξ_j and the resulting ∂Ȧ remain.
+                    let oj = self.joint_offset(j);
+                    for (i, d) in ws.dxd.iter_mut().enumerate() {
+                        *d = if i == j {
+                            ws.mjs[j].column(c).into_owned()
+                        } else {
+                            Vector4::zeros()
+                        };
+                    }
+                    jx[col * n + oj..col * n + oj + 4].copy_from_slice(ws.dxd[j].as_slice());
+                    self.dadot_z(
+                        DadotZ {
+                            dxd: &ws.dxd,
+                            xi_dot: &ws.xi_dot,
+                            dc: &ws.dc,
+                            tz: &ws.tz,
+                            cdot2: &mut ws.cdot2,
+                            dv: &mut ws.dv,
+                        },
+                        j,
+                        c,
+                    );
+                    let t = &mut ws.dkp;
+                    t.fill(0.0);
+                    skew_apply(&ws.dv, &ws.wj, rj, p, t, &mut ws.rtmp);
+                    for i in 0..m {
+                        jx[col * n + i] = -t[i];
+                    }
+                    continue;
+                }
                 let vc = &ws.vc[j][c];
                 let dcj = &ws.dc[j][c];
                 let wjj = &ws.wjj[j];
@@ -306,30 +352,18 @@ impl ExactJointsRom {
                     jx[col * n + oi..col * n + oi + 4].copy_from_slice(d.as_slice());
                 }
                 // ∂Ȧ Z
-                for (i, ir) in self.cons.joints.iter().enumerate() {
-                    let cd = &mut ws.cdot2[i];
-                    cd.fill(0.0);
-                    for d in 0..4 {
-                        let s = ws.dxd[i][d];
-                        cd.iter_mut().zip(&ws.dc[i][d]).for_each(|(a, b)| *a += s * b);
-                    }
-                    if i == j {
-                        for d in 0..4 {
-                            let s = ws.xi_dot[j][d];
-                            if s != 0.0 {
-                                let c2 = &jr.c2[4 * c + d];
-                                cd.iter_mut().zip(c2.iter()).for_each(|(a, b)| *a += s * b);
-                            }
-                        }
-                    }
-                    gemm(
-                        view_mut(&mut ws.dv, rj, m).subrows_mut(self.row_offsets[i] - rs, ir.rows),
-                        false,
-                        view(cd, ir.rows, ir.e.nrows()),
-                        view(&ws.tz[i], ir.e.nrows(), m),
-                        1.0,
-                    );
-                }
+                self.dadot_z(
+                    DadotZ {
+                        dxd: &ws.dxd,
+                        xi_dot: &ws.xi_dot,
+                        dc: &ws.dc,
+                        tz: &ws.tz,
+                        cdot2: &mut ws.cdot2,
+                        dv: &mut ws.dv,
+                    },
+                    j,
+                    c,
+                );
                 // − ȦAᵀG V_c
                 gemm(
                     view_mut(&mut ws.dv, rj, m),
@@ -386,62 +420,22 @@ impl ExactJointsRom {
                     -1.0,
                 );
                 right_phi_t(&ws.v, rj, vc, wjj, rjj, m, -1.0, &mut ws.dv, &mut ws.phitmp);
-                // ∂G = −G(Q + Qᵀ)G, Q = A_cAᵀ (rows j: ∂C_jc E_j Aᵀ)
+                // ∂W on the joint rows: ∂G B + G ∂B with ∂G = −G(Q + Qᵀ)G, Q = A_cAᵀ (rows j
+                // only), W = GB, ∂B = V_c + QW − BΛ_cᵀ (V_c, QW on rows j): the QW terms cancel,
+                // ∂W = G[:, j] V_c − (G Qᵀ) W − W Λ_cᵀ, and G Qᵀ = G A A_cᵀ is `gaac`.
                 gemm(
-                    view_mut(&mut ws.qj, rjj, r),
+                    view_mut(&mut ws.dw, rj, m),
                     false,
-                    view(dcj, rjj, kk),
-                    view(&ws.ta[j], kk, r),
-                    1.0,
-                );
-                ws.qq.fill(0.0);
-                for cc in 0..r {
-                    for i in 0..rjj {
-                        let v = ws.qj[cc * rjj + i];
-                        ws.qq[cc * r + o + i] += v;
-                        ws.qq[(o + i) * r + cc] += v;
-                    }
-                }
-                gemm(
-                    view_mut(&mut ws.big, r, r),
-                    false,
-                    view(&ws.qq, r, r),
-                    view(&ws.g, r, r),
+                    view(&ws.g, r, r).submatrix(rs, o, rj, rjj),
+                    view(vc, rjj, m),
                     1.0,
                 );
                 gemm(
-                    view_mut(&mut ws.dg, r, r),
-                    false,
-                    view(&ws.g, r, r),
-                    view(&ws.big, r, r),
+                    view_mut(&mut ws.dw, rj, m),
+                    true,
+                    view(&ws.gaac, r, rjj).subrows(rs, rj),
+                    view(wjj, rjj, m),
                     -1.0,
-                );
-                // ∂B = V_c + Q W − B Λ_cᵀ (the last term enters ∂W_J as −W_J Λ_cᵀ below)
-                ws.db.fill(0.0);
-                for k in 0..m {
-                    ws.db[k * r + o..k * r + o + rjj].copy_from_slice(&vc[k * rjj..(k + 1) * rjj]);
-                }
-                gemm(
-                    view_mut(&mut ws.db, r, m).subrows_mut(o, rjj),
-                    true,
-                    view(&ws.qj, rjj, r),
-                    view(&ws.w, r, m),
-                    1.0,
-                );
-                // ∂W on the joint rows
-                gemm(
-                    view_mut(&mut ws.dw, rj, m),
-                    false,
-                    view(&ws.dg, r, r).subrows(rs, rj),
-                    view(&ws.b, r, m),
-                    1.0,
-                );
-                gemm(
-                    view_mut(&mut ws.dw, rj, m),
-                    true,
-                    view(&ws.g, r, r).subrows(rs, rj),
-                    view(&ws.db, r, m),
-                    1.0,
                 );
                 // − G_J B Λ_cᵀ = − W_J Λ_cᵀ
                 right_phi_t(&ws.wj, rj, vc, wjj, rjj, m, -1.0, &mut ws.dw, &mut ws.phitmp);
@@ -455,6 +449,39 @@ impl ExactJointsRom {
                     jx[col * n + i] = colp[i] - t[i];
                 }
             }
+        }
+    }
+
+    /// `∂Ȧ Z` on the joint rows into `ws.dv` for the column of `ξ_jc`, from the changes
+    /// `ws.dxd` of every joint's `ξ̇` and the constant `∂²A/∂ξ_jc∂ξ_jd`.
+    fn dadot_z(&self, ws: DadotZ<'_>, j: usize, c: usize) {
+        let m = self.n_p();
+        let rs = self.cons.support.nrows();
+        let rj = self.cons.n_rows() - rs;
+        let jr = &self.cons.joints[j];
+        for (i, ir) in self.cons.joints.iter().enumerate() {
+            let cd = &mut ws.cdot2[i];
+            cd.fill(0.0);
+            for d in 0..4 {
+                let s = ws.dxd[i][d];
+                cd.iter_mut().zip(&ws.dc[i][d]).for_each(|(a, b)| *a += s * b);
+            }
+            if i == j {
+                for d in 0..4 {
+                    let s = ws.xi_dot[j][d];
+                    if s != 0.0 {
+                        let c2 = &jr.c2[4 * c + d];
+                        cd.iter_mut().zip(c2.iter()).for_each(|(a, b)| *a += s * b);
+                    }
+                }
+            }
+            gemm(
+                view_mut(ws.dv, rj, m).subrows_mut(self.row_offsets[i] - rs, ir.rows),
+                false,
+                view(cd, ir.rows, ir.e.nrows()),
+                view(&ws.tz[i], ir.e.nrows(), m),
+                1.0,
+            );
         }
     }
 }
