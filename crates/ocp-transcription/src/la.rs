@@ -330,6 +330,147 @@ impl WithSimd for SparseRightT<'_> {
     }
 }
 
+/// Rows of a sparse operator that share one column pattern, at most [`GROUP`] of them:
+/// on the transposed layout their output columns are accumulated together, so each loaded
+/// chunk of an input column serves every row of the group (a modal `e^{hW/2}` is a few
+/// dense diagonal blocks up to a permutation: its rows come in groups of equal patterns).
+#[derive(Clone, Debug)]
+pub(crate) struct RowGroup {
+    rows: [usize; GROUP],
+    /// Number of rows in the group (1 to [`GROUP`]).
+    len: usize,
+    cols: Vec<usize>,
+    /// `vals[k · len + q]` = entry of row `rows[q]` in column `cols[k]`.
+    vals: Vec<f64>,
+}
+
+/// Rows per [`RowGroup`]: 4 rows × 8 directions are 8 AVX2 accumulators.
+const GROUP: usize = 4;
+
+impl RowGroup {
+    /// Groups the compressed rows `(row_ptr, col, val)` by equal column patterns (in order of
+    /// first appearance, split into groups of at most [`GROUP`] rows).
+    fn of(row_ptr: &[usize], col: &[usize], val: &[f64]) -> Vec<RowGroup> {
+        let n = row_ptr.len() - 1;
+        let pattern = |i: usize| &col[row_ptr[i]..row_ptr[i + 1]];
+        let mut taken = vec![false; n];
+        let mut groups = Vec::new();
+        for i in 0..n {
+            if taken[i] {
+                continue;
+            }
+            let same: Vec<usize> =
+                (i..n).filter(|&r| !taken[r] && pattern(r) == pattern(i)).collect();
+            for chunk in same.chunks(GROUP) {
+                let mut rows = [0; GROUP];
+                rows[..chunk.len()].copy_from_slice(chunk);
+                let cols = pattern(i).to_vec();
+                let mut vals = Vec::with_capacity(cols.len() * chunk.len());
+                for k in 0..cols.len() {
+                    for &r in chunk {
+                        vals.push(val[row_ptr[r] + k]);
+                        taken[r] = true;
+                    }
+                }
+                groups.push(RowGroup { rows, len: chunk.len(), cols, vals });
+            }
+        }
+        groups
+    }
+}
+
+/// `dst = alpha src · opᵀ` (+= when `add`) over the [`RowGroup`]s of a sparse operator: the
+/// same sums in the same order as [`SparseRightT`] (per entry, the FMA chain over the row's
+/// columns in ascending order), with `len` output columns accumulated at once.
+struct GroupedRightT<'a> {
+    dst: &'a mut [f64],
+    src: &'a [f64],
+    groups: &'a [RowGroup],
+    m: usize,
+    alpha: f64,
+    add: bool,
+}
+
+/// `W` directions from `c0` of the `R` output columns of group `g`.
+#[inline(always)]
+fn group_chunk<const R: usize, const W: usize>(
+    dst: &mut [f64],
+    src: &[f64],
+    g: &RowGroup,
+    m: usize,
+    c0: usize,
+    alpha: f64,
+    add: bool,
+) {
+    let mut acc = [[0.0_f64; W]; R];
+    for (&c, v) in g.cols.iter().zip(g.vals.chunks_exact(R)) {
+        let s: &[f64; W] = src[c * m + c0..c * m + c0 + W].try_into().expect("chunk width");
+        for q in 0..R {
+            for t in 0..W {
+                acc[q][t] = v[q].mul_add(s[t], acc[q][t]);
+            }
+        }
+    }
+    for q in 0..R {
+        let r = g.rows[q];
+        let dd: &mut [f64; W] =
+            (&mut dst[r * m + c0..r * m + c0 + W]).try_into().expect("chunk width");
+        if add {
+            for t in 0..W {
+                dd[t] = alpha.mul_add(acc[q][t], dd[t]);
+            }
+        } else {
+            for t in 0..W {
+                dd[t] = alpha * acc[q][t];
+            }
+        }
+    }
+}
+
+/// All directions of the `R` output columns of group `g` (chunks of 8, then 4, 2, 1).
+#[inline(always)]
+fn group_rows<const R: usize>(
+    dst: &mut [f64],
+    src: &[f64],
+    g: &RowGroup,
+    m: usize,
+    alpha: f64,
+    add: bool,
+) {
+    let mut c0 = 0;
+    while c0 + 8 <= m {
+        group_chunk::<R, 8>(dst, src, g, m, c0, alpha, add);
+        c0 += 8;
+    }
+    if c0 + 4 <= m {
+        group_chunk::<R, 4>(dst, src, g, m, c0, alpha, add);
+        c0 += 4;
+    }
+    if c0 + 2 <= m {
+        group_chunk::<R, 2>(dst, src, g, m, c0, alpha, add);
+        c0 += 2;
+    }
+    if c0 < m {
+        group_chunk::<R, 1>(dst, src, g, m, c0, alpha, add);
+    }
+}
+
+impl WithSimd for GroupedRightT<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) {
+        let GroupedRightT { dst, src, groups, m, alpha, add } = self;
+        for g in groups {
+            match g.len {
+                1 => group_rows::<1>(dst, src, g, m, alpha, add),
+                2 => group_rows::<2>(dst, src, g, m, alpha, add),
+                3 => group_rows::<3>(dst, src, g, m, alpha, add),
+                _ => group_rows::<GROUP>(dst, src, g, m, alpha, add),
+            }
+        }
+    }
+}
+
 #[inline(always)]
 fn axpy_kernel(y: &mut [f64], a: f64, x: &[f64]) {
     for (yi, xi) in y.iter_mut().zip(x) {
@@ -449,8 +590,15 @@ pub(crate) fn axpy(y: &mut [f64], a: f64, x: &[f64]) {
 pub(crate) enum Operator {
     /// Dense storage.
     Dense(DMatrix<f64>),
-    /// Compressed rows: `(row_ptr, col, val)`; the dense copy serves transposed products.
-    Sparse { row_ptr: Vec<usize>, col: Vec<usize>, val: Vec<f64>, dense: DMatrix<f64> },
+    /// Compressed rows: `(row_ptr, col, val)`, the same rows grouped by column pattern
+    /// (products on the transposed layout); the dense copy serves transposed products.
+    Sparse {
+        row_ptr: Vec<usize>,
+        col: Vec<usize>,
+        val: Vec<f64>,
+        groups: Vec<RowGroup>,
+        dense: DMatrix<f64>,
+    },
     /// Block diagonal with small diagonal blocks `(start, size, column-major values)`.
     BlockDiagonal { blocks: Vec<(usize, usize, Vec<f64>)>, dense: DMatrix<f64> },
 }
@@ -517,7 +665,8 @@ impl Operator {
             }
             row_ptr.push(col.len());
         }
-        Operator::Sparse { row_ptr, col, val, dense: m }
+        let groups = RowGroup::of(&row_ptr, &col, &val);
+        Operator::Sparse { row_ptr, col, val, groups, dense: m }
     }
 
     /// The dense matrix.
@@ -596,13 +745,10 @@ impl Operator {
                     }
                 }
             }
-            Operator::Sparse { row_ptr, col, val, .. } => Arch::new().dispatch(SparseRightT {
+            Operator::Sparse { groups, .. } => Arch::new().dispatch(GroupedRightT {
                 dst: dst.as_mut_slice(),
                 src: src.as_slice(),
-                row_ptr: &row_ptr[..row_ptr.len() - 1],
-                row_end: &row_ptr[1..],
-                col,
-                val,
+                groups,
                 m,
                 alpha,
                 add,
@@ -788,6 +934,61 @@ mod tests {
             op.apply_vec(&mut y, src.column(0).as_slice(), 1.0, false);
             let e = &m * src.column(0);
             assert!(y.iter().zip(e.iter()).all(|(a, b)| (a - b).abs() < 1e-14));
+        }
+    }
+
+    /// A sparse operator that is dense diagonal blocks up to a permutation: its rows are
+    /// grouped by pattern, and the grouped product gives the row-by-row kernel's bits.
+    #[test]
+    fn grouped_rows_match_row_kernel_bitwise() {
+        let n = 37;
+        let mut rng = crate::samples::seeded(3);
+        let mut perm: Vec<usize> = (0..n).collect();
+        for i in (1..n).rev() {
+            perm.swap(i, rng.random_range(0..=i));
+        }
+        let mut m = DMatrix::zeros(n, n);
+        let mut start = 0;
+        for b in [1, 6, 2, 9, 3, 1, 5, 7, 3].into_iter().cycle() {
+            let b = b.min(n - start);
+            for r in start..start + b {
+                for c in start..start + b {
+                    m[(perm[r], perm[c])] = rng.random_range(-1.0..1.0);
+                }
+            }
+            start += b;
+            if start == n {
+                break;
+            }
+        }
+        let op = Operator::new(m.clone());
+        let Operator::Sparse { row_ptr, col, val, groups, .. } = &op else {
+            panic!("expected sparse storage");
+        };
+        assert!(groups.iter().any(|g| g.len == GROUP), "groups {}", groups.len());
+        assert_eq!(groups.iter().map(|g| g.len).sum::<usize>(), n);
+        for rows in [58, 7, 1] {
+            let src = DMatrix::from_fn(rows, n, |_, _| rng.random_range(-1.0..1.0));
+            for add in [false, true] {
+                let mut grouped = DMatrix::from_element(rows, n, 0.5);
+                op.apply_right_t(&mut grouped, &src, 0.7, add);
+                let mut by_row = DMatrix::from_element(rows, n, 0.5);
+                Arch::new().dispatch(SparseRightT {
+                    dst: by_row.as_mut_slice(),
+                    src: src.as_slice(),
+                    row_ptr: &row_ptr[..n],
+                    row_end: &row_ptr[1..],
+                    col,
+                    val,
+                    m: rows,
+                    alpha: 0.7,
+                    add,
+                });
+                assert_eq!(grouped, by_row, "rows {rows}, add {add}");
+                let base =
+                    if add { DMatrix::from_element(rows, n, 0.5) } else { DMatrix::zeros(rows, n) };
+                assert!((grouped - base - &src * m.transpose() * 0.7).amax() < 1e-13);
+            }
         }
     }
 }
