@@ -423,6 +423,43 @@ pub(crate) fn lincomb(y: &mut [f64], x: &[f64], a: f64, z: &[f64]) {
     Arch::new().dispatch(Lincomb { y, x, a, z })
 }
 
+struct Lincomb3<'a> {
+    y: &'a mut [f64],
+    x: &'a [f64],
+    a: f64,
+    z: &'a [f64],
+    b: f64,
+    w1: &'a [f64],
+    w2: &'a [f64],
+}
+
+impl WithSimd for Lincomb3<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) {
+        let Lincomb3 { y, x, a, z, b, w1, w2 } = self;
+        let n = y.len();
+        let (x, z, w1, w2) = (&x[..n], &z[..n], &w1[..n], &w2[..n]);
+        for i in 0..n {
+            y[i] = x[i] + a * z[i] + b * (w1[i] + w2[i]);
+        }
+    }
+}
+
+/// `y = x + a z + b (w1 + w2)`, evaluated as `(x + a·z) + b·(w1 + w2)` with separate
+/// multiplies and adds (no FMA: the bits do not depend on the SIMD level); SIMD-dispatched.
+pub(crate) fn lincomb3(
+    y: &mut [f64],
+    x: &[f64],
+    a: f64,
+    z: &[f64],
+    b: f64,
+    w1: &[f64],
+    w2: &[f64],
+) {
+    Arch::new().dispatch(Lincomb3 { y, x, a, z, b, w1, w2 })
+}
+
 struct CoveredCheck<'a> {
     j: &'a [f64],
     uncovered: &'a [(usize, usize)],

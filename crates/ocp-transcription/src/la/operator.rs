@@ -2,7 +2,7 @@
 //! with rows grouped by column pattern, applied to vectors and to the transposed
 //! sensitivity layout.
 
-use super::{axpy, fmut, fref, gemm, gemv, gemv_t, SparseRightT};
+use super::{axpy, fmut, fref, gemv, gemv_t};
 use faer::linalg::matmul::matmul;
 use faer::traits::pulp::{Arch, Simd, WithSimd};
 use faer::{Accum, Par};
@@ -14,15 +14,9 @@ use nalgebra::DMatrix;
 pub(crate) enum Operator {
     /// Dense storage.
     Dense(DMatrix<f64>),
-    /// Compressed rows: `(row_ptr, col, val)`, the same rows grouped by column pattern
-    /// (products on the transposed layout); the dense copy serves transposed products.
-    Sparse {
-        row_ptr: Vec<usize>,
-        col: Vec<usize>,
-        val: Vec<f64>,
-        groups: Vec<RowGroup>,
-        dense: DMatrix<f64>,
-    },
+    /// The nonzeros by rows, rows grouped by column pattern ([`RowGroup`]); the dense copy
+    /// serves transposed products.
+    Sparse { groups: Vec<RowGroup>, dense: DMatrix<f64> },
     /// Block diagonal with small diagonal blocks `(start, size, column-major values)`.
     BlockDiagonal { blocks: Vec<(usize, usize, Vec<f64>)>, dense: DMatrix<f64> },
 }
@@ -90,7 +84,7 @@ impl Operator {
             row_ptr.push(col.len());
         }
         let groups = RowGroup::of(&row_ptr, &col, &val);
-        Operator::Sparse { row_ptr, col, val, groups, dense: m }
+        Operator::Sparse { groups, dense: m }
     }
 
     /// The dense matrix.
@@ -105,7 +99,7 @@ impl Operator {
     #[cfg(test)]
     pub(crate) fn apply(&self, dst: &mut DMatrix<f64>, src: &DMatrix<f64>, alpha: f64, add: bool) {
         match self {
-            Operator::Dense(m) => gemm(dst, m, src, alpha, add),
+            Operator::Dense(m) => super::gemm(dst, m, src, alpha, add),
             Operator::BlockDiagonal { blocks, .. } => {
                 let n = dst.nrows();
                 for (s, d) in
@@ -114,22 +108,12 @@ impl Operator {
                     block_apply(blocks, d, s, alpha, add);
                 }
             }
-            Operator::Sparse { row_ptr, col, val, .. } => {
+            Operator::Sparse { .. } => {
                 let n = dst.nrows();
-                let src = src.as_slice();
-                let dst = dst.as_mut_slice();
-                for (s, d) in src.chunks_exact(n).zip(dst.chunks_exact_mut(n)) {
-                    for i in 0..n {
-                        let mut acc = 0.0;
-                        for p in row_ptr[i]..row_ptr[i + 1] {
-                            acc += val[p] * s[col[p]];
-                        }
-                        if add {
-                            d[i] += alpha * acc;
-                        } else {
-                            d[i] = alpha * acc;
-                        }
-                    }
+                for (s, d) in
+                    src.as_slice().chunks_exact(n).zip(dst.as_mut_slice().chunks_exact_mut(n))
+                {
+                    self.apply_vec(d, s, alpha, add);
                 }
             }
         }
@@ -435,7 +419,7 @@ impl WithSimd for GroupedVec<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::la::{mul_right_t, SparseRows};
+    use crate::la::{mul_right_t, SparseRightT, SparseRows};
     use rand::Rng;
 
     /// The three storages give the same products as the dense matrix.
@@ -508,9 +492,19 @@ mod tests {
             }
         }
         let op = Operator::new(m.clone());
-        let Operator::Sparse { row_ptr, col, val, groups, .. } = &op else {
+        let Operator::Sparse { groups, .. } = &op else {
             panic!("expected sparse storage");
         };
+        let (mut row_ptr, mut col, mut val) = (vec![0], Vec::new(), Vec::new());
+        for i in 0..n {
+            for j in 0..n {
+                if m[(i, j)] != 0.0 {
+                    col.push(j);
+                    val.push(m[(i, j)]);
+                }
+            }
+            row_ptr.push(col.len());
+        }
         assert!(groups.iter().any(|g| g.len == GROUP), "groups {}", groups.len());
         assert_eq!(groups.iter().map(|g| g.len).sum::<usize>(), n);
         for rows in [58, 7, 1] {
@@ -524,8 +518,8 @@ mod tests {
                     src: src.as_slice(),
                     row_ptr: &row_ptr[..n],
                     row_end: &row_ptr[1..],
-                    col,
-                    val,
+                    col: &col,
+                    val: &val,
                     m: rows,
                     alpha: 0.7,
                     add,
