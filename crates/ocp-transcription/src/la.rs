@@ -6,6 +6,9 @@ use faer::traits::pulp::{Arch, Simd, WithSimd};
 use faer::{Accum, MatMut, MatRef, Par};
 use nalgebra::DMatrix;
 
+mod operator;
+pub(crate) use operator::Operator;
+
 /// A faer view of a nalgebra matrix.
 pub(crate) fn fref(m: &DMatrix<f64>) -> MatRef<'_, f64> {
     MatRef::from_column_major_slice(m.as_slice(), m.nrows(), m.ncols())
@@ -420,6 +423,43 @@ pub(crate) fn lincomb(y: &mut [f64], x: &[f64], a: f64, z: &[f64]) {
     Arch::new().dispatch(Lincomb { y, x, a, z })
 }
 
+struct Lincomb3<'a> {
+    y: &'a mut [f64],
+    x: &'a [f64],
+    a: f64,
+    z: &'a [f64],
+    b: f64,
+    w1: &'a [f64],
+    w2: &'a [f64],
+}
+
+impl WithSimd for Lincomb3<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) {
+        let Lincomb3 { y, x, a, z, b, w1, w2 } = self;
+        let n = y.len();
+        let (x, z, w1, w2) = (&x[..n], &z[..n], &w1[..n], &w2[..n]);
+        for i in 0..n {
+            y[i] = x[i] + a * z[i] + b * (w1[i] + w2[i]);
+        }
+    }
+}
+
+/// `y = x + a z + b (w1 + w2)`, evaluated as `(x + a·z) + b·(w1 + w2)` with separate
+/// multiplies and adds (no FMA: the bits do not depend on the SIMD level); SIMD-dispatched.
+pub(crate) fn lincomb3(
+    y: &mut [f64],
+    x: &[f64],
+    a: f64,
+    z: &[f64],
+    b: f64,
+    w1: &[f64],
+    w2: &[f64],
+) {
+    Arch::new().dispatch(Lincomb3 { y, x, a, z, b, w1, w2 })
+}
+
 struct CoveredCheck<'a> {
     j: &'a [f64],
     uncovered: &'a [(usize, usize)],
@@ -441,248 +481,6 @@ impl WithSimd for CoveredCheck<'_> {
 /// `y += a * x` (SIMD-dispatched).
 pub(crate) fn axpy(y: &mut [f64], a: f64, x: &[f64]) {
     Arch::new().dispatch(Axpy { y, a, x })
-}
-
-/// A square operator that is either dense or stored by rows with its nonzeros only
-/// (the exponential of a block-diagonal modal `W` is block diagonal).
-#[derive(Clone, Debug)]
-pub(crate) enum Operator {
-    /// Dense storage.
-    Dense(DMatrix<f64>),
-    /// Compressed rows: `(row_ptr, col, val)`; the dense copy serves transposed products.
-    Sparse { row_ptr: Vec<usize>, col: Vec<usize>, val: Vec<f64>, dense: DMatrix<f64> },
-    /// Block diagonal with small diagonal blocks `(start, size, column-major values)`.
-    BlockDiagonal { blocks: Vec<(usize, usize, Vec<f64>)>, dense: DMatrix<f64> },
-}
-
-/// Contiguous diagonal blocks of a square matrix's sparsity pattern (largest block size).
-fn diagonal_blocks(m: &DMatrix<f64>) -> (Vec<(usize, usize)>, usize) {
-    let n = m.nrows();
-    let mut blocks = Vec::new();
-    let mut largest = 0;
-    let mut start = 0;
-    while start < n {
-        let mut end = start + 1;
-        loop {
-            let mut new_end = end;
-            for r in start..n {
-                for c in start..n {
-                    let inside_r = r < end;
-                    let inside_c = c < end;
-                    if (inside_r || inside_c) && m[(r, c)] != 0.0 {
-                        new_end = new_end.max(r + 1).max(c + 1);
-                    }
-                }
-            }
-            if new_end == end {
-                break;
-            }
-            end = new_end;
-        }
-        blocks.push((start, end - start));
-        largest = largest.max(end - start);
-        start = end;
-    }
-    (blocks, largest)
-}
-
-impl Operator {
-    /// Stores `m` block diagonal when its blocks are at most 8 × 8, sparse when at most 30 %
-    /// of its entries are nonzero, dense otherwise.
-    pub(crate) fn new(m: DMatrix<f64>) -> Self {
-        let n = m.nrows();
-        let (blocks, largest) = diagonal_blocks(&m);
-        if largest <= 8 && n > 8 {
-            let blocks = blocks
-                .into_iter()
-                .map(|(s, b)| (s, b, m.view((s, s), (b, b)).iter().copied().collect()))
-                .collect();
-            return Operator::BlockDiagonal { blocks, dense: m };
-        }
-        let nnz = m.iter().filter(|v| **v != 0.0).count();
-        if nnz * 10 > 3 * n * n {
-            return Operator::Dense(m);
-        }
-        let mut row_ptr = Vec::with_capacity(n + 1);
-        let mut col = Vec::with_capacity(nnz);
-        let mut val = Vec::with_capacity(nnz);
-        row_ptr.push(0);
-        for i in 0..n {
-            for j in 0..m.ncols() {
-                let v = m[(i, j)];
-                if v != 0.0 {
-                    col.push(j);
-                    val.push(v);
-                }
-            }
-            row_ptr.push(col.len());
-        }
-        Operator::Sparse { row_ptr, col, val, dense: m }
-    }
-
-    /// The dense matrix.
-    pub(crate) fn dense(&self) -> &DMatrix<f64> {
-        match self {
-            Operator::Dense(m) => m,
-            Operator::Sparse { dense, .. } | Operator::BlockDiagonal { dense, .. } => dense,
-        }
-    }
-
-    /// `dst = alpha * op * src` (+= when `add`), `src` and `dst` with the same shape.
-    #[cfg(test)]
-    pub(crate) fn apply(&self, dst: &mut DMatrix<f64>, src: &DMatrix<f64>, alpha: f64, add: bool) {
-        match self {
-            Operator::Dense(m) => gemm(dst, m, src, alpha, add),
-            Operator::BlockDiagonal { blocks, .. } => {
-                let n = dst.nrows();
-                for (s, d) in
-                    src.as_slice().chunks_exact(n).zip(dst.as_mut_slice().chunks_exact_mut(n))
-                {
-                    block_apply(blocks, d, s, alpha, add);
-                }
-            }
-            Operator::Sparse { row_ptr, col, val, .. } => {
-                let n = dst.nrows();
-                let src = src.as_slice();
-                let dst = dst.as_mut_slice();
-                for (s, d) in src.chunks_exact(n).zip(dst.chunks_exact_mut(n)) {
-                    for i in 0..n {
-                        let mut acc = 0.0;
-                        for p in row_ptr[i]..row_ptr[i + 1] {
-                            acc += val[p] * s[col[p]];
-                        }
-                        if add {
-                            d[i] += alpha * acc;
-                        } else {
-                            d[i] = alpha * acc;
-                        }
-                    }
-                }
-            }
-        }
-    }
-
-    /// `dst = alpha * src * opᵀ` (+= when `add`): the operator applied to the transposed
-    /// layout (column `i` of `dst` is `alpha Σ_k op[i, k] src[:, k]`).
-    pub(crate) fn apply_right_t(
-        &self,
-        dst: &mut DMatrix<f64>,
-        src: &DMatrix<f64>,
-        alpha: f64,
-        add: bool,
-    ) {
-        let m = src.nrows();
-        match self {
-            Operator::Dense(e) => {
-                let acc = if add { Accum::Add } else { Accum::Replace };
-                matmul(fmut(dst), acc, fref(src), fref(e).transpose(), alpha, Par::Seq);
-            }
-            Operator::BlockDiagonal { blocks, .. } => {
-                let ss = src.as_slice();
-                let ds = dst.as_mut_slice();
-                for (start, b, v) in blocks {
-                    let (start, b) = (*start, *b);
-                    for r in 0..b {
-                        let d = &mut ds[(start + r) * m..(start + r + 1) * m];
-                        if !add {
-                            d.fill(0.0);
-                        }
-                        for c in 0..b {
-                            let w = alpha * v[r + c * b];
-                            if w != 0.0 {
-                                axpy(d, w, &ss[(start + c) * m..(start + c + 1) * m]);
-                            }
-                        }
-                    }
-                }
-            }
-            Operator::Sparse { row_ptr, col, val, .. } => Arch::new().dispatch(SparseRightT {
-                dst: dst.as_mut_slice(),
-                src: src.as_slice(),
-                row_ptr: &row_ptr[..row_ptr.len() - 1],
-                row_end: &row_ptr[1..],
-                col,
-                val,
-                m,
-                alpha,
-                add,
-            }),
-        }
-    }
-
-    /// `y = alpha * op * x` (+= when `add`).
-    pub(crate) fn apply_vec(&self, y: &mut [f64], x: &[f64], alpha: f64, add: bool) {
-        match self {
-            Operator::Dense(m) => gemv(y, m, x, alpha, add),
-            Operator::BlockDiagonal { blocks, .. } => block_apply(blocks, y, x, alpha, add),
-            Operator::Sparse { row_ptr, col, val, .. } => {
-                for (yi, r) in y.iter_mut().zip(row_ptr.windows(2)) {
-                    let acc = col[r[0]..r[1]]
-                        .iter()
-                        .zip(&val[r[0]..r[1]])
-                        .fold(0.0, |acc, (&c, &v)| acc + v * x[c]);
-                    if add {
-                        *yi += alpha * acc;
-                    } else {
-                        *yi = alpha * acc;
-                    }
-                }
-            }
-        }
-    }
-
-    /// `y = alpha * opᵀ * x` (+= when `add`).
-    pub(crate) fn apply_t_vec(&self, y: &mut [f64], x: &[f64], alpha: f64, add: bool) {
-        gemv_t(y, self.dense(), x, alpha, add)
-    }
-}
-
-/// `d = alpha * blockdiag * s` (+= when add) for one column.
-fn block_apply(
-    blocks: &[(usize, usize, Vec<f64>)],
-    d: &mut [f64],
-    s: &[f64],
-    alpha: f64,
-    add: bool,
-) {
-    for (start, b, v) in blocks {
-        let (start, b) = (*start, *b);
-        match b {
-            1 => {
-                let y = alpha * v[0] * s[start];
-                if add {
-                    d[start] += y;
-                } else {
-                    d[start] = y;
-                }
-            }
-            2 => {
-                let (x0, x1) = (s[start], s[start + 1]);
-                let y0 = alpha * (v[0] * x0 + v[2] * x1);
-                let y1 = alpha * (v[1] * x0 + v[3] * x1);
-                if add {
-                    d[start] += y0;
-                    d[start + 1] += y1;
-                } else {
-                    d[start] = y0;
-                    d[start + 1] = y1;
-                }
-            }
-            _ => {
-                for r in 0..b {
-                    let mut acc = 0.0;
-                    for c in 0..b {
-                        acc += v[r + c * b] * s[start + c];
-                    }
-                    if add {
-                        d[start + r] += alpha * acc;
-                    } else {
-                        d[start + r] = alpha * acc;
-                    }
-                }
-            }
-        }
-    }
 }
 
 #[cfg(test)]
@@ -744,50 +542,5 @@ mod tests {
         j4[(3, 25)] = f64::NAN;
         mul_right_t(&mut dst, &src, &j4, &mut rows);
         assert!(dst.column(3).iter().any(|v| v.is_nan()), "NaN must propagate");
-    }
-
-    /// The three storages give the same products as the dense matrix.
-    #[test]
-    fn operator_storages_agree() {
-        let n = 11;
-        let mut rng = crate::samples::seeded(1);
-        let mut bd = DMatrix::zeros(n, n);
-        for p in 0..n / 2 {
-            for r in 0..2 {
-                for c in 0..2 {
-                    bd[(2 * p + r, 2 * p + c)] = rng.random_range(-1.0..1.0);
-                }
-            }
-        }
-        bd[(n - 1, n - 1)] = 0.7;
-        let mut sp = bd.clone();
-        sp[(0, n - 1)] = 0.3; // couples first and last: one big block, still sparse
-        let dense = DMatrix::from_fn(n, n, |_, _| rng.random_range(-1.0..1.0));
-        let src = DMatrix::from_fn(n, 3, |_, _| rng.random_range(-1.0..1.0));
-        for (m, kind) in [(bd, 0), (sp, 1), (dense, 2)] {
-            let op = Operator::new(m.clone());
-            match (kind, &op) {
-                (0, Operator::BlockDiagonal { .. })
-                | (1, Operator::Sparse { .. })
-                | (2, Operator::Dense(_)) => {}
-                _ => panic!("unexpected storage for kind {kind}"),
-            }
-            let mut dst = DMatrix::from_element(n, 3, 1.0);
-            op.apply(&mut dst, &src, 2.0, true);
-            let expected = DMatrix::from_element(n, 3, 1.0) + &m * &src * 2.0;
-            assert!((dst - expected).amax() < 1e-14);
-            let srct = src.transpose();
-            let mut dt = DMatrix::from_element(3, n, 1.0);
-            op.apply_right_t(&mut dt, &srct, 2.0, true);
-            let expected_t = DMatrix::from_element(3, n, 1.0) + &srct * m.transpose() * 2.0;
-            assert!((dt - expected_t).amax() < 1e-14);
-            let mut prod = DMatrix::zeros(3, n);
-            mul_right_t(&mut prod, &srct, &m, &mut SparseRows::with_capacity(n));
-            assert!((prod - &srct * m.transpose()).amax() < 1e-14);
-            let mut y = vec![0.0; n];
-            op.apply_vec(&mut y, src.column(0).as_slice(), 1.0, false);
-            let e = &m * src.column(0);
-            assert!(y.iter().zip(e.iter()).all(|(a, b)| (a - b).abs() < 1e-14));
-        }
     }
 }

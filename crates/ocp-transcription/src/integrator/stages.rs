@@ -4,7 +4,7 @@
 use super::{Integrator, Pow};
 use crate::dynamics::Dynamics;
 use crate::error::{OcpError, Result};
-use crate::la::{all_finite, axpy, lincomb, norm_inf};
+use crate::la::{all_finite, axpy, lincomb, lincomb3, norm_inf};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::lu::partial_pivoting::{factor as lu_factor, solve as lu_solve};
 use faer::{Conj, Par};
@@ -112,25 +112,22 @@ impl Integrator {
         self.stage(model, u, 3, sens, tape)?;
         // x⁺ = E²(x + h/6 k1) + h/3 E(k2 + k3) + h/6 k4
         //    = E (Ex + h/6 Ek1 + h/3 (k2 + k3)) + h/6 k4
-        for i in 0..self.nx {
-            self.t[i] =
-                self.ex[i] + h / 6.0 * self.ek1[i] + h / 3.0 * (self.k[1][i] + self.k[2][i]);
-        }
+        let (h6, h3) = (h / 6.0, h / 3.0);
+        lincomb3(&mut self.t, &self.ex, h6, &self.ek1, h3, &self.k[1], &self.k[2]);
         Self::pow_vec(&self.lawson, Pow::E1, &mut self.x, &self.t, 1.0, false);
-        axpy(&mut self.x, h / 6.0, &self.k[3]);
+        axpy(&mut self.x, h6, &self.k[3]);
         if sens {
-            let (tm, es, eks, k2, k3) = (
+            lincomb3(
                 self.tm.as_mut_slice(),
                 self.es.as_slice(),
+                h6,
                 self.eks.as_slice(),
+                h3,
                 self.ks[1].as_slice(),
                 self.ks[2].as_slice(),
             );
-            for i in 0..tm.len() {
-                tm[i] = es[i] + h / 6.0 * eks[i] + h / 3.0 * (k2[i] + k3[i]);
-            }
             Self::pow_mat(&self.lawson, Pow::E1, &mut self.s, &self.tm, 1.0, false);
-            axpy(self.s.as_mut_slice(), h / 6.0, self.ks[3].as_slice());
+            axpy(self.s.as_mut_slice(), h6, self.ks[3].as_slice());
         }
         Ok(())
     }
