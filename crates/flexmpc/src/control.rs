@@ -489,10 +489,29 @@ fn solve_first<D: ocp_transcription::Dynamics + Clone>(
         type Attempt<D> = (SqpSolver<D>, ocp_transcription::SqpStats, &'static str, Start);
         let mut best: Option<Attempt<D>> = None;
         let mut time = 0.0;
+        // the exact Hessian needs the model's second derivatives and an explicit integrator;
+        // otherwise the quasi-Newton estimate of the dynamics' curvature takes its place
+        let second_order = model.has_second_order()
+            && integrator.kind != ocp_transcription::IntegratorKind::ImplicitMidpoint;
+        let hessian = if std::env::var("FLEXMPC_HESS").as_deref() == Ok("gn") {
+            ocp_transcription::HessianApproximation::GaussNewton
+        } else if second_order && std::env::var("FLEXMPC_HESS").as_deref() != Ok("qn") {
+            SqpSettings::converge(integrator.clone()).hessian
+        } else if std::env::var("FLEXMPC_HESS").as_deref() == Ok("bfgs") {
+            ocp_transcription::HessianApproximation::GaussNewtonThenQuasiNewton {
+                switch_kkt: 1e-2,
+                damped_bfgs: true,
+            }
+        } else {
+            SqpSettings::converge_quasi_newton(integrator.clone()).hessian
+        };
         for (name, settings) in [
-            ("merit", SqpSettings::converge(integrator.clone())),
-            ("filter", SqpSettings::converge_filter(integrator.clone())),
+            ("merit", SqpSettings { hessian, ..SqpSettings::converge(integrator.clone()) }),
+            ("filter", SqpSettings { hessian, ..SqpSettings::converge_filter(integrator.clone()) }),
         ] {
+            if std::env::var("FLEXMPC_LS").is_ok_and(|v| v != name) {
+                continue;
+            }
             let mut nmpc = SqpSolver::new(model.clone(), ocp.clone(), settings)?;
             for (d, s) in nmpc.states_mut().iter_mut().zip(lmpc.states()) {
                 d.copy_from(s);
@@ -501,6 +520,12 @@ fn solve_first<D: ocp_transcription::Dynamics + Clone>(
                 d.copy_from(s);
             }
             let (st, start) = nmpc.solve_with_fallback_starts(first.x0)?;
+            if std::env::var("FLEXMPC_LOG").is_ok() {
+                for l in nmpc.log() {
+                    eprintln!("{name} {l:?}");
+                }
+                eprintln!("{name} {st:?}");
+            }
             time += st.time_total;
             if best.as_ref().is_none_or(|(_, b, _, _)| st.better_than(b)) {
                 best = Some((nmpc, st, name, start));
