@@ -363,7 +363,10 @@ pub fn run_sweep_models(
 /// With `converge` (NMPC), the problem is solved to convergence from the linear MPC plan by a
 /// full SQP twice, with [`ocp_transcription::SqpSettings::converge`] (merit line search) and
 /// [`ocp_transcription::SqpSettings::converge_filter`] (KKT tolerance 1e-8, Gauss–Newton then
-/// exact Hessian), whatever the scene's real-time settings, and the better result
+/// exact Hessian; where the model or the integrator has no second derivatives, e.g. the
+/// exact-joints model with the implicit midpoint rule, Gauss–Newton then the quasi-Newton
+/// estimate of [`ocp_transcription::SqpSettings::converge_quasi_newton`]), whatever the
+/// scene's real-time settings, and the better result
 /// ([`ocp_transcription::SqpStats::better_than`]) is reported (`line_search`); when the
 /// nonlinear model is not finite at the plan's nodes, the plan's controls rolled out from the
 /// initial state are the start. `optimum` says whether the status is `Solved`.
@@ -493,15 +496,8 @@ fn solve_first<D: ocp_transcription::Dynamics + Clone>(
         // otherwise the quasi-Newton estimate of the dynamics' curvature takes its place
         let second_order = model.has_second_order()
             && integrator.kind != ocp_transcription::IntegratorKind::ImplicitMidpoint;
-        let hessian = if std::env::var("FLEXMPC_HESS").as_deref() == Ok("gn") {
-            ocp_transcription::HessianApproximation::GaussNewton
-        } else if second_order && std::env::var("FLEXMPC_HESS").as_deref() != Ok("qn") {
+        let hessian = if second_order {
             SqpSettings::converge(integrator.clone()).hessian
-        } else if std::env::var("FLEXMPC_HESS").as_deref() == Ok("bfgs") {
-            ocp_transcription::HessianApproximation::GaussNewtonThenQuasiNewton {
-                switch_kkt: 1e-2,
-                damped_bfgs: true,
-            }
         } else {
             SqpSettings::converge_quasi_newton(integrator.clone()).hessian
         };
@@ -509,9 +505,6 @@ fn solve_first<D: ocp_transcription::Dynamics + Clone>(
             ("merit", SqpSettings { hessian, ..SqpSettings::converge(integrator.clone()) }),
             ("filter", SqpSettings { hessian, ..SqpSettings::converge_filter(integrator.clone()) }),
         ] {
-            if std::env::var("FLEXMPC_LS").is_ok_and(|v| v != name) {
-                continue;
-            }
             let mut nmpc = SqpSolver::new(model.clone(), ocp.clone(), settings)?;
             for (d, s) in nmpc.states_mut().iter_mut().zip(lmpc.states()) {
                 d.copy_from(s);
@@ -520,12 +513,6 @@ fn solve_first<D: ocp_transcription::Dynamics + Clone>(
                 d.copy_from(s);
             }
             let (st, start) = nmpc.solve_with_fallback_starts(first.x0)?;
-            if std::env::var("FLEXMPC_LOG").is_ok() {
-                for l in nmpc.log() {
-                    eprintln!("{name} {l:?}");
-                }
-                eprintln!("{name} {st:?}");
-            }
             time += st.time_total;
             if best.as_ref().is_none_or(|(_, b, _, _)| st.better_than(b)) {
                 best = Some((nmpc, st, name, start));

@@ -227,8 +227,9 @@ pub(super) struct QuasiNewton {
     z_prev: Vec<DVector<f64>>,
     have_prev: bool,
     damped_bfgs: bool,
-    /// `B_k = G_k + M_k` of the damped BFGS update.
+    /// `B_k = G_k + M_k` of the damped BFGS update and its Gauss–Newton part `G_k`.
     b: DMatrix<f64>,
+    g: DMatrix<f64>,
     bs: DVector<f64>,
     s: DVector<f64>,
     y: DVector<f64>,
@@ -249,6 +250,7 @@ impl QuasiNewton {
             have_prev: false,
             damped_bfgs,
             b: DMatrix::zeros(nz, nz),
+            g: DMatrix::zeros(nz, nz),
             bs: DVector::zeros(nz),
             s: DVector::zeros(nz),
             y: DVector::zeros(nz),
@@ -277,13 +279,13 @@ impl QuasiNewton {
     /// and `self.y` (dynamics part; the cost part `G_k s` is added here), stored back as
     /// `M_k = B_k − G_k` (N&W Procedure 18.2).
     fn damped_bfgs(&mut self, k: usize) {
-        let g = self.b.clone_owned();
+        self.g.copy_from(&self.b);
         self.b += &self.m[k];
         self.bs.gemv(1.0, &self.b, &self.s, 0.0);
         let sbs = self.s.dot(&self.bs);
         let ss = self.s.norm_squared();
         // y of the Lagrangian: dynamics part plus the exact cost curvature G s
-        self.r.gemv(1.0, &g, &self.s, 0.0);
+        self.r.gemv(1.0, &self.g, &self.s, 0.0);
         self.r += &self.y;
         let sy = self.s.dot(&self.r);
         if !(sbs > 1e-14 * ss) || !sy.is_finite() {
@@ -337,7 +339,7 @@ impl<D: Dynamics> SqpSolver<D> {
                         qn.b.view_mut((0, 0), (nx, nx)).copy_from(&self.lin.hq[k]);
                         qn.b.view_mut((nx, nx), (nu, nu)).copy_from(&self.lin.hr[k]);
                         qn.b.view_mut((nx, 0), (nu, nx)).copy_from(&self.lin.hs[k]);
-                        qn.b.view_mut((0, nx), (nx, nu)).copy_from(&self.lin.hs[k].transpose());
+                        qn.b.view_mut((0, nx), (nx, nu)).tr_copy_from(&self.lin.hs[k]);
                         qn.damped_bfgs(k);
                     } else {
                         qn.sr1(k);
