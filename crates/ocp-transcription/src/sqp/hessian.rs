@@ -267,7 +267,7 @@ impl QuasiNewton {
         self.r.gemv(-1.0, m, &self.s, 1.0);
         let rs = self.r.dot(&self.s);
         let (rn, sn) = (self.r.norm(), self.s.norm());
-        if !(rs.abs() >= 1e-8 * rn * sn) || rn == 0.0 || !rs.is_finite() {
+        if !rs.is_finite() || rn == 0.0 || rs.abs() < 1e-8 * rn * sn {
             self.skipped += 1;
             return;
         }
@@ -288,7 +288,7 @@ impl QuasiNewton {
         self.r.gemv(1.0, &self.g, &self.s, 0.0);
         self.r += &self.y;
         let sy = self.s.dot(&self.r);
-        if !(sbs > 1e-14 * ss) || !sy.is_finite() {
+        if !sbs.is_finite() || !sy.is_finite() || sbs <= 1e-14 * ss {
             self.skipped += 1;
             return;
         }

@@ -57,7 +57,7 @@ pub struct SqpStats {
     /// QPs solved again with a Levenberg–Marquardt term after a failure
     /// ([`crate::SqpSettings::qp_recovery`]).
     pub qp_recoveries: usize,
-    /// Symmetric rank-one updates of the quasi-Newton blocks made in this solve
+    /// Quasi-Newton block updates (SR1 or damped BFGS) made in this solve
     /// ([`HessianApproximation::GaussNewtonThenQuasiNewton`](crate::HessianApproximation::GaussNewtonThenQuasiNewton)).
     pub quasi_newton_updates: usize,
     /// Final KKT residual (max norm).
