@@ -349,10 +349,10 @@ pub fn run_sweep_models(
 
 /// `flexmpc ocp`: solves the first sample's optimal control problem alone (from the projected
 /// initial state of a run with the scene's disturbance) and returns its cost, control
-/// sequence, KKT residual, status, iterations and solve time as JSON; with `export`, also
-/// writes the whole problem (modal model export plus `ocp.json`: weights, references, bounds,
-/// horizon, `Nc`, integrator, initial state) so that another solver can solve exactly the
-/// same problem.
+/// sequence, KKT residual, status, iterations and solve time (thread CPU) as JSON; with
+/// `export`, also writes the whole problem (modal model export plus `ocp.json`: weights,
+/// references, bounds, horizon, `Nc`, integrator, initial state) so that another solver can
+/// solve exactly the same problem.
 ///
 /// Either controller model: the paper's (14)–(29), or the exact-joints model (theory.md §10),
 /// whose problem is that of the closed loop's first sample ([`mpc::first_sample_exact`]: the
@@ -363,7 +363,10 @@ pub fn run_sweep_models(
 /// With `converge` (NMPC), the problem is solved to convergence from the linear MPC plan by a
 /// full SQP twice, with [`ocp_transcription::SqpSettings::converge`] (merit line search) and
 /// [`ocp_transcription::SqpSettings::converge_filter`] (KKT tolerance 1e-8, Gauss–Newton then
-/// exact Hessian), whatever the scene's real-time settings, and the better result
+/// exact Hessian; where the model or the integrator has no second derivatives, e.g. the
+/// exact-joints model with the implicit midpoint rule, Gauss–Newton then the quasi-Newton
+/// estimate of [`ocp_transcription::SqpSettings::converge_quasi_newton`]), whatever the
+/// scene's real-time settings, and the better result
 /// ([`ocp_transcription::SqpStats::better_than`]) is reported (`line_search`); when the
 /// nonlinear model is not finite at the plan's nodes, the plan's controls rolled out from the
 /// initial state are the start. `optimum` says whether the status is `Solved`.
@@ -489,9 +492,18 @@ fn solve_first<D: ocp_transcription::Dynamics + Clone>(
         type Attempt<D> = (SqpSolver<D>, ocp_transcription::SqpStats, &'static str, Start);
         let mut best: Option<Attempt<D>> = None;
         let mut time = 0.0;
+        // the exact Hessian needs the model's second derivatives and an explicit integrator;
+        // otherwise the quasi-Newton estimate of the dynamics' curvature takes its place
+        let second_order = model.has_second_order()
+            && integrator.kind != ocp_transcription::IntegratorKind::ImplicitMidpoint;
+        let hessian = if second_order {
+            SqpSettings::converge(integrator.clone()).hessian
+        } else {
+            SqpSettings::converge_quasi_newton(integrator.clone()).hessian
+        };
         for (name, settings) in [
-            ("merit", SqpSettings::converge(integrator.clone())),
-            ("filter", SqpSettings::converge_filter(integrator.clone())),
+            ("merit", SqpSettings { hessian, ..SqpSettings::converge(integrator.clone()) }),
+            ("filter", SqpSettings { hessian, ..SqpSettings::converge_filter(integrator.clone()) }),
         ] {
             let mut nmpc = SqpSolver::new(model.clone(), ocp.clone(), settings)?;
             for (d, s) in nmpc.states_mut().iter_mut().zip(lmpc.states()) {
@@ -500,8 +512,11 @@ fn solve_first<D: ocp_transcription::Dynamics + Clone>(
             for (d, s) in nmpc.controls_mut().iter_mut().zip(lmpc.controls()) {
                 d.copy_from(s);
             }
-            let (st, start) = nmpc.solve_with_fallback_starts(first.x0)?;
-            time += st.time_total;
+            // thread CPU (the solves run on this thread), not inflated by other processes
+            let (cpu, r) =
+                ocp_transcription::thread_cpu_timed(|| nmpc.solve_with_fallback_starts(first.x0));
+            let (st, start) = r?;
+            time += cpu;
             if best.as_ref().is_none_or(|(_, b, _, _)| st.better_than(b)) {
                 best = Some((nmpc, st, name, start));
             }

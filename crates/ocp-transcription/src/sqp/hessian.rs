@@ -1,10 +1,11 @@
-//! Convexification of the exact Lagrangian Hessian stage by stage
-//! ([`HessianApproximation::ExactProjected`](super::HessianApproximation::ExactProjected)).
+//! Curvature beyond Gauss–Newton in the QP: convexification of the exact Lagrangian Hessian
+//! (stage projection, inertia correction, Levenberg–Marquardt retries) and the structured
+//! quasi-Newton estimate of the dynamics' curvature.
 
 use super::{SqpSolver, PROJECTION_FLOOR};
 use crate::dynamics::Dynamics;
 use crate::qp::QpFailure;
-use nalgebra::{DMatrix, SymmetricEigen};
+use nalgebra::{DMatrix, DVector, SymmetricEigen};
 
 /// Projects the symmetric `m` onto `{H : H ⪰ εI}`: with `m = VΛVᵀ`,
 /// `m ← V max(Λ, ε) Vᵀ`, `ε = PROJECTION_FLOOR · max(1, max|Λ|)` (the nearest matrix in the
@@ -211,6 +212,154 @@ impl<D: Dynamics> SqpSolver<D> {
                 }
             }
         }
+    }
+}
+
+/// The structured quasi-Newton estimates of
+/// [`HessianApproximation::GaussNewtonThenQuasiNewton`](super::HessianApproximation::GaussNewtonThenQuasiNewton):
+/// one block `M_k ≈ ∇²_{(s,u)}(λ_{k+1}ᵀΦ_k)` per interval and the previous iterate's
+/// Jacobians and point.
+#[derive(Clone, Debug)]
+pub(super) struct QuasiNewton {
+    m: Vec<DMatrix<f64>>,
+    a_prev: Vec<DMatrix<f64>>,
+    b_prev: Vec<DMatrix<f64>>,
+    z_prev: Vec<DVector<f64>>,
+    have_prev: bool,
+    damped_bfgs: bool,
+    /// `B_k = G_k + M_k` of the damped BFGS update and its Gauss–Newton part `G_k`.
+    b: DMatrix<f64>,
+    g: DMatrix<f64>,
+    bs: DVector<f64>,
+    s: DVector<f64>,
+    y: DVector<f64>,
+    r: DVector<f64>,
+    /// Rank-one updates made and skipped in this solve.
+    updates: usize,
+    skipped: usize,
+}
+
+impl QuasiNewton {
+    pub(super) fn new(n: usize, nx: usize, nu: usize, damped_bfgs: bool) -> Self {
+        let nz = nx + nu;
+        Self {
+            m: vec![DMatrix::zeros(nz, nz); n],
+            a_prev: vec![DMatrix::zeros(nx, nx); n],
+            b_prev: vec![DMatrix::zeros(nx, nu); n],
+            z_prev: vec![DVector::zeros(nz); n],
+            have_prev: false,
+            damped_bfgs,
+            b: DMatrix::zeros(nz, nz),
+            g: DMatrix::zeros(nz, nz),
+            bs: DVector::zeros(nz),
+            s: DVector::zeros(nz),
+            y: DVector::zeros(nz),
+            r: DVector::zeros(nz),
+            updates: 0,
+            skipped: 0,
+        }
+    }
+
+    /// SR1 update of block `k` from `self.s`, `self.y` (N&W (6.24), skip rule (6.26)).
+    fn sr1(&mut self, k: usize) {
+        let m = &mut self.m[k];
+        self.r.copy_from(&self.y);
+        self.r.gemv(-1.0, m, &self.s, 1.0);
+        let rs = self.r.dot(&self.s);
+        let (rn, sn) = (self.r.norm(), self.s.norm());
+        if !rs.is_finite() || rn == 0.0 || rs.abs() < 1e-8 * rn * sn {
+            self.skipped += 1;
+            return;
+        }
+        m.ger(1.0 / rs, &self.r, &self.r, 1.0);
+        self.updates += 1;
+    }
+
+    /// Damped BFGS update of `B_k = G_k + M_k` (`G_k` in `self.b` on entry) from `self.s`
+    /// and `self.y` (dynamics part; the cost part `G_k s` is added here), stored back as
+    /// `M_k = B_k − G_k` (N&W Procedure 18.2).
+    fn damped_bfgs(&mut self, k: usize) {
+        self.g.copy_from(&self.b);
+        self.b += &self.m[k];
+        self.bs.gemv(1.0, &self.b, &self.s, 0.0);
+        let sbs = self.s.dot(&self.bs);
+        let ss = self.s.norm_squared();
+        // y of the Lagrangian: dynamics part plus the exact cost curvature G s
+        self.r.gemv(1.0, &self.g, &self.s, 0.0);
+        self.r += &self.y;
+        let sy = self.s.dot(&self.r);
+        if !sbs.is_finite() || !sy.is_finite() || sbs <= 1e-14 * ss {
+            self.skipped += 1;
+            return;
+        }
+        let theta = if sy >= 0.2 * sbs { 1.0 } else { 0.8 * sbs / (sbs - sy) };
+        self.r *= theta;
+        self.r.axpy(1.0 - theta, &self.bs, 1.0);
+        let sr = self.s.dot(&self.r);
+        let m = &mut self.m[k];
+        m.ger(-1.0 / sbs, &self.bs, &self.bs, 1.0);
+        m.ger(1.0 / sr, &self.r, &self.r, 1.0);
+        self.updates += 1;
+    }
+}
+
+impl<D: Dynamics> SqpSolver<D> {
+    /// After a linearisation: updates every `M_k` from the step since the previous one
+    /// (none at the first iteration of a solve, `first`, which clears the estimates), keeps
+    /// this iterate's Jacobians and point, and, after the switch, adds `M_k` to the stage
+    /// blocks `[[Q_k, S_kᵀ], [S_k, R_k]]` of the QP.
+    pub(super) fn quasi_newton_update(&mut self, first: bool) {
+        let Some(mut qn) = self.qn.take() else { return };
+        let (nx, nu) = (self.nx, self.nu);
+        if first {
+            for m in &mut qn.m {
+                m.fill(0.0);
+            }
+            qn.have_prev = false;
+            qn.updates = 0;
+            qn.skipped = 0;
+        }
+        for k in 0..self.n {
+            if qn.have_prev {
+                for i in 0..nx {
+                    qn.s[i] = self.s[k][i] - qn.z_prev[k][i];
+                }
+                for i in 0..nu {
+                    qn.s[nx + i] = self.u[k][i] - qn.z_prev[k][nx + i];
+                }
+                if qn.s.iter().any(|v| *v != 0.0) {
+                    let lam = &self.lam[k + 1];
+                    let (mut yx, mut yu) = qn.y.rows_range_pair_mut(0..nx, nx..nx + nu);
+                    yx.gemv_tr(1.0, &self.lin.a[k], lam, 0.0);
+                    yx.gemv_tr(-1.0, &qn.a_prev[k], lam, 1.0);
+                    yu.gemv_tr(1.0, &self.lin.b[k], lam, 0.0);
+                    yu.gemv_tr(-1.0, &qn.b_prev[k], lam, 1.0);
+                    if qn.damped_bfgs {
+                        // the Gauss–Newton block of this linearisation (the cost's is constant)
+                        qn.b.view_mut((0, 0), (nx, nx)).copy_from(&self.lin.hq[k]);
+                        qn.b.view_mut((nx, nx), (nu, nu)).copy_from(&self.lin.hr[k]);
+                        qn.b.view_mut((nx, 0), (nu, nx)).copy_from(&self.lin.hs[k]);
+                        qn.b.view_mut((0, nx), (nx, nu)).tr_copy_from(&self.lin.hs[k]);
+                        qn.damped_bfgs(k);
+                    } else {
+                        qn.sr1(k);
+                    }
+                }
+            }
+            qn.a_prev[k].copy_from(&self.lin.a[k]);
+            qn.b_prev[k].copy_from(&self.lin.b[k]);
+            qn.z_prev[k].rows_mut(0, nx).copy_from(&self.s[k]);
+            qn.z_prev[k].rows_mut(nx, nu).copy_from(&self.u[k]);
+            if self.exact_phase {
+                let m = &qn.m[k];
+                self.lin.hq[k] += m.view((0, 0), (nx, nx));
+                self.lin.hr[k] += m.view((nx, nx), (nu, nu));
+                self.lin.hs[k] += m.view((nx, 0), (nu, nx));
+            }
+        }
+        qn.have_prev = true;
+        self.stats.quasi_newton_updates = qn.updates;
+        self.qn = Some(qn);
     }
 }
 

@@ -79,6 +79,8 @@ pub struct SqpSolver<D: Dynamics> {
     d_saved: Vec<DVector<f64>>,
     step_saved: Step,
     filter: filter::Filter,
+    /// [`HessianApproximation::GaussNewtonThenQuasiNewton`]: the curvature estimates.
+    qn: Option<hessian::QuasiNewton>,
     tmp_x: DVector<f64>,
     tmp_x2: DVector<f64>,
     tmp_u: DVector<f64>,
@@ -183,6 +185,12 @@ impl<D: Dynamics> SqpSolver<D> {
             d_saved: vec![DVector::zeros(nx); n],
             step_saved: Step::new(n, nx, nu),
             filter: filter::Filter::with_capacity(2 * settings.max_iterations + 2),
+            qn: match settings.hessian {
+                HessianApproximation::GaussNewtonThenQuasiNewton { damped_bfgs, .. } => {
+                    Some(hessian::QuasiNewton::new(n, nx, nu, damped_bfgs))
+                }
+                _ => None,
+            },
             tmp_x: DVector::zeros(nx),
             tmp_x2: DVector::zeros(nx),
             tmp_u: DVector::zeros(nu),
@@ -451,13 +459,28 @@ impl<D: Dynamics> SqpSolver<D> {
         match self.settings.hessian {
             HessianApproximation::GaussNewton => false,
             HessianApproximation::GaussNewtonThenExact { .. } => self.exact_phase,
+            HessianApproximation::GaussNewtonThenQuasiNewton { .. } => false,
             _ => true,
         }
     }
 
-    /// Whether the stage blocks of the next QP may be indefinite (exact, not projected).
+    /// Whether the next QP carries curvature of the dynamics (exact or quasi-Newton).
+    fn curvature_now(&self) -> bool {
+        match self.settings.hessian {
+            HessianApproximation::GaussNewtonThenQuasiNewton { .. } => self.exact_phase,
+            _ => self.exact_now(),
+        }
+    }
+
+    /// Whether the stage blocks of the next QP may be indefinite (exact or quasi-Newton, not
+    /// projected).
     fn indefinite_blocks_now(&self) -> bool {
-        self.exact_now() && self.settings.hessian != HessianApproximation::ExactProjected
+        self.curvature_now()
+            && !matches!(
+                self.settings.hessian,
+                HessianApproximation::ExactProjected
+                    | HessianApproximation::GaussNewtonThenQuasiNewton { damped_bfgs: true, .. }
+            )
     }
 
     /// Substep count of each interval in the last linearisation (all equal unless

@@ -39,6 +39,37 @@ pub enum HessianApproximation {
         /// KKT residual (max norm) at or below which the exact Hessian is used, in `(0, ∞)`.
         switch_kkt: f64,
     },
+    /// Gauss–Newton until the KKT residual of an iterate is at most `switch_kkt`, then the
+    /// Gauss–Newton blocks plus a structured quasi-Newton estimate `M_k` of the dynamics'
+    /// curvature `∇²_{(s,u)}(λ_{k+1}ᵀΦ_k)`, one `(nx+nu)²` block per interval, for the rest of
+    /// the solve: what [`Self::GaussNewtonThenExact`] does where the model or the integrator
+    /// has no second derivatives (the implicit midpoint rule, models without
+    /// [`Dynamics::weighted_hessian`](crate::Dynamics::weighted_hessian)). `M_k` starts at 0
+    /// at every solve and is updated from the first accepted step on (the Gauss–Newton phase
+    /// collects curvature too) by the symmetric rank-one formula (Nocedal & Wright, 2nd ed.,
+    /// (6.24)) with `s_k = z_k⁺ − z_k`, `z_k = (s_k, u_k)`, and
+    /// `y_k = ([A_k B_k]⁺ − [A_k B_k])ᵀ λ_{k+1}⁺` (the change of `∇_z(λᵀΦ_k)` at the new
+    /// multipliers; the cost is quadratic, its curvature is exact in the Gauss–Newton part):
+    /// `M_k ← M_k + r rᵀ / (rᵀs)`, `r = y − M_k s`, skipped when `|rᵀs| < 1e-8‖r‖‖s‖`
+    /// (N&W (6.26)). SR1 rather than BFGS because the true blocks are indefinite (only the
+    /// reduced Hessian is definite at a solution); the indefinite QP is then treated as the
+    /// exact one (inertia correction, Levenberg–Marquardt retries). The derivatives are
+    /// first-order only (no adjoint sweeps), so an iteration costs what a Gauss–Newton one
+    /// does plus `O(N (nx+nu)²)`.
+    ///
+    /// With `damped_bfgs` the whole block `B_k = G_k + M_k` (`G_k` its Gauss–Newton part) is
+    /// updated instead by Powell's damped BFGS formula (N&W Procedure 18.2; the block-wise
+    /// update of multiple-shooting SQP, Bock & Plitt 1984) with `y_k` plus the exact cost
+    /// curvature `G_k s_k`: `r = θy + (1 − θ)B s`, `θ = 1` if `sᵀy ≥ 0.2 sᵀBs`, else
+    /// `0.8 sᵀBs / (sᵀBs − sᵀy)`; `B ← B − B s sᵀB / sᵀBs + r rᵀ / sᵀr`. Every block stays
+    /// positive definite (a convex QP without inertia correction, at the price of a model that
+    /// cannot carry the blocks' negative curvature).
+    GaussNewtonThenQuasiNewton {
+        /// KKT residual (max norm) at or below which `M_k` enters the QP, in `(0, ∞)`.
+        switch_kkt: f64,
+        /// Damped BFGS on the whole blocks (`true`) or SR1 on the curvature (`false`).
+        damped_bfgs: bool,
+    },
 }
 
 /// KKT residual at which [`SqpSettings::converge`] switches from the Gauss–Newton to the
@@ -53,7 +84,32 @@ impl HessianApproximation {
     /// Whether the Hessian includes (or may switch to) the dynamics' curvature `λᵀ∇²Φ`
     /// (integrator adjoint sweeps).
     pub fn is_exact(self) -> bool {
-        !matches!(self, HessianApproximation::GaussNewton)
+        !matches!(
+            self,
+            HessianApproximation::GaussNewton
+                | HessianApproximation::GaussNewtonThenQuasiNewton { .. }
+        )
+    }
+
+    /// Whether the QP may take curvature beyond the Gauss–Newton blocks that makes its
+    /// blocks indefinite after a switch (the hybrids).
+    pub(crate) fn is_hybrid(self) -> bool {
+        matches!(
+            self,
+            HessianApproximation::GaussNewtonThenExact { .. }
+                | HessianApproximation::GaussNewtonThenQuasiNewton { .. }
+        )
+    }
+
+    /// The switch of a hybrid (`None` otherwise).
+    pub(crate) fn switch_kkt(self) -> Option<f64> {
+        match self {
+            HessianApproximation::GaussNewtonThenExact { switch_kkt }
+            | HessianApproximation::GaussNewtonThenQuasiNewton { switch_kkt, .. } => {
+                Some(switch_kkt)
+            }
+            _ => None,
+        }
     }
 }
 
@@ -235,6 +291,19 @@ impl SqpSettings {
         Self { globalisation: Globalisation::filter(), ..Self::converge(integrator) }
     }
 
+    /// [`SqpSettings::converge`] with [`HessianApproximation::GaussNewtonThenQuasiNewton`]
+    /// (switching at [`CONVERGE_SWITCH_KKT`]): for models or integrators without second
+    /// derivatives.
+    pub fn converge_quasi_newton(integrator: IntegratorSettings) -> Self {
+        Self {
+            hessian: HessianApproximation::GaussNewtonThenQuasiNewton {
+                switch_kkt: CONVERGE_SWITCH_KKT,
+                damped_bfgs: false,
+            },
+            ..Self::converge(integrator)
+        }
+    }
+
     /// Checks every field's range.
     pub fn validate(&self) -> Result<()> {
         self.integrator.validate()?;
@@ -257,7 +326,7 @@ impl SqpSettings {
         if self.qp_max_iterations == 0 {
             return Err(invalid("qp_max_iterations", self.qp_max_iterations, "must be at least 1"));
         }
-        if let HessianApproximation::GaussNewtonThenExact { switch_kkt } = self.hessian {
+        if let Some(switch_kkt) = self.hessian.switch_kkt() {
             if switch_kkt.is_nan() || switch_kkt <= 0.0 {
                 return Err(invalid("hessian.switch_kkt", switch_kkt, "must be positive"));
             }

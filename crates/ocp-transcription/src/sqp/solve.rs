@@ -1,9 +1,6 @@
 //! The SQP loop.
 
-use super::{
-    status_of, Globalisation, HessianApproximation, IterationLog, SqpMode, SqpSolver, SqpStats,
-    SqpStatus,
-};
+use super::{status_of, Globalisation, IterationLog, SqpMode, SqpSolver, SqpStats, SqpStatus};
 use crate::dynamics::Dynamics;
 use crate::error::{check_dim, invalid, Result};
 use crate::la::{all_finite, norm_inf};
@@ -97,10 +94,12 @@ impl<D: Dynamics> SqpSolver<D> {
                 status = SqpStatus::NonFiniteDynamics;
                 break;
             }
-            if let HessianApproximation::GaussNewtonThenExact { switch_kkt } = self.settings.hessian
-            {
-                // from the next linearisation on
+            if let Some(switch_kkt) = self.settings.hessian.switch_kkt() {
+                // from the next linearisation on (the quasi-Newton estimate from this one on)
                 self.exact_phase |= kkt <= switch_kkt;
+            }
+            if self.qn.is_some() {
+                self.quasi_newton_update(it == 0);
             }
             if !rti && kkt <= self.settings.kkt_tolerance {
                 status = SqpStatus::Solved;
@@ -126,8 +125,7 @@ impl<D: Dynamics> SqpSolver<D> {
                 }
             }
             let mut t = self.step_length(it == 0);
-            let hybrid =
-                matches!(self.settings.hessian, HessianApproximation::GaussNewtonThenExact { .. });
+            let hybrid = self.settings.hessian.is_hybrid();
             if hybrid && ((self.exact_phase && t != Some(1.0)) || t.is_none()) {
                 t = match self.levenberg_marquardt_retries(it == 0, t) {
                     Ok(t) => t,

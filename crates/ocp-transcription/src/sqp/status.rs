@@ -57,6 +57,9 @@ pub struct SqpStats {
     /// QPs solved again with a Levenberg–Marquardt term after a failure
     /// ([`crate::SqpSettings::qp_recovery`]).
     pub qp_recoveries: usize,
+    /// Quasi-Newton block updates (SR1 or damped BFGS) made in this solve
+    /// ([`HessianApproximation::GaussNewtonThenQuasiNewton`](crate::HessianApproximation::GaussNewtonThenQuasiNewton)).
+    pub quasi_newton_updates: usize,
     /// Final KKT residual (max norm).
     pub kkt: f64,
     /// Final cost `J`.
@@ -87,6 +90,7 @@ impl Default for SqpStats {
             gauss_newton_fallbacks: 0,
             second_order_corrections: 0,
             qp_recoveries: 0,
+            quasi_newton_updates: 0,
             kkt: f64::NAN,
             cost: f64::NAN,
             constraint_violation: f64::NAN,

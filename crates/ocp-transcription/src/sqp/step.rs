@@ -1,6 +1,6 @@
 //! The QP of an iteration and the step length (globalisation).
 
-use super::{Globalisation, HessianApproximation, SqpSolver, AUTO_SPARSE_CONDITION};
+use super::{Globalisation, SqpSolver, AUTO_SPARSE_CONDITION};
 use crate::dynamics::Dynamics;
 use crate::la::norm_inf;
 use crate::qp::{solve_condensed_clarabel, solve_sparse_clarabel, QpFailure, QpForm};
@@ -42,11 +42,8 @@ impl<D: Dynamics> SqpSolver<D> {
             self.stats.time_qp += t.elapsed().as_secs_f64();
             return r;
         }
-        let mut exact = self.exact_now() && self.lq.is_none();
-        if exact
-            && matches!(self.settings.hessian, HessianApproximation::GaussNewtonThenExact { .. })
-            && !self.inertia_correction()
-        {
+        let mut exact = self.curvature_now() && self.lq.is_none();
+        if exact && self.settings.hessian.is_hybrid() && !self.inertia_correction() {
             // no shift made the reduced Hessian definite: take the Gauss–Newton step
             self.gauss_newton_blocks();
             let t = Instant::now();

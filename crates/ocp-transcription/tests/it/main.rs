@@ -4,5 +4,6 @@ mod adaptive;
 mod globalisation;
 mod hessian;
 mod integrators;
+mod quasi_newton;
 mod reference;
 mod sqp;
