@@ -3,7 +3,7 @@
 
 Usage: python casadi_peers.py DIR [--only sqpmethod,ipopt] [--qpsol hpipm|qpoases|...]
                                [--max-iter-ls N] [--check-only] [--jit]
-                               [--ipopt-hessian exact|limited-memory]
+                               [--ipopt-hessian exact|limited-memory] [--max-iter N]
 
 Two controller models, by problem.json's `model`:
 
@@ -17,6 +17,7 @@ Two controller models, by problem.json's `model`:
   in the output holds the worst normwise relative difference max|df| / max|f| per sample kind
   (--check-only stops there). sqpmethod runs on the CasADi virtual machine (--jit compiles
   the NLP functions), IPOPT with the limited-memory Hessian unless --ipopt-hessian exact.
+  --max-iter N caps the iterations of both peers (defaults 200 and 1000).
 
 Inputs in DIR (written by xtask/src/peers.rs):
   * model.json + *.npy: the modal model (modal-rom's export), used here:
@@ -273,7 +274,7 @@ def gauss_newton_nlp(prob, phi, phis, jit):
     return {"x": w, "p": p, "f": f, "g": g}, jac_fg, hess_lag, lbw, ubw
 
 
-def sqpmethod(prob, maps, w0, qpsol, max_iter_ls, compiled=True):
+def sqpmethod(prob, maps, w0, qpsol, max_iter_ls, compiled=True, max_iter=200):
     """Solves the NLP with CasADi's `sqpmethod`, Gauss-Newton Hessian, `qpsol`; with
     `compiled` every NLP function generated as C and compiled by gcc -O2 before the solve.
     `maps()` builds (Phi, PhiS): the interval map and its map with sensitivities."""
@@ -295,7 +296,7 @@ def sqpmethod(prob, maps, w0, qpsol, max_iter_ls, compiled=True):
         "jac_fg": jac_fg,
         "qpsol": qpsol,
         "qpsol_options": qopts,
-        "max_iter": 200,
+        "max_iter": max_iter,
         "max_iter_ls": max_iter_ls,
         "tol_pr": 1e-8,
         "tol_du": 1e-8,
@@ -366,7 +367,7 @@ def stack(prob, states, controls):
     return np.array(v)
 
 
-def ipopt(problem, lbw, ubw, w0, hessian="exact"):
+def ipopt(problem, lbw, ubw, w0, hessian="exact", max_iter=1000):
     """IPOPT with the exact Hessian of the Lagrangian (AD of the MX graph), or `hessian` =
     limited-memory (L-BFGS), tol 1e-10."""
     ng = problem["g"].shape[0]
@@ -374,7 +375,7 @@ def ipopt(problem, lbw, ubw, w0, hessian="exact"):
         "ipopt.tol": 1e-10,
         "ipopt.print_level": 5 if os.environ.get("PEERS_LOG") is not None else 0,
         "print_time": False,
-        "ipopt.max_iter": 1000,
+        "ipopt.max_iter": max_iter,
         "ipopt.hessian_approximation": hessian,
     }
     solver = ca.nlpsol("ipopt", "ipopt", problem, opts)
@@ -408,7 +409,7 @@ def main():
     peers = ["sqpmethod", "ipopt"]
     qpsol = "hpipm"
     max_iter_ls = 3
-    check_only, jit_exact, ipopt_hessian = False, False, None
+    check_only, jit_exact, ipopt_hessian, max_iter = False, False, None, None
     rest = args[1:]
     while rest:
         a = rest.pop(0)
@@ -418,6 +419,8 @@ def main():
             qpsol = rest.pop(0)
         elif a == "--max-iter-ls":
             max_iter_ls = int(rest.pop(0))
+        elif a == "--max-iter":
+            max_iter = int(rest.pop(0))
         elif a == "--check-only":
             check_only = True
         elif a == "--jit":
@@ -464,15 +467,18 @@ def main():
         "check_cost_rel": abs(jf - prob["flexmpc_cost"]) / abs(prob["flexmpc_cost"]),
         "check_defect": float(np.max(np.abs(np.array(gf)))),
     })
+    # the checks first (stderr), a solve that is stopped still leaves them
+    print(json.dumps(out).replace("NaN", "null"), file=sys.stderr, flush=True)
     w0 = stack(prob, "start_states", "start_controls")
     if "sqpmethod" in peers:
-        sol, out["sqpmethod"] = sqpmethod(prob, maps, w0, qpsol, max_iter_ls, compiled)
+        sol, out["sqpmethod"] = sqpmethod(prob, maps, w0, qpsol, max_iter_ls, compiled,
+                                          max_iter or 200)
         # the optimum in IPOPT's NLP (constraint s_0 = x0 included)
         _, gs = fg(sol["x"])
         out["sqpmethod"]["max_defect"] = float(np.max(np.abs(np.array(gs))))
         write_solution(d, "sqpmethod_solution.json", prob, sol, out["sqpmethod"]["status"])
     if "ipopt" in peers:
-        sol, out["ipopt"] = ipopt(problem, lbw, ubw, w0, hessian)
+        sol, out["ipopt"] = ipopt(problem, lbw, ubw, w0, hessian, max_iter or 1000)
         write_solution(d, "ipopt_solution.json", prob, sol, out["ipopt"]["status"])
     print(json.dumps(out).replace("NaN", "null"))
 

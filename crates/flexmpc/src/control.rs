@@ -365,7 +365,8 @@ pub fn run_sweep_models(
 /// With `converge` (NMPC), the problem is solved to convergence from the linear MPC plan by a
 /// full SQP twice, with [`ocp_transcription::SqpSettings::converge`] (merit line search) and
 /// [`ocp_transcription::SqpSettings::converge_filter`] (KKT tolerance 1e-8, Gauss–Newton then
-/// exact Hessian), whatever the scene's real-time settings, and the better result
+/// exact Hessian; Gauss–Newton throughout with up to 200 iterations on the exact-joints model,
+/// which has no second derivatives), whatever the scene's real-time settings, and the better result
 /// ([`ocp_transcription::SqpStats::better_than`]) is reported (`line_search`); when the
 /// nonlinear model is not finite at the plan's nodes, the plan's controls rolled out from the
 /// initial state are the start. `optimum` says whether the status is `Solved`.
@@ -499,6 +500,17 @@ fn solve_first<D: ocp_transcription::Dynamics + Clone>(
             ("merit", SqpSettings::converge(integrator.clone())),
             ("filter", SqpSettings::converge_filter(integrator.clone())),
         ] {
+            // a model without second derivatives (the exact-joints model): Gauss–Newton
+            // throughout, which converges linearly, so with more iterations
+            let settings = if model.has_second_order() {
+                settings
+            } else {
+                SqpSettings {
+                    hessian: ocp_transcription::HessianApproximation::GaussNewton,
+                    max_iterations: settings.max_iterations.max(200),
+                    ..settings
+                }
+            };
             let mut nmpc = SqpSolver::new(model.clone(), ocp.clone(), settings)?;
             for (d, s) in nmpc.states_mut().iter_mut().zip(lmpc.states()) {
                 d.copy_from(s);
