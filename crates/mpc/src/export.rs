@@ -255,3 +255,38 @@ pub fn export_first_sample_exact(
     write_ocp(&p, dir)?;
     Ok((sample, p))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{ModelKind, Scenario};
+
+    /// The exact-joints first sample exported and re-read: the problem as written, the model's
+    /// export with the state size and reference state of the controller model.
+    #[test]
+    fn exact_joints_export_round_trip() {
+        let sc = Scenario::paper_2d(8).unwrap();
+        let setup = Setup::new(&sc).unwrap();
+        let c =
+            ControllerSettings { model: ModelKind::ExactJoints, ..ControllerSettings::full_sqp() };
+        let dir = std::env::temp_dir().join(format!("mpc-export-exact-{}", std::process::id()));
+        let (sample, p) = export_first_sample_exact(&setup, 0.5, &c, &dir).unwrap();
+        let text = std::fs::read_to_string(dir.join("ocp.json")).unwrap();
+        let back: OcpExport = serde_json::from_str(&text).unwrap();
+        let (meta, arrays) = modal_rom::read_exact_joints(&dir).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert_eq!(back, p);
+        assert_eq!(p.model, "exact-joints");
+        let rom = sample.dynamics.rom();
+        assert_eq!(
+            (meta.n_state, p.x0.len(), p.q.len()),
+            (rom.n_state(), rom.n_state(), rom.n_state())
+        );
+        assert_eq!(meta.reference_state, rom.reference_state());
+        assert_eq!(p.x0, sample.x0);
+        assert_eq!(p.x_ref, sample.weights.x_ref.iter().copied().collect::<Vec<_>>());
+        assert_eq!(arrays["z0"].shape, vec![meta.n_fields, rom.n_p()]);
+        assert_eq!(p.inputs, rom.input_names());
+        assert_eq!(p.newton_tolerance.is_some(), p.integrator == "ImplicitMidpoint");
+    }
+}
