@@ -2,7 +2,22 @@
 `sqpmethod` (Gauss-Newton, compiled) and IPOPT (exact Hessian).
 
 Usage: python casadi_peers.py DIR [--only sqpmethod,ipopt] [--qpsol hpipm|qpoases|...]
-                               [--max-iter-ls N]
+                               [--max-iter-ls N] [--check-only] [--jit]
+                               [--ipopt-hessian exact|limited-memory] [--max-iter N]
+
+Two controller models, by problem.json's `model`:
+
+* `paper` (default): the modal model (29) with Lawson RK4, described below.
+* `exact-joints`: the exact-joints model (docs/theory.md §10) from its export
+  (exact_joints.py: the right-hand side on CasADi SX scalars) with the implicit midpoint rule
+  flexmpc uses (`substeps` steps per interval, each midpoint solved by CasADi's `newton`
+  rootfinder to abstol = newton_tolerance, sensitivities through (I - h/2 f_x) as flexmpc's).
+  First the right-hand side is compared with flexmpc's at problem.json's `rhs_check` samples
+  (flexmpc's optimal nodes and synthetic states with joints turned up to 3 rad): `rhs_check`
+  in the output holds the worst normwise relative difference max|df| / max|f| per sample kind
+  (--check-only stops there). sqpmethod runs on the CasADi virtual machine (--jit compiles
+  the NLP functions), IPOPT with the limited-memory Hessian unless --ipopt-hessian exact.
+  --max-iter N caps the iterations of both peers (defaults 200 and 1000).
 
 Inputs in DIR (written by xtask/src/peers.rs):
   * model.json + *.npy: the modal model (modal-rom's export), used here:
@@ -129,19 +144,24 @@ def interval_map(meta, prob, arr):
     return ca.Function("Phi", [x0, u], [x])
 
 
-def nlp(meta, prob, arr):
+def x_ref(prob, k):
+    """The state reference at node k (the nodes' own when the reference varies)."""
+    nodes = prob.get("x_ref_nodes") or []
+    return np.array(nodes[k] if nodes else prob["x_ref"])
+
+
+def nlp(prob, phi):
     nx, nu, nc = prob["nx"], prob["nu"], prob["intervals"]
     dt = prob["interval"]
-    phi = interval_map(meta, prob, arr)
     qw, rw, pw = (np.array(prob[k]) for k in ("q", "r", "terminal"))
-    xr, ur = np.array(prob["x_ref"]), np.array(prob["u_ref"])
+    ur = np.array(prob["u_ref"])
     s = [ca.MX.sym(f"s{k}", nx) for k in range(nc + 1)]
     uu = [ca.MX.sym(f"u{k}", nu) for k in range(nc)]
     w, lbw, ubw = [], [], []
     j = 0
     g = [s[0] - np.array(prob["x0"])]
     for k in range(nc + 1):
-        e = s[k] - xr
+        e = s[k] - x_ref(prob, k)
         c = 0.5 * dt if k in (0, nc) else dt
         j += 0.5 * c * ca.bilin(qw, e, e)
         if k == nc:
@@ -200,7 +220,7 @@ def sensitivities(meta, prob, arr):
     return ca.Function("Phi", [x0, u], [x]), ca.Function("PhiS", [x0, u], [x, xs])
 
 
-def gauss_newton_nlp(meta, prob, arr, jit):
+def gauss_newton_nlp(prob, phi, phis, jit):
     """The same NLP for `sqpmethod`: s_0 fixed by its bounds (lbx = ubx = x0) instead of the
     constraint s_0 = x0, constraints the gaps Phi(s_k, u_k) - s_{k+1} in stage order (the
     [gap_0 gap_1 ...] layout HPIPM reads), the cost 1/2 (w - w_ref)' H (w - w_ref) with the
@@ -210,13 +230,12 @@ def gauss_newton_nlp(meta, prob, arr, jit):
     derivative functions and the bounds."""
     nx, nu, nc = prob["nx"], prob["nu"], prob["intervals"]
     dt = prob["interval"]
-    phi, phis = sensitivities(meta, prob, arr)
     qw, rw, pw = (np.array(prob[k]) for k in ("q", "r", "terminal"))
     blocks, wref, lbw, ubw = [], [], [], []
     for k in range(nc + 1):
         c = 0.5 * dt if k in (0, nc) else dt
         blocks.append(c * qw + (pw if k == nc else 0.0))
-        wref += prob["x_ref"]
+        wref += list(x_ref(prob, k))
         lbw += prob["x0"] if k == 0 else [-np.inf] * nx
         ubw += prob["x0"] if k == 0 else [np.inf] * nx
         if k < nc:
@@ -255,14 +274,16 @@ def gauss_newton_nlp(meta, prob, arr, jit):
     return {"x": w, "p": p, "f": f, "g": g}, jac_fg, hess_lag, lbw, ubw
 
 
-def sqpmethod(meta, prob, arr, w0, qpsol, max_iter_ls):
-    """Solves the NLP with CasADi's `sqpmethod`, Gauss-Newton Hessian, `qpsol`, every NLP
-    function generated as C and compiled by gcc -O2 before the solve."""
+def sqpmethod(prob, maps, w0, qpsol, max_iter_ls, compiled=True, max_iter=200):
+    """Solves the NLP with CasADi's `sqpmethod`, Gauss-Newton Hessian, `qpsol`; with
+    `compiled` every NLP function generated as C and compiled by gcc -O2 before the solve.
+    `maps()` builds (Phi, PhiS): the interval map and its map with sensitivities."""
     nx, nu, nc = prob["nx"], prob["nu"], prob["intervals"]
     jit = {"jit": True, "compiler": "shell", "jit_cleanup": True,
-           "jit_options": {"flags": ["-O2"], "verbose": False}}
+           "jit_options": {"flags": ["-O2"], "verbose": False}} if compiled else {}
     c0, t0, ch0 = time.process_time(), time.perf_counter(), children_cpu()
-    problem, jac_fg, hess_lag, lbw, ubw = gauss_newton_nlp(meta, prob, arr, jit)
+    phi, phis = maps()
+    problem, jac_fg, hess_lag, lbw, ubw = gauss_newton_nlp(prob, phi, phis, jit)
     qopts = {"printLevel": "none", "error_on_fail": False} if qpsol == "qpoases" else {}
     # HPIPM with its default settings reads the OCP stages from the variable layout
     if qpsol == "hpipm":
@@ -275,7 +296,7 @@ def sqpmethod(meta, prob, arr, w0, qpsol, max_iter_ls):
         "jac_fg": jac_fg,
         "qpsol": qpsol,
         "qpsol_options": qopts,
-        "max_iter": 200,
+        "max_iter": max_iter,
         "max_iter_ls": max_iter_ls,
         "tol_pr": 1e-8,
         "tol_du": 1e-8,
@@ -346,15 +367,16 @@ def stack(prob, states, controls):
     return np.array(v)
 
 
-def ipopt(problem, lbw, ubw, w0):
-    """IPOPT with the exact Hessian of the Lagrangian (AD of the MX graph), tol 1e-10."""
+def ipopt(problem, lbw, ubw, w0, hessian="exact", max_iter=1000):
+    """IPOPT with the exact Hessian of the Lagrangian (AD of the MX graph), or `hessian` =
+    limited-memory (L-BFGS), tol 1e-10."""
     ng = problem["g"].shape[0]
     opts = {
         "ipopt.tol": 1e-10,
-        "ipopt.print_level": 0,
+        "ipopt.print_level": 5 if os.environ.get("PEERS_LOG") is not None else 0,
         "print_time": False,
-        "ipopt.max_iter": 1000,
-        "ipopt.hessian_approximation": "exact",
+        "ipopt.max_iter": max_iter,
+        "ipopt.hessian_approximation": hessian,
     }
     solver = ca.nlpsol("ipopt", "ipopt", problem, opts)
     c0, t0 = time.process_time(), time.perf_counter()
@@ -364,6 +386,7 @@ def ipopt(problem, lbw, ubw, w0):
     its = st.get("iterations", {})
     return sol, {
         "status": st["return_status"],
+        "hessian": hessian,
         "cost": float(sol["f"]),
         "iterations": int(st["iter_count"]),
         "inf_pr": float(its["inf_pr"][-1]) if its else float("nan"),
@@ -386,6 +409,7 @@ def main():
     peers = ["sqpmethod", "ipopt"]
     qpsol = "hpipm"
     max_iter_ls = 3
+    check_only, jit_exact, ipopt_hessian, max_iter = False, False, None, None
     rest = args[1:]
     while rest:
         a = rest.pop(0)
@@ -395,27 +419,66 @@ def main():
             qpsol = rest.pop(0)
         elif a == "--max-iter-ls":
             max_iter_ls = int(rest.pop(0))
+        elif a == "--max-iter":
+            max_iter = int(rest.pop(0))
+        elif a == "--check-only":
+            check_only = True
+        elif a == "--jit":
+            jit_exact = True
+        elif a == "--ipopt-hessian":
+            ipopt_hessian = rest.pop(0)
         else:
             sys.exit(f"unknown argument {a}")
-    meta, prob, arr = load(d)
-    problem, lbw, ubw = nlp(meta, prob, arr)
+    out = {}
+    with open(os.path.join(d, "problem.json")) as f:
+        prob = json.load(f)
+    if prob.get("model") == "exact-joints":
+        sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+        import exact_joints
+        meta, arr = exact_joints.load_model(d)
+        c0 = time.process_time()
+        phi, phis, f, jac = exact_joints.midpoint_maps(meta, arr, prob)
+        out["rhs_check"] = exact_joints.check(f, prob["rhs_check"])
+        out["model_build_cpu_s"] = time.process_time() - c0
+        out["rhs_instructions"] = f.n_instructions()
+        out["jacobian_instructions"] = jac.n_instructions()
+        if check_only:
+            print(json.dumps(out).replace("NaN", "null"))
+            return
+
+        def maps():
+            return phi, phis
+        compiled = jit_exact
+        hessian = ipopt_hessian or "limited-memory"
+    else:
+        meta, prob, arr = load(d)
+        phi = interval_map(meta, prob, arr)
+
+        def maps():
+            return sensitivities(meta, prob, arr)
+        compiled = True
+        hessian = ipopt_hessian or "exact"
+    problem, lbw, ubw = nlp(prob, phi)
     fg = ca.Function("fg", [problem["x"]], [problem["f"], problem["g"]])
     jf, gf = fg(stack(prob, "flexmpc_states", "flexmpc_controls"))
     jf = float(jf)
-    out = {
+    out.update({
         "check_cost": jf,
         "check_cost_rel": abs(jf - prob["flexmpc_cost"]) / abs(prob["flexmpc_cost"]),
         "check_defect": float(np.max(np.abs(np.array(gf)))),
-    }
+    })
+    # the checks first (stderr), a solve that is stopped still leaves them
+    print(json.dumps(out).replace("NaN", "null"), file=sys.stderr, flush=True)
     w0 = stack(prob, "start_states", "start_controls")
     if "sqpmethod" in peers:
-        sol, out["sqpmethod"] = sqpmethod(meta, prob, arr, w0, qpsol, max_iter_ls)
+        sol, out["sqpmethod"] = sqpmethod(prob, maps, w0, qpsol, max_iter_ls, compiled,
+                                          max_iter or 200)
         # the optimum in IPOPT's NLP (constraint s_0 = x0 included)
         _, gs = fg(sol["x"])
         out["sqpmethod"]["max_defect"] = float(np.max(np.abs(np.array(gs))))
         write_solution(d, "sqpmethod_solution.json", prob, sol, out["sqpmethod"]["status"])
     if "ipopt" in peers:
-        sol, out["ipopt"] = ipopt(problem, lbw, ubw, w0)
+        sol, out["ipopt"] = ipopt(problem, lbw, ubw, w0, hessian, max_iter or 1000)
         write_solution(d, "ipopt_solution.json", prob, sol, out["ipopt"]["status"])
     print(json.dumps(out).replace("NaN", "null"))
 

@@ -1,12 +1,12 @@
 //! `cargo xtask bench peers`: the first-sample optimal control problems of the paper's scenes
-//! (`scenes/paper-{2d,3d}-mpc.toml` at several ω0) solved to convergence by flexmpc's SQP
+//! (`scenes/paper-{2d,3d}-mpc.toml` and `scenes/paper-3d-mpc-paper-model.toml` at several ω0) solved to convergence by flexmpc's SQP
 //! from the linear MPC plan, with iterations, KKT residual, cost and time per solve and per
 //! iteration (thread CPU time), and the same problems solved by CasADi (`sqpmethod` with the
 //! Gauss–Newton Hessian and compiled NLP functions, IPOPT with the exact Hessian) when a
 //! `python3` with `casadi` is present.
 
 use anyhow::{bail, Context, Result};
-use mpc::RomDynamics;
+use mpc::{ExactDynamics, RomDynamics};
 use nalgebra::{DMatrix, DVector};
 use ocp_transcription::{
     Dynamics, Globalisation, IntegratorKind, Ocp, SqpMode, SqpSettings, SqpSolver, SqpStats, Start,
@@ -14,13 +14,14 @@ use ocp_transcription::{
 use std::path::{Path, PathBuf};
 
 const USAGE: &str = "\
-usage: cargo xtask bench peers [--variant NAME]... [--scene 2d|3d] [--omega0 W]...
+usage: cargo xtask bench peers [--variant NAME]... [--scene 2d|3d|3d-paper] [--omega0 W]...
                                [--python PATH | --no-casadi] [--peers LIST] [--qpsol NAME]
                                [--sqp-ls N] [--log] [--keep DIR] [--start-from DIR]
 
-Solves the first sample's problem of scenes/paper-2d-mpc.toml (ω0 = 0.5, 1, 2, 2.5) and
-scenes/paper-3d-mpc-paper-model.toml (ω0 = 0.5, 1, 1.5) to convergence (KKT tolerance 1e-8) from the
-linear MPC plan and prints status, iterations, KKT, cost J*, CPU time per solve and per
+Solves the first sample's problem of scenes/paper-2d-mpc.toml (ω0 = 0.5, 1, 2, 2.5),
+scenes/paper-3d-mpc.toml (`3d`: the exact-joints model, implicit midpoint) and
+scenes/paper-3d-mpc-paper-model.toml (`3d-paper`) (3D: ω0 = 0.5, 1, 1.5) to convergence (KKT
+tolerance 1e-8) from the linear MPC plan and prints status, iterations, KKT, cost J*, CPU time per solve and per
 iteration. --variant picks the globalisation (converge (default), merit, full, exact, ...);
 continuation-K solves along x0(α) = x_ref + α(x0 − x_ref), α = 1/K, 2/K, …, 1 with the
 converge settings, each stage from the last one's solution (the first from the linear MPC
@@ -29,8 +30,9 @@ converge-rollout / converge-filter-rollout start from the plan's controls rolled
 --log prints flexmpc's iteration log (cost, KKT, violation, step) to stderr.
 
 When --python PATH is given, or `python3` can `import casadi`, each problem is exported to a
-temporary directory (modal model, `problem.json` with the OCP data, the Lawson propagator,
-the start and flexmpc's solution) and solved by xtask/peers/casadi_peers.py from the same
+temporary directory (the controller model's export, `problem.json` with the OCP data, the
+integrator (the Lawson propagator, or the implicit midpoint's Newton tolerance and a check of the
+exact-joints right-hand side against flexmpc's), the start and flexmpc's solution) and solved by xtask/peers/casadi_peers.py from the same
 start with CasADi's `sqpmethod` (Gauss–Newton Hessian, QP solver --qpsol, default hpipm;
 NLP functions generated as C and compiled with gcc -O2 before the solve) and with IPOPT
 (exact Hessian); a second table compares them with the first --variant (CPU time ratios
@@ -43,61 +45,97 @@ and writes their solutions to DIR/SCENE-W/{sqpmethod,ipopt}_solution.json). --st
 starts flexmpc from DIR/SCENE-W/ipopt_solution.json instead of the linear MPC plan (does the
 optimum IPOPT found stay a KKT point of flexmpc's NLP?).";
 
+/// The controller model of a problem.
+#[derive(Clone)]
+pub enum PeerModel {
+    /// The paper's model (14)–(29) and its reduced model (what the export writes).
+    Paper(RomDynamics, Box<modal_rom::ModalRom>),
+    /// The exact-joints model (theory.md §10).
+    Exact(Box<ExactDynamics>),
+}
+
 /// One first-sample problem: the model, the OCP and the initial state.
 pub struct Problem {
-    /// `2d` or `3d`.
+    /// `2d`, `3d` (the exact-joints model of scenes/paper-3d-mpc.toml) or `3d-paper`.
     pub scene: &'static str,
     /// Disturbance magnitude.
     pub omega0: f64,
     /// Controller model.
-    pub model: RomDynamics,
+    pub model: PeerModel,
     /// The OCP (33)–(35).
     pub ocp: Ocp,
-    /// Initial modal state.
+    /// Initial state.
     pub x0: Vec<f64>,
     /// The scene's controller settings (integrator).
     pub controller: mpc::ControllerSettings,
-    /// The controller's reduced model (what the export writes).
-    pub rom: modal_rom::ModalRom,
 }
 
-/// Builds the first-sample problem of `scene` (`2d` or `3d`) at `omega0` through the scene
-/// loader and the mpc crate's public API (the problem `flexmpc ocp --export` writes).
-pub fn problem(root: &Path, scene: &'static str, omega0: f64) -> Result<Problem> {
-    // the paper model's problems: the 3D paper scene runs the exact-joints model
-    let file = match scene {
-        "3d" => root.join("scenes/paper-3d-mpc-paper-model.toml"),
+/// The scene file of `scene`.
+fn scene_file(root: &Path, scene: &str) -> PathBuf {
+    match scene {
+        "3d-paper" => root.join("scenes/paper-3d-mpc-paper-model.toml"),
         _ => root.join(format!("scenes/paper-{scene}-mpc.toml")),
-    };
+    }
+}
+
+/// Builds the first-sample problem of `scene` (`2d`, `3d` or `3d-paper`) at `omega0` through
+/// the scene loader and the mpc crate's public API, on the scene's controller model (the
+/// problem `flexmpc ocp --export` writes).
+pub fn problem(root: &Path, scene: &'static str, omega0: f64) -> Result<Problem> {
+    let file = scene_file(root, scene);
     let s = flexmpc::scene::load(&file).with_context(|| format!("loading {}", file.display()))?;
     let overrides = flexmpc::control::Overrides { omega0: Some(omega0), ..Default::default() };
     let control = flexmpc::control::control_of(&s, &overrides)?;
     let setup = mpc::Setup::new(&control.scenario)?;
-    let p = mpc::first_sample_problem(&setup, omega0, &control.controller)?;
-    let model = RomDynamics::new(&setup.rom)?;
     let mpc = &control.scenario.mpc;
-    let nu = p.u_min.len();
-    let nx = p.x0.len();
+    let (model, x0, weights, nodes, u_max) = match control.controller.model {
+        mpc::ModelKind::Paper => {
+            let p = mpc::first_sample_problem(&setup, omega0, &control.controller)?;
+            let model = RomDynamics::new(&setup.rom)?;
+            let w = setup.weights.clone();
+            (PeerModel::Paper(model, Box::new(setup.rom.clone())), p.x0, w, None, p.u_max)
+        }
+        mpc::ModelKind::ExactJoints => {
+            let f = mpc::first_sample_exact(&setup, omega0, &control.controller)?;
+            let p = f.problem(&setup, omega0, &control.controller);
+            let model = PeerModel::Exact(Box::new(f.dynamics.clone()));
+            (model, f.x0, f.weights, p.x_ref_nodes, p.u_max)
+        }
+    };
+    let nu = u_max.len();
+    let nx = x0.len();
     let mut ocp = Ocp::new(nx, nu, mpc.timing.horizon, mpc.timing.intervals)?;
-    ocp.q = setup.weights.q.clone();
-    ocp.r = setup.weights.r.clone();
-    ocp.x_ref = setup.weights.x_ref.clone();
+    ocp.q = weights.q.clone();
+    ocp.r = weights.r.clone();
     ocp.u_ref = DVector::zeros(nu);
-    ocp.u_min = DVector::from_vec(p.u_min.clone());
-    ocp.u_max = DVector::from_vec(p.u_max.clone());
-    Ok(Problem {
-        scene,
-        omega0,
-        model,
-        ocp,
-        x0: p.x0,
-        controller: control.controller,
-        rom: setup.rom.clone(),
-    })
+    ocp.u_min = -DVector::from_vec(u_max.clone());
+    ocp.u_max = DVector::from_vec(u_max);
+    match nodes {
+        Some(n) => {
+            ocp.x_ref = DVector::from_vec(n[0].clone());
+            ocp.x_ref_nodes = n.into_iter().map(DVector::from_vec).collect();
+        }
+        None => ocp.x_ref = weights.x_ref.clone(),
+    }
+    Ok(Problem { scene, omega0, model, ocp, x0, controller: control.controller })
 }
 
-/// The SQP settings of a named variant.
+/// The SQP settings of a named variant; where the model or the integrator has no second
+/// derivatives (the exact-joints model, the implicit midpoint rule) the exact Hessian is
+/// replaced by the Gauss–Newton-then-quasi-Newton estimate, as in `flexmpc ocp --converge`.
 fn settings(variant: &str, p: &Problem) -> Result<SqpSettings> {
+    let mut s = named_settings(variant, p)?;
+    let second_order = match &p.model {
+        PeerModel::Paper(m, _) => m.has_second_order(),
+        PeerModel::Exact(m) => m.has_second_order(),
+    } && s.integrator.kind != ocp_transcription::IntegratorKind::ImplicitMidpoint;
+    if !second_order && s.hessian != ocp_transcription::HessianApproximation::GaussNewton {
+        s.hessian = SqpSettings::converge_quasi_newton(s.integrator.clone()).hessian;
+    }
+    Ok(s)
+}
+
+fn named_settings(variant: &str, p: &Problem) -> Result<SqpSettings> {
     let base = SqpSettings {
         integrator: p.controller.integrator.clone(),
         max_iterations: 60,
@@ -217,6 +255,25 @@ pub fn solve(
     continuation: Option<usize>,
     rollout: bool,
 ) -> Result<Solved> {
+    match &p.model {
+        PeerModel::Paper(m, _) => {
+            solve_on(m.clone(), p, settings, log, start_from, continuation, rollout)
+        }
+        PeerModel::Exact(m) => {
+            solve_on((**m).clone(), p, settings, log, start_from, continuation, rollout)
+        }
+    }
+}
+
+fn solve_on<D: Dynamics + Clone>(
+    model: D,
+    p: &Problem,
+    settings: SqpSettings,
+    log: bool,
+    start_from: Option<&Path>,
+    continuation: Option<usize>,
+    rollout: bool,
+) -> Result<Solved> {
     let lq = SqpSettings {
         mode: SqpMode::LinearQuadratic,
         globalisation: Globalisation::FullStep,
@@ -224,9 +281,9 @@ pub fn solve(
         integrator: settings.integrator.clone(),
         ..SqpSettings::default()
     };
-    let mut lmpc = SqpSolver::new(p.model.clone(), p.ocp.clone(), lq)?;
+    let mut lmpc = SqpSolver::new(model.clone(), p.ocp.clone(), lq)?;
     lmpc.solve(&p.x0)?;
-    let mut nmpc = SqpSolver::new(p.model.clone(), p.ocp.clone(), settings)?;
+    let mut nmpc = SqpSolver::new(model.clone(), p.ocp.clone(), settings)?;
     for (d, s) in nmpc.states_mut().iter_mut().zip(lmpc.states()) {
         d.copy_from(s);
     }
@@ -251,8 +308,7 @@ pub fn solve(
             let xa: Vec<f64> =
                 p.x0.iter().zip(p.ocp.x_ref.iter()).map(|(x, r)| r + a * (x - r)).collect();
             if i == 1 {
-                let mut l =
-                    SqpSolver::new(p.model.clone(), p.ocp.clone(), lmpc.settings().clone())?;
+                let mut l = SqpSolver::new(model.clone(), p.ocp.clone(), lmpc.settings().clone())?;
                 l.solve(&xa)?;
                 nmpc.states_mut().clone_from_slice(l.states());
                 nmpc.controls_mut().clone_from_slice(l.controls());
@@ -281,7 +337,7 @@ pub fn solve(
     let (st, used) = solved?;
     if used != Start::Given {
         // the start the SQP actually iterated from: the rollout the fallback made
-        let mut roll = SqpSolver::new(p.model.clone(), p.ocp.clone(), settings_of(&nmpc))?;
+        let mut roll = SqpSolver::new(model.clone(), p.ocp.clone(), settings_of(&nmpc))?;
         if used == Start::RolledOutReference {
             let u = p.ocp.u_ref.clone();
             roll.initialize_constant(&p.x0, u.as_slice())?;
@@ -313,7 +369,7 @@ pub fn solve(
     })
 }
 
-fn settings_of(s: &SqpSolver<RomDynamics>) -> SqpSettings {
+fn settings_of<D: Dynamics>(s: &SqpSolver<D>) -> SqpSettings {
     s.settings().clone()
 }
 
@@ -359,20 +415,16 @@ fn plan(v: &[DVector<f64>]) -> Vec<Vec<f64>> {
     v.iter().map(|x| x.iter().copied().collect()).collect()
 }
 
-/// Writes the modal model and `problem.json` (OCP data, integrator with the Lawson propagator
-/// `E = exp(L h/2)` of the model's linear part `L` as flexmpc computes it, start and
-/// flexmpc's solution) of `p` to `dir`.
+/// Writes the controller model and `problem.json` (OCP data, integrator, start and flexmpc's
+/// solution) of `p` to `dir`. Paper model: modal-rom's export and the Lawson propagator
+/// `E = exp(L h/2)` of the model's linear part `L` as flexmpc computes it. Exact-joints model:
+/// its export (theory.md §10), the implicit midpoint's Newton tolerance, and `rhs_check`:
+/// states, inputs and flexmpc's right-hand side there ([`rhs_samples`]), for the peer to
+/// compare its own right-hand side with.
 fn export(p: &Problem, s: &Solved, settings: &SqpSettings, dir: &Path) -> Result<()> {
     let int = &settings.integrator;
-    if int.kind != IntegratorKind::LawsonRk4 || int.adaptive.is_some() {
-        bail!("the CasADi peer reproduces Lawson RK4 with fixed substeps, found {:?}", int);
-    }
-    p.rom.export(dir).with_context(|| format!("exporting the model to {}", dir.display()))?;
-    let l = p.model.linear_part().context("the model has no linear part")?;
-    let h = p.ocp.interval() / int.substeps as f64;
-    let e = (&l * (0.5 * h)).exp();
     let o = &p.ocp;
-    let json = serde_json::json!({
+    let mut json = serde_json::json!({
         "scene": p.scene,
         "omega0": p.omega0,
         "nx": o.nx(),
@@ -384,21 +436,118 @@ fn export(p: &Problem, s: &Solved, settings: &SqpSettings, dir: &Path) -> Result
         "r": rows(&o.r),
         "terminal": rows(&o.terminal),
         "x_ref": o.x_ref.iter().copied().collect::<Vec<_>>(),
+        "x_ref_nodes": plan(&o.x_ref_nodes),
         "u_ref": o.u_ref.iter().copied().collect::<Vec<_>>(),
         "u_min": o.u_min.iter().copied().collect::<Vec<_>>(),
         "u_max": o.u_max.iter().copied().collect::<Vec<_>>(),
         "x0": p.x0,
-        "linear_part": rows(&l),
-        "lawson_e": rows(&e),
         "start_states": plan(&s.start.0),
         "start_controls": plan(&s.start.1),
         "flexmpc_states": plan(&s.solution.0),
         "flexmpc_controls": plan(&s.solution.1),
         "flexmpc_cost": s.stats.cost,
     });
+    let extra = match &p.model {
+        PeerModel::Paper(model, rom) => {
+            if int.kind != IntegratorKind::LawsonRk4 || int.adaptive.is_some() {
+                bail!("the CasADi peer reproduces Lawson RK4 with fixed substeps, found {:?}", int);
+            }
+            rom.export(dir).with_context(|| format!("exporting the model to {}", dir.display()))?;
+            let l = model.linear_part().context("the model has no linear part")?;
+            let h = p.ocp.interval() / int.substeps as f64;
+            let e = (&l * (0.5 * h)).exp();
+            serde_json::json!({
+                "model": "paper",
+                "integrator": "lawson-rk4",
+                "linear_part": rows(&l),
+                "lawson_e": rows(&e),
+            })
+        }
+        PeerModel::Exact(model) => {
+            if int.kind != IntegratorKind::ImplicitMidpoint {
+                bail!("the CasADi peer reproduces the exact-joints model's implicit midpoint rule, found {:?}", int);
+            }
+            let rom = model.rom();
+            rom.export(dir).with_context(|| format!("exporting the model to {}", dir.display()))?;
+            serde_json::json!({
+                "model": "exact-joints",
+                "integrator": "implicit-midpoint",
+                "newton_tolerance": int.newton_tolerance,
+                "newton_max_iterations": int.newton_max_iterations,
+                "rhs_check": rhs_samples(rom, p, s)?,
+            })
+        }
+    };
+    if let (Some(m), Some(e)) = (json.as_object_mut(), extra.as_object()) {
+        m.extend(e.clone());
+    }
     std::fs::write(dir.join("problem.json"), serde_json::to_string(&json)?)
         .with_context(|| format!("writing {}/problem.json", dir.display()))?;
     Ok(())
+}
+
+/// States and inputs at which the peer checks its exact-joints right-hand side, with flexmpc's
+/// values there: flexmpc's optimal nodes and controls, and synthetic states (velocities and
+/// forces of the size of the initial state's, inputs at ±bounds) with the joints turned from
+/// their reference by 0.3 … 3.0 rad about varied axes and the root turned arbitrarily. States
+/// outside the model's range are skipped (the model reports them).
+fn rhs_samples(
+    rom: &modal_rom::ExactJointsRom,
+    p: &Problem,
+    s: &Solved,
+) -> Result<Vec<serde_json::Value>> {
+    let n = rom.n_state();
+    let nu = rom.n_inputs();
+    let mut points: Vec<(Vec<f64>, Vec<f64>, &str)> = s
+        .solution
+        .0
+        .iter()
+        .zip(&s.solution.1)
+        .map(|(x, u)| (x.iter().copied().collect(), u.iter().copied().collect(), "flexmpc optimum"))
+        .collect();
+    let scale = p.x0[..rom.n_p() + rom.n_p2()].iter().fold(0.0f64, |m, v| m.max(v.abs())).max(0.1);
+    let quat = |angle: f64, axis: [f64; 3]| {
+        let nrm = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
+        let sn = (0.5 * angle).sin() / nrm;
+        [(0.5 * angle).cos(), sn * axis[0], sn * axis[1], sn * axis[2]]
+    };
+    let mul = |a: [f64; 4], b: [f64; 4]| {
+        [
+            a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
+            a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+            a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
+            a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0],
+        ]
+    };
+    for (i, angle) in [0.3, 0.8, 1.2, 1.6, 2.0, 2.4, 2.8, 3.0].into_iter().enumerate() {
+        let seed = 1.0 + i as f64;
+        let mut x = rom.reference_state();
+        for (c, v) in x[..rom.n_p() + rom.n_p2()].iter_mut().enumerate() {
+            *v = scale * (seed * (c as f64 + 1.7)).sin();
+        }
+        let axis = [(seed * 0.9).sin(), (seed * 1.3).cos(), 0.5 + (seed * 2.1).sin()];
+        for j in 0..rom.n_joints() {
+            let o = rom.joint_offset(j);
+            let r = [x[o], x[o + 1], x[o + 2], x[o + 3]];
+            x[o..o + 4].copy_from_slice(&mul(r, quat(angle, axis)));
+        }
+        if rom.has_root() {
+            let o = rom.root_offset();
+            let r = [x[o], x[o + 1], x[o + 2], x[o + 3]];
+            x[o..o + 4].copy_from_slice(&mul(r, quat(2.0 * angle, [axis[2], -axis[0], axis[1]])));
+        }
+        let u: Vec<f64> =
+            (0..nu).map(|c| p.ocp.u_max[c] * if (c + i) % 2 == 0 { 1.0 } else { -0.5 }).collect();
+        points.push((x, u, "synthetic"));
+    }
+    let mut out = Vec::new();
+    for (x, u, kind) in points {
+        let mut f = vec![0.0; n];
+        if rom.rhs(&x, &u, &mut f).is_ok() {
+            out.push(serde_json::json!({ "kind": kind, "x": x, "u": u, "f": f }));
+        }
+    }
+    Ok(out)
 }
 
 /// The Python to run the CasADi peer with, or why there is none.
@@ -463,7 +612,8 @@ pub fn main(args: &[String]) -> Result<()> {
             "--scene" => match it.next().map(String::as_str) {
                 Some("2d") => scenes.push("2d"),
                 Some("3d") => scenes.push("3d"),
-                v => bail!("--scene takes 2d or 3d, found {v:?}"),
+                Some("3d-paper") => scenes.push("3d-paper"),
+                v => bail!("--scene takes 2d, 3d or 3d-paper, found {v:?}"),
             },
             "--omega0" => {
                 let v = it.next().context("--omega0 needs a value")?;

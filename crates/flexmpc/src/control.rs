@@ -357,8 +357,10 @@ pub fn run_sweep_models(
 /// Either controller model: the paper's (14)–(29), or the exact-joints model (theory.md §10),
 /// whose problem is that of the closed loop's first sample ([`mpc::first_sample_exact`]: the
 /// FE state projected onto the exact-joints state, the joint commands' references at the
-/// shooting nodes' times). The export is the paper model's only (the exact-joints model has
-/// no export format): `export` with the exact-joints model is an error.
+/// shooting nodes' times). The export writes the controller model's own format: modal-rom's
+/// model export for the paper's model, the exact-joints export (`model.json` of format
+/// `flexmpc-exact-joints-rom` and its arrays) for the exact-joints model; `ocp.json` names it
+/// (`model`) and holds the references at the shooting nodes when they vary.
 ///
 /// With `converge` (NMPC), the problem is solved to convergence from the linear MPC plan by a
 /// full SQP twice, with [`ocp_transcription::SqpSettings::converge`] (merit line search) and
@@ -408,16 +410,20 @@ pub fn first_sample(
             solve_first(&control, mpc::RomDynamics::new(&setup.rom)?, &first, converge)?
         }
         mpc::ModelKind::ExactJoints => {
-            if let Some(dir) = export {
-                bail!(
-                    "{}: --export {} writes the paper model's problem (modal-rom's model export); \
-                     the exact-joints model has no export format: use --model paper, or drop \
-                     --export",
-                    scene.file.display(),
-                    dir.display()
-                );
-            }
-            let p = mpc::first_sample_exact(&setup, control.omega0, &control.controller)?;
+            let p = match export {
+                Some(dir) => {
+                    std::fs::create_dir_all(dir)
+                        .with_context(|| format!("creating {}", dir.display()))?;
+                    mpc::export_first_sample_exact(
+                        &setup,
+                        control.omega0,
+                        &control.controller,
+                        dir,
+                    )?
+                    .0
+                }
+                None => mpc::first_sample_exact(&setup, control.omega0, &control.controller)?,
+            };
             let first = FirstSample {
                 weights: &p.weights,
                 schedule: p.schedule.as_ref(),

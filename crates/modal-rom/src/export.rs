@@ -17,6 +17,12 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
 
+mod exact_joints;
+pub use exact_joints::{
+    read_exact_joints, ExactJointsMetadata, ExportedJoint, EXACT_JOINTS_FORMAT,
+    EXACT_JOINTS_VERSION,
+};
+
 /// Format name written in `model.json`.
 pub const FORMAT: &str = "flexmpc-modal-rom";
 /// Format version.

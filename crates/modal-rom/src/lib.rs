@@ -189,7 +189,10 @@ pub use blocks::BlockDiag;
 pub use eigen::{solve as solve_second_order, EigenSettings, RawModes, SecondOrderProblem};
 pub use error::{ModalError, Result};
 pub use exact_joints::{ExactJointsRom, LinkBasis, LinkBasisSettings};
-pub use export::{ArrayInfo, Metadata, FORMAT, VERSION};
+pub use export::{
+    read_exact_joints, ArrayInfo, ExactJointsMetadata, ExportedJoint, Metadata,
+    EXACT_JOINTS_FORMAT, EXACT_JOINTS_VERSION, FORMAT, VERSION,
+};
 pub use layout::{BeamLayout, Components, FullIndex, Layout};
 pub use projection::Fields;
 pub use report::{mode_report, report_of, BeamShape, ModeReport, ModeShape};

@@ -204,7 +204,8 @@ pub use error::{MpcError, Result};
 pub use exact_dynamics::exact_joints_rom;
 pub use exact_dynamics::{ExactDynamics, ModelKind};
 pub use export::{
-    export_first_sample, first_sample_exact, first_sample_problem, ExactFirstSample, OcpExport,
+    export_first_sample, export_first_sample_exact, first_sample_exact, first_sample_problem,
+    ExactFirstSample, OcpExport,
 };
 pub use modal_plant::ModalPlant;
 pub use orientation::{chord_orientation, ChordOrientation};

@@ -155,8 +155,8 @@ fn mpc_short_run_writes_csv_solver_log_and_report() {
 /// `flexmpc mpc --model exact-joints` on the paper's 2D scene (2 × 8 elements, 1 s): the
 /// NMPC on the exact-joints model runs on the FE plant, writes its summary into a folder of
 /// its own (`nmpc-exact-fe-w1`, next to the paper model's `nmpc-fe-w1`), and slows the spin;
-/// `ocp` with it solves the closed loop's first sample (same first control); `ocp --export`
-/// and an LMPC with it are clear errors naming the model.
+/// `ocp` with it solves the closed loop's first sample (same first control) and `ocp --export`
+/// writes the exact-joints model's export; an LMPC with it is a clear error naming the model.
 #[test]
 fn mpc_with_the_exact_joints_model() {
     let (scene, out) = small_2d_scene("mpc-exact");
@@ -198,10 +198,26 @@ fn mpc_with_the_exact_joints_model() {
     assert_eq!(first["first_control"], samples[0]["u"], "{first}");
     assert_eq!(first["controls"].as_array().unwrap().len(), 24, "Nc = 24");
     assert!(first["cost"].as_f64().unwrap().is_finite(), "{first}");
-    for (args, needle) in [
-        (vec!["ocp", "--model", "exact-joints", "--export", "ocp-exact"], "exact-joints"),
-        (vec!["mpc", "--model", "exact-joints", "--controller", "lmpc"], "kind"),
-    ] {
+    // its export: the exact-joints model's own format, the same initial state
+    let o = flexmpc()
+        .current_dir(&dir)
+        .args(["--json", "ocp"])
+        .arg(&scene)
+        .args(["--model", "exact-joints", "--export", "ocp-exact"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "stderr: {}", String::from_utf8_lossy(&o.stderr));
+    let read = |f: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(dir.join("ocp-exact").join(f)).unwrap())
+            .unwrap()
+    };
+    let (model, ocp) = (read("model.json"), read("ocp.json"));
+    assert_eq!(model["format"], "flexmpc-exact-joints-rom");
+    assert_eq!(ocp["model"], "exact-joints");
+    assert_eq!(ocp["x0"].as_array().unwrap().len(), first["n_state"].as_u64().unwrap() as usize);
+    assert_eq!(model["n_state"], first["n_state"]);
+    for (args, needle) in [(vec!["mpc", "--model", "exact-joints", "--controller", "lmpc"], "kind")]
+    {
         let o = flexmpc().current_dir(&dir).args(&args[..1]).arg(&scene).args(&args[1..]).output();
         let o = o.unwrap();
         assert!(!o.status.success(), "{args:?} succeeded");

@@ -550,6 +550,14 @@ impl AmbientOps {
         self.block_diagonal.then(|| self.links.iter().map(|l| (l.c1, l.c2)))
     }
 
+    /// Per link: `((first velocity column, count), (first force column, count), Γ1, Γ2)` with
+    /// `Γ1[i + m(j + m l)] = Γ1^l_ij`, `Γ2[i + m(j + m2 l)] = Γ2^l_ij` (link-local indices).
+    pub(crate) fn link_gammas(
+        &self,
+    ) -> impl Iterator<Item = ((usize, usize), (usize, usize), &[f64], &[f64])> + '_ {
+        self.links.iter().map(|l| (l.c1, l.c2, &l.g1_lj[..], &l.g2_lj[..]))
+    }
+
     /// Scratch length [`AmbientOps::eval`] needs.
     pub fn scratch_len(&self) -> usize {
         self.links

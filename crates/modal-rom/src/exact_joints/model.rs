@@ -316,6 +316,14 @@ impl ExactJointsRom {
         &self.flat.z2
     }
 
+    /// The model's parts for its export: Galerkin operators, rows, `Z0`, `Z2` and the
+    /// `(component, rate axis)` of the rotational components.
+    pub(crate) fn parts(
+        &self,
+    ) -> (&AmbientOps, &Constraints, &Mat<f64>, &Mat<f64>, &[(usize, usize)]) {
+        (&self.ops, &self.cons, &self.z0, &self.z2, &self.rate_comps)
+    }
+
     /// The link fields.
     pub fn basis(&self) -> &LinkBasis {
         &self.basis
