@@ -373,7 +373,7 @@ fn exact_joints_3d() -> CaseOutcome {
 
 /// The ω0 that `mpc/3d-exact-joints` runs per plant: the largest ω0 of the scene's sweep that
 /// meets the criterion on each plant (docs/mpc.md, "3D sweep": FE 1.125, ✗ from 1.25; ROM
-/// 1.5, the largest of the sweep). One loop ≈ 1.5–2 min CPU.
+/// 1.5, the largest of the sweep). The two loops ≈ 4 min CPU.
 const EXACT_JOINTS_3D_OMEGAS: &[(PlantKind, &[f64])] =
     &[(PlantKind::Fe, &[1.125]), (PlantKind::Rom, &[1.5])];
 
