@@ -128,7 +128,8 @@ fn settings(variant: &str, p: &Problem) -> Result<SqpSettings> {
     let second_order = match &p.model {
         PeerModel::Paper(m, _) => m.has_second_order(),
         PeerModel::Exact(m) => m.has_second_order(),
-    } && s.integrator.kind != ocp_transcription::IntegratorKind::ImplicitMidpoint;
+    } && s.integrator.kind
+        != ocp_transcription::IntegratorKind::ImplicitMidpoint;
     if !second_order && s.hessian != ocp_transcription::HessianApproximation::GaussNewton {
         s.hessian = SqpSettings::converge_quasi_newton(s.integrator.clone()).hessian;
     }

@@ -82,6 +82,25 @@ pub struct Metadata {
     pub arrays: BTreeMap<String, ArrayInfo>,
 }
 
+/// Writes each `(name, array, meaning)` to `dir/name.npy` and returns the metadata entries
+/// that describe them.
+pub(crate) fn write_arrays<N: AsRef<str>>(
+    dir: &Path,
+    arrays: &[(N, NpyArray, String)],
+) -> Result<BTreeMap<String, ArrayInfo>> {
+    let mut infos = BTreeMap::new();
+    for (name, a, meaning) in arrays {
+        let name = name.as_ref();
+        let file = format!("{name}.npy");
+        npy::write(&dir.join(&file), a)?;
+        infos.insert(
+            name.to_string(),
+            ArrayInfo { file, shape: a.shape.clone(), meaning: meaning.clone() },
+        );
+    }
+    Ok(infos)
+}
+
 fn mat_array(m: &Mat<f64>) -> NpyArray {
     NpyArray {
         shape: vec![m.nrows(), m.ncols()],
@@ -159,15 +178,7 @@ impl ModalRom {
                 "node weights w_n of the quaternion products".into(),
             ));
         }
-        let mut infos = BTreeMap::new();
-        for (name, a, meaning) in &arrays {
-            let file = format!("{name}.npy");
-            npy::write(&dir.join(&file), a)?;
-            infos.insert(
-                name.to_string(),
-                ArrayInfo { file, shape: a.shape.clone(), meaning: meaning.clone() },
-            );
-        }
+        let infos = write_arrays(dir, &arrays)?;
         let meta = Metadata {
             format: FORMAT.into(),
             version: VERSION,

@@ -48,16 +48,14 @@ pub struct ControllerSettings {
     /// Which controller \[NMPC\].
     pub kind: ControllerKind,
     /// Integrator inside each shooting interval [Lawson RK4 on `W`, 16 substeps per
-    /// `Δt = 0.25 s`; theory.md §8 measured a one-interval error 1.2e-2 at ω0 = 2].
+    /// `Δt = 0.25 s`; its one-interval error: theory.md §8].
     pub integrator: IntegratorSettings,
     /// Real-time iteration: one SQP iteration (one QP) per sample from the shifted plan,
     /// instead of iterating to the KKT tolerance \[true; false in
     /// [`ControllerSettings::full_sqp`]\]. The retry and fallback still apply when that
-    /// iteration fails. Measured (docs/mpc.md, "Real
-    /// time"; FE plant, one core): with `retry_relaxation = None` the worst sample is ≤ 11 ms
-    /// in 2D and 25–52 ms in 3D (full SQP: 16–196 ms and 0.24–0.76 s) and the 3D criterion
-    /// holds at ω0 = 0.25–0.75 as with the full SQP, but the 2D criterion is lost at
-    /// ω0 = 1.0, 1.5, 1.75 (full SQP: all 8 of 0.25…2; RTI with a full step: ✗ at 1.5, 1.75).
+    /// iteration fails. One QP per sample bounds the time per sample; converging each
+    /// sample's problem follows fast motion more closely (the trade-off is measured in
+    /// docs/mpc.md, "Real time").
     pub real_time_iteration: bool,
     /// SQP iteration limit of the NMPC per sample \[10\].
     pub max_iterations: usize,
@@ -91,17 +89,16 @@ pub struct ControllerSettings {
     /// retry) whose predicted joint angle between links exceeds this (deg) at any of its
     /// nodes is treated as a failed attempt (→ relaxed retry → linear MPC fallback), like a
     /// solver failure. Needs the joint geometry ([`Controller::set_joint_monitor`]; the closed
-    /// loop sets it); `None`: no check. [20°: 2D NMPC on the FE plant, paper weights, with
-    /// the hold, the stabilisation criterion met at every ω0 = 0.25…2 with 15° and 20°, not
-    /// with 25° (✗ at 1.0, 1.5) nor without the check (✗ from 1.0, elbow 56–240°); docs/mpc.md]
+    /// loop sets it); `None`: no check. [20°: the paper model's modes are linearised at the
+    /// reference angle, and beyond about 20° its plans stop describing the structure; the
+    /// measured choice is in docs/mpc.md, "Why the joint-angle limit and the hold"]
     pub plan_joint_limit_deg: Option<f64>,
     /// After a fallback to the linear MPC plan, the next `fallback_hold` samples apply the
     /// linear MPC plan directly (strategy [`Strategy::Held`]) before the NMPC is tried again:
     /// a failure or an out-of-range plan means the state is where the model is not trusted,
     /// and switching back and forth between the two controllers' plans every sample excites
-    /// the structure [5 samples = 1 s: with 0, the 2D NMPC on the FE plant fails the
-    /// criterion at ω0 = 1.25, 2.0 (limit 20°), with 3 or 5 it meets it at every ω0, with 10
-    /// it fails at 1.5 and 1.75].
+    /// the structure [5 samples = 1 s; the measured choice is in docs/mpc.md, "Why the
+    /// joint-angle limit and the hold"].
     pub fallback_hold: usize,
     /// The controller's reduced model \[paper\]: the paper's (29), or the exact-joints model
     /// (theory.md §10, [`crate::ExactDynamics`]) with the basis of [`Self::link_elastic_modes`].
@@ -162,10 +159,9 @@ impl ControllerSettings {
     /// The real-time NMPC of the paper's scenes (`scenes/paper-{2d,3d}-mpc.toml`; docs/mpc.md,
     /// "Real time"): one SQP iteration per sample (RTI; held samples after a fallback spend
     /// one NMPC iteration each, not applied), no relaxed retry, and the first attempt's step
-    /// a full Gauss–Newton step (`line_search = false`: 2D, where the merit line search loses
-    /// ω0 = 1.0 and 1.75) or merit line search (`true`: 3D, where full steps diverge at
-    /// ω0 = 0.75). Measured on the FE plant: 2D ✓ at all 8 ω0 with worst samples 5–20 ms;
-    /// 3D ✓ at 0.25–0.75 with worst samples 29–37 ms.
+    /// a full Gauss–Newton step (`line_search = false`: the planar scenes) or merit line
+    /// search (`true`: the spatial scenes, where full steps diverge at large motion). The
+    /// range each one stabilises and its time per sample: docs/mpc.md, "Real time".
     pub fn real_time(line_search: bool) -> Self {
         Self {
             real_time_iteration: true,
@@ -183,11 +179,8 @@ impl ControllerSettings {
     /// search, and without the two safeguards that lean on the linear MPC — no joint-angle
     /// check of the plans and no fallback to the linear MPC plan (a failed iteration applies
     /// the NMPC's own iterate). In 3D the linear MPC itself fails from ω0 ≈ 0.75 (paper
-    /// §5.3), so falling back to it hurts. Measured on the paper's 3D two-link (FE plant,
-    /// docs/mpc.md, "3D NMPC up to ω0 = 1"): with `k_u ∈ {0.5, 0.7, 1, 1.25}` (option, the
-    /// paper's is 0.1) the stabilisation criterion holds at every ω0 = 0.25, 0.375, …, 1.0 (28/28
-    /// runs), against 26/28 with the safeguards; with the paper's `k_u = 0.1` it fails at
-    /// ω0 = 1.0.
+    /// §5.3), so falling back to it hurts (measured range: docs/mpc.md, "3D NMPC up to
+    /// ω0 = 1").
     pub fn real_time_spatial() -> Self {
         Self { plan_joint_limit_deg: None, fallback_to_lmpc: false, ..Self::real_time(true) }
     }

@@ -205,15 +205,7 @@ impl ExactJointsRom {
             });
             row += r;
         }
-        let mut infos = BTreeMap::new();
-        for (name, a, meaning) in &arrays {
-            let file = format!("{name}.npy");
-            npy::write(&dir.join(&file), a)?;
-            infos.insert(
-                name.clone(),
-                ArrayInfo { file, shape: a.shape.clone(), meaning: meaning.clone() },
-            );
-        }
+        let infos = crate::export::write_arrays(dir, &arrays)?;
         let meta = ExactJointsMetadata {
             format: EXACT_JOINTS_FORMAT.into(),
             version: EXACT_JOINTS_VERSION,

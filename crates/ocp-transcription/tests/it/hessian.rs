@@ -10,7 +10,8 @@ use ocp_transcription::{
 const HYBRID: HessianApproximation =
     HessianApproximation::GaussNewtonThenExact { switch_kkt: 1e-2 };
 
-fn swing_up_ocp() -> Ocp {
+/// The cart-pole swing-up problem of the Hessian tests (also used by the quasi-Newton tests).
+pub(crate) fn swing_up_ocp() -> Ocp {
     let mut ocp = Ocp::new(4, 1, 1.5, 30).unwrap();
     ocp.q =
         nalgebra::DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![10.0, 10.0, 0.1, 0.1]));

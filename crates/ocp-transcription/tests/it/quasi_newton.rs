@@ -1,24 +1,12 @@
 //! The Gauss–Newton-then-quasi-Newton Hessian: convergence where the model or the integrator
 //! has no second derivatives.
 
+use super::hessian::swing_up_ocp;
 use ocp_transcription::samples::CartPole;
 use ocp_transcription::{
     Globalisation, HessianApproximation, IntegratorKind, IntegratorSettings, Ocp, SqpSettings,
     SqpSolver, SqpStats, SqpStatus,
 };
-
-fn swing_up_ocp() -> Ocp {
-    let mut ocp = Ocp::new(4, 1, 1.5, 30).unwrap();
-    ocp.q =
-        nalgebra::DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![10.0, 10.0, 0.1, 0.1]));
-    ocp.r = nalgebra::DMatrix::identity(1, 1) * 1e-3;
-    ocp.terminal = nalgebra::DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![
-        100.0, 100.0, 10.0, 10.0,
-    ]));
-    ocp.u_min[0] = -25.0;
-    ocp.u_max[0] = 25.0;
-    ocp
-}
 
 fn midpoint() -> IntegratorSettings {
     IntegratorSettings::new(IntegratorKind::ImplicitMidpoint, 2)
