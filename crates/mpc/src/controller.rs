@@ -10,7 +10,7 @@ use crate::weights::{MpcSettings, Weights};
 use nalgebra::DVector;
 use ocp_transcription::{
     Dynamics, Globalisation, HessianApproximation, Integrator, IntegratorKind, IntegratorSettings,
-    Ocp, QpForm, SqpMode, SqpSettings, SqpSolver, SqpStatus,
+    QpForm, SqpMode, SqpSettings, SqpSolver, SqpStatus,
 };
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
@@ -373,13 +373,7 @@ impl<D: Dynamics + Clone> Controller<D> {
         settings.validate()?;
         let nu = model.nu();
         let nx = model.nx();
-        let mut ocp = Ocp::new(nx, nu, mpc.timing.horizon, mpc.timing.intervals)?;
-        ocp.q = weights.q.clone();
-        ocp.r = weights.r.clone();
-        ocp.x_ref = weights.x_ref.clone();
-        ocp.u_ref = DVector::zeros(nu);
-        ocp.u_min = DVector::from_element(nu, -mpc.cost.u_max);
-        ocp.u_max = DVector::from_element(nu, mpc.cost.u_max);
+        let ocp = weights.ocp(mpc, nx, nu)?;
         let base = SqpSettings {
             hessian: HessianApproximation::GaussNewton,
             qp_form: settings.qp_form,

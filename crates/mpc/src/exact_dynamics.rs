@@ -300,7 +300,7 @@ mod tests {
     use modal_rom::{
         exact_joints, BasisSettings, LinkBasisSettings, ModeSelection, StructureModel,
     };
-    use ocp_transcription::{Ocp, SqpSettings, SqpSolver};
+    use ocp_transcription::{SqpSettings, SqpSolver};
 
     fn model_2d(n: usize) -> (ExactDynamics, multibody_constraints::Structure) {
         let s = multibody_constraints::samples::paper_2d(Section::paper_2d(), n, 0.0).unwrap();
@@ -380,13 +380,7 @@ mod tests {
         );
         let x0 = d.rom().project_fe(&x_fe, s.reference()).unwrap();
         let (nx, nu) = (d.nx(), d.nu());
-        let mut ocp = Ocp::new(nx, nu, settings.timing.horizon, settings.timing.intervals).unwrap();
-        ocp.q = w.q.clone();
-        ocp.r = w.r.clone();
-        ocp.x_ref = w.x_ref.clone();
-        ocp.u_ref = DVector::zeros(nu);
-        ocp.u_min = DVector::from_element(nu, -settings.cost.u_max);
-        ocp.u_max = DVector::from_element(nu, settings.cost.u_max);
+        let ocp = w.ocp(&settings, nx, nu).unwrap();
         let sqp = SqpSettings {
             integrator: crate::ControllerSettings::default().integrator,
             levenberg_marquardt: crate::ControllerSettings::default().levenberg_marquardt,

@@ -4,6 +4,7 @@
 use crate::error::{invalid, Result};
 use modal_rom::ModalRom;
 use nalgebra::{DMatrix, DVector};
+use ocp_transcription::Ocp;
 use serde::{Deserialize, Serialize};
 
 /// Input weight `k_u` of the 3D option (`[controller.weights] ku = 1.0`,
@@ -249,6 +250,20 @@ impl Weights {
         let r = DMatrix::identity(nu, nu) * settings.ku;
         let x_ref = DVector::from_vec(rom.reference_state());
         Ok(Self { q, r, x_ref, k_xi, a_xi, a_dxi })
+    }
+
+    /// The optimal control problem (33)–(34) of these weights over the horizon of `settings`,
+    /// for a model with `nx` states and `nu` inputs: input reference zero, inputs within
+    /// `±u_max`.
+    pub(crate) fn ocp(&self, settings: &MpcSettings, nx: usize, nu: usize) -> Result<Ocp> {
+        let mut ocp = Ocp::new(nx, nu, settings.timing.horizon, settings.timing.intervals)?;
+        ocp.q = self.q.clone();
+        ocp.r = self.r.clone();
+        ocp.x_ref = self.x_ref.clone();
+        ocp.u_ref = DVector::zeros(nu);
+        ocp.u_min = DVector::from_element(nu, -settings.cost.u_max);
+        ocp.u_max = DVector::from_element(nu, settings.cost.u_max);
+        Ok(ocp)
     }
 
     /// State part of the cost (34), `V_x = ½ (q − q_r)ᵀ Q (q − q_r)`.

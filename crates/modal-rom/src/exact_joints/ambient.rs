@@ -27,6 +27,9 @@ use intrinsic_beam::operators::{l1_times, l2_times};
 use intrinsic_beam::rotation::rotation;
 use nalgebra::{Vector3, Vector6};
 
+/// One link's `((first velocity column, count), (first force column, count), Γ1, Γ2)`.
+pub(crate) type LinkGammas<'a> = ((usize, usize), (usize, usize), &'a [f64], &'a [f64]);
+
 /// Settings of [`LinkBasis::from_fields`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct LinkBasisSettings {
@@ -552,9 +555,7 @@ impl AmbientOps {
 
     /// Per link: `((first velocity column, count), (first force column, count), Γ1, Γ2)` with
     /// `Γ1[i + m(j + m l)] = Γ1^l_ij`, `Γ2[i + m(j + m2 l)] = Γ2^l_ij` (link-local indices).
-    pub(crate) fn link_gammas(
-        &self,
-    ) -> impl Iterator<Item = ((usize, usize), (usize, usize), &[f64], &[f64])> + '_ {
+    pub(crate) fn link_gammas(&self) -> impl Iterator<Item = LinkGammas<'_>> + '_ {
         self.links.iter().map(|l| (l.c1, l.c2, &l.g1_lj[..], &l.g2_lj[..]))
     }
 

@@ -27,6 +27,11 @@ use intrinsic_beam::Kinematics;
 use multibody_constraints::Structure;
 use nalgebra::{Matrix4, Vector3, Vector4};
 
+/// The parts of a model its export writes: Galerkin operators, rows, `Z0`, `Z2` and the
+/// `(component, rate axis)` of the rotational components.
+pub(crate) type ModelParts<'a> =
+    (&'a AmbientOps, &'a Constraints, &'a Mat<f64>, &'a Mat<f64>, &'a [(usize, usize)]);
+
 /// `U(ω)` of eq. (8): `U(ω)ξ = ½ ξ ⊗ (0, ω)`.
 pub(super) fn u_right(w: &Vector3<f64>) -> Matrix4<f64> {
     Matrix4::new(
@@ -263,16 +268,21 @@ impl ExactJointsRom {
             && (0..nb).all(|i| (0..m2).all(|j| self.z2[(i, j)] == if i == j { 1.0 } else { 0.0 }));
     }
 
-    /// The sizes the evaluation buffers depend on.
-    pub(super) fn dims_key(&self) -> Vec<usize> {
-        let mut key = vec![
+    /// The model-wide sizes the evaluation buffers depend on (the per-constraint ones follow).
+    fn dims_head(&self) -> [usize; 6] {
+        [
             self.basis.n1(),
             self.basis.n2(),
             self.n_p(),
             self.n_p2(),
             self.cons.support.nrows(),
             self.ops.scratch_len(),
-        ];
+        ]
+    }
+
+    /// The sizes the evaluation buffers depend on.
+    pub(super) fn dims_key(&self) -> Vec<usize> {
+        let mut key = self.dims_head().to_vec();
         key.extend(self.tracked.iter().map(|t| t.rows.nrows()));
         key.extend(self.cons.joints.iter().flat_map(|j| [j.rows, j.e.nrows()]));
         key
@@ -280,14 +290,7 @@ impl ExactJointsRom {
 
     /// Whether buffers sized for `key` fit this model.
     pub(super) fn dims_match(&self, key: &[usize]) -> bool {
-        let head = [
-            self.basis.n1(),
-            self.basis.n2(),
-            self.n_p(),
-            self.n_p2(),
-            self.cons.support.nrows(),
-            self.ops.scratch_len(),
-        ];
+        let head = self.dims_head();
         let nt = self.tracked.len();
         key.len() == head.len() + nt + 2 * self.n_joints()
             && key[..head.len()] == head
@@ -318,9 +321,7 @@ impl ExactJointsRom {
 
     /// The model's parts for its export: Galerkin operators, rows, `Z0`, `Z2` and the
     /// `(component, rate axis)` of the rotational components.
-    pub(crate) fn parts(
-        &self,
-    ) -> (&AmbientOps, &Constraints, &Mat<f64>, &Mat<f64>, &[(usize, usize)]) {
+    pub(crate) fn parts(&self) -> ModelParts<'_> {
         (&self.ops, &self.cons, &self.z0, &self.z2, &self.rate_comps)
     }
 

@@ -339,33 +339,26 @@ impl SqpSettings {
                 }
             }
             Globalisation::Filter { backtracking, min_step, .. } => {
-                if !(backtracking > 0.0 && backtracking < 1.0) {
-                    return Err(invalid(
-                        "globalisation.backtracking",
-                        backtracking,
-                        "must be in (0, 1)",
-                    ));
-                }
-                if !(min_step > 0.0 && min_step < 1.0) {
-                    return Err(invalid("globalisation.min_step", min_step, "must be in (0, 1)"));
-                }
+                validate_backtracking(backtracking, min_step)?;
             }
             Globalisation::MeritLineSearch { armijo, backtracking, min_step, .. } => {
                 if !(armijo > 0.0 && armijo < 0.5) {
                     return Err(invalid("globalisation.armijo", armijo, "must be in (0, 0.5)"));
                 }
-                if !(backtracking > 0.0 && backtracking < 1.0) {
-                    return Err(invalid(
-                        "globalisation.backtracking",
-                        backtracking,
-                        "must be in (0, 1)",
-                    ));
-                }
-                if !(min_step > 0.0 && min_step < 1.0) {
-                    return Err(invalid("globalisation.min_step", min_step, "must be in (0, 1)"));
-                }
+                validate_backtracking(backtracking, min_step)?;
             }
         }
         Ok(())
     }
+}
+
+/// The backtracking factor and the smallest step of a line search, each in (0, 1).
+fn validate_backtracking(backtracking: f64, min_step: f64) -> Result<()> {
+    if !(backtracking > 0.0 && backtracking < 1.0) {
+        return Err(invalid("globalisation.backtracking", backtracking, "must be in (0, 1)"));
+    }
+    if !(min_step > 0.0 && min_step < 1.0) {
+        return Err(invalid("globalisation.min_step", min_step, "must be in (0, 1)"));
+    }
+    Ok(())
 }

@@ -135,17 +135,18 @@ impl<D: Dynamics> SqpSolver<D> {
                     }
                 };
             }
+            let record = |step_length| IterationLog {
+                iteration: it,
+                cost,
+                kkt,
+                constraint_violation: viol,
+                step_norm,
+                step_length,
+                qp_iterations: qp_iters,
+            };
             let Some(t) = t else {
                 status = SqpStatus::LineSearchFailed;
-                self.log.push(IterationLog {
-                    iteration: it,
-                    cost,
-                    kkt,
-                    constraint_violation: viol,
-                    step_norm,
-                    step_length: 0.0,
-                    qp_iterations: qp_iters,
-                });
+                self.log.push(record(0.0));
                 break;
             };
             for k in 0..=self.n {
@@ -159,15 +160,7 @@ impl<D: Dynamics> SqpSolver<D> {
                     }
                 }
             }
-            self.log.push(IterationLog {
-                iteration: it,
-                cost,
-                kkt,
-                constraint_violation: viol,
-                step_norm,
-                step_length: t,
-                qp_iterations: qp_iters,
-            });
+            self.log.push(record(t));
             it += 1;
             self.stats.iterations = it;
             if rti {

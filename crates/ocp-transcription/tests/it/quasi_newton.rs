@@ -4,7 +4,7 @@
 use super::hessian::swing_up_ocp;
 use ocp_transcription::samples::CartPole;
 use ocp_transcription::{
-    Globalisation, HessianApproximation, IntegratorKind, IntegratorSettings, Ocp, SqpSettings,
+    Globalisation, HessianApproximation, IntegratorKind, IntegratorSettings, SqpSettings,
     SqpSolver, SqpStats, SqpStatus,
 };
 
