@@ -82,6 +82,26 @@ pub struct Metadata {
     pub arrays: BTreeMap<String, ArrayInfo>,
 }
 
+/// Writes `meta` to `dir/model.json`.
+pub(crate) fn write_metadata<T: Serialize>(dir: &Path, meta: &T) -> Result<()> {
+    let text = serde_json::to_string_pretty(meta)
+        .map_err(|e| ModalError::Format { path: "model.json".into(), reason: e.to_string() })?;
+    let path = dir.join("model.json");
+    std::fs::write(&path, text)
+        .map_err(|e| ModalError::Io { path: path.display().to_string(), source: e })
+}
+
+/// Reads `dir/model.json` as `T`; returns it with the file's path, which names every error.
+pub(crate) fn read_metadata<T: serde::de::DeserializeOwned>(dir: &Path) -> Result<(T, String)> {
+    let path = dir.join("model.json");
+    let shown = path.display().to_string();
+    let text = std::fs::read_to_string(&path)
+        .map_err(|e| ModalError::Io { path: shown.clone(), source: e })?;
+    let meta = serde_json::from_str(&text)
+        .map_err(|e| ModalError::Format { path: shown.clone(), reason: e.to_string() })?;
+    Ok((meta, shown))
+}
+
 /// Writes each `(name, array, meaning)` to `dir/name.npy` and returns the metadata entries
 /// that describe them.
 pub(crate) fn write_arrays<N: AsRef<str>>(
@@ -208,21 +228,14 @@ impl ModalRom {
             ],
             arrays: infos,
         };
-        let text = serde_json::to_string_pretty(&meta)
-            .map_err(|e| ModalError::Format { path: "model.json".into(), reason: e.to_string() })?;
-        let path = dir.join("model.json");
-        std::fs::write(&path, text)
-            .map_err(|e| ModalError::Io { path: path.display().to_string(), source: e })?;
+        write_metadata(dir, &meta)?;
         Ok(meta)
     }
 
     /// Reads a model written by [`ModalRom::export`].
     pub fn read(dir: &Path) -> Result<ModalRom> {
-        let path = dir.join("model.json");
-        let text = std::fs::read_to_string(&path)
-            .map_err(|e| ModalError::Io { path: path.display().to_string(), source: e })?;
-        let bad = |reason: String| ModalError::Format { path: path.display().to_string(), reason };
-        let meta: Metadata = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
+        let (meta, path): (Metadata, String) = read_metadata(dir)?;
+        let bad = |reason: String| ModalError::Format { path: path.clone(), reason };
         if meta.format != FORMAT || meta.version != VERSION {
             return Err(bad(format!(
                 "format {} v{} is not {FORMAT} v{VERSION}",

@@ -236,11 +236,7 @@ impl ExactJointsRom {
             ],
             arrays: infos,
         };
-        let text = serde_json::to_string_pretty(&meta)
-            .map_err(|e| ModalError::Format { path: "model.json".into(), reason: e.to_string() })?;
-        let path = dir.join("model.json");
-        std::fs::write(&path, text)
-            .map_err(|e| ModalError::Io { path: path.display().to_string(), source: e })?;
+        crate::export::write_metadata(dir, &meta)?;
         Ok(meta)
     }
 }
@@ -248,11 +244,8 @@ impl ExactJointsRom {
 /// Reads the data written by [`ExactJointsRom::export`]: the metadata and every listed array,
 /// each checked against the shape the metadata's sizes give.
 pub fn read_exact_joints(dir: &Path) -> Result<(ExactJointsMetadata, BTreeMap<String, NpyArray>)> {
-    let path = dir.join("model.json");
-    let text = std::fs::read_to_string(&path)
-        .map_err(|e| ModalError::Io { path: path.display().to_string(), source: e })?;
-    let bad = |reason: String| ModalError::Format { path: path.display().to_string(), reason };
-    let meta: ExactJointsMetadata = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
+    let (meta, path): (ExactJointsMetadata, String) = crate::export::read_metadata(dir)?;
+    let bad = |reason: String| ModalError::Format { path: path.clone(), reason };
     if meta.format != EXACT_JOINTS_FORMAT || meta.version != EXACT_JOINTS_VERSION {
         return Err(bad(format!(
             "format {} v{} is not {EXACT_JOINTS_FORMAT} v{EXACT_JOINTS_VERSION}",
