@@ -9,8 +9,13 @@
 //!
 //! * **RK4**: the classical method.
 //! * **Implicit midpoint** (Gauss–Legendre, one stage): `m = x + h/2 f(m, u)`,
-//!   `x⁺ = 2m − x`, solved by Newton; the sensitivities follow from the implicit function
-//!   theorem with the Newton matrix `I − h/2 ∂f/∂x` re-factorised at the converged point.
+//!   `x⁺ = 2m − x`, solved by simplified Newton: the iterations reuse the interval's last
+//!   factorised Newton matrix `I − h/2 ∂f/∂x` (the previous substep's) and re-evaluate it
+//!   only when the residual contracts slower than [`SIMPLIFIED_NEWTON_MAX_RATE`], so an
+//!   integration without sensitivities costs one Jacobian per interval when the iteration
+//!   contracts (full Newton with [`IntegratorSettings::simplified_newton`] off); the
+//!   sensitivities follow from the implicit function theorem with the Newton matrix
+//!   re-factorised at the converged point (exact, whichever iteration found it).
 //!   Symplectic and quadratic-invariant preserving (keeps `½xᵀx` when `xᵀf(x) = 0`).
 //! * **Lawson RK4**: RK4 applied to `v = e^{−tL}x`, with `L` a constant matrix (the
 //!   stiff linear part): with `E = e^{hL/2}` and `g(x) = f(x, u) − Lx`,
@@ -33,6 +38,7 @@ mod stages;
 
 pub use settings::{
     interval_error, AdaptiveSubsteps, IntegratorKind, IntegratorSettings, LinearPart,
+    SIMPLIFIED_NEWTON_MAX_RATE,
 };
 
 use crate::dynamics::Dynamics;
@@ -89,6 +95,14 @@ pub struct Integrator {
     model_linear_part: bool,
     newton_tolerance: f64,
     newton_max_iterations: usize,
+    simplified_newton: bool,
+    /// `lu` holds a factorised Newton matrix for the current `h`, evaluated in this interval
+    /// integration (reset at the start of each, so that an integration is a function of its
+    /// arguments alone: same bits whichever interval the workspace integrated before).
+    newton_factored: bool,
+    /// The previous Newton iterate and its residual (to undo a simplified step that diverged).
+    m_prev: Vec<f64>,
+    r_prev: Vec<f64>,
     x: Vec<f64>,
     xs: Vec<f64>,
     t: Vec<f64>,
@@ -203,6 +217,10 @@ impl Integrator {
             lawson,
             newton_tolerance: settings.newton_tolerance,
             newton_max_iterations: settings.newton_max_iterations,
+            simplified_newton: settings.simplified_newton,
+            newton_factored: false,
+            m_prev: zv(),
+            r_prev: zv(),
             x: zv(),
             xs: zv(),
             t: zv(),
@@ -470,6 +488,7 @@ impl Integrator {
         tape: bool,
     ) -> Result<()> {
         self.calls += 1;
+        self.newton_factored = false;
         self.x.copy_from_slice(x0);
         if sens {
             self.s.fill(0.0);

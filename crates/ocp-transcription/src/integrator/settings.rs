@@ -6,6 +6,12 @@ use crate::error::{invalid, Result};
 use crate::la::norm_inf;
 use nalgebra::DMatrix;
 
+/// Largest residual contraction per iteration `‖r_{k+1}‖∞ / ‖r_k‖∞` the simplified Newton
+/// iteration of the implicit midpoint rule accepts before it evaluates the Jacobian at the
+/// current iterate and refactorises (an iteration with a fresh Jacobian is a full Newton
+/// step, so the simplified iteration never evaluates more Jacobians than full Newton).
+pub const SIMPLIFIED_NEWTON_MAX_RATE: f64 = 0.1;
+
 /// Which one-step method runs inside a shooting interval. With the `serde` feature it reads
 /// and writes as `rk4`, `implicit-midpoint`, `lawson-rk4`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -44,6 +50,14 @@ pub struct IntegratorSettings {
     pub newton_tolerance: f64,
     /// Newton iteration limit, `≥ 1`. Default 30.
     pub newton_max_iterations: usize,
+    /// Simplified Newton for the implicit midpoint rule: the iterations reuse the last
+    /// factorised Newton matrix `I − h/2 ∂f/∂x` of the interval (the previous substep's, at its
+    /// converged midpoint) and evaluate the Jacobian and refactorise only when the residual
+    /// contracts slower than [`SIMPLIFIED_NEWTON_MAX_RATE`] per iteration. The convergence test
+    /// is the same as full Newton's, and the sensitivities stay exact (Jacobian and factor at
+    /// the converged midpoint). `false`: full Newton (a Jacobian and a factorisation per
+    /// iteration). Default `true`.
+    pub simplified_newton: bool,
     /// State-adapted substep counts (explicit methods): each shooting interval's count is
     /// chosen from its nodes and control by an error table, fixed during one SQP iteration.
     /// `None` (default): every interval uses `substeps`.
@@ -257,6 +271,7 @@ impl Default for IntegratorSettings {
             linear_part: LinearPart::Model,
             newton_tolerance: 1e-13,
             newton_max_iterations: 30,
+            simplified_newton: true,
             adaptive: None,
         }
     }

@@ -1,7 +1,7 @@
 //! Stage evaluations and substeps of the explicit (RK4, Lawson RK4) and implicit midpoint
 //! methods, forward sensitivities alongside.
 
-use super::{Integrator, Pow};
+use super::{Integrator, Pow, SIMPLIFIED_NEWTON_MAX_RATE};
 use crate::dynamics::Dynamics;
 use crate::error::{OcpError, Result};
 use crate::la::{all_finite, axpy, lincomb, lincomb3, norm_inf};
@@ -135,6 +135,7 @@ impl Integrator {
     /// Factorises `lu = I − h/2 fx` in place.
     pub(super) fn factor_newton(&mut self) -> Result<()> {
         let nx = self.nx;
+        self.newton_factored = false;
         self.lu.copy_from(&self.fx);
         self.lu *= -0.5 * self.h;
         for i in 0..nx {
@@ -156,6 +157,7 @@ impl Integrator {
                 return Err(OcpError::Singular { what: "implicit midpoint Newton matrix" });
             }
         }
+        self.newton_factored = true;
         Ok(())
     }
 
@@ -200,6 +202,10 @@ impl Integrator {
         axpy(&mut self.xs, 0.5 * h, &self.k[0]);
         let mut converged = false;
         let mut residual = f64::INFINITY;
+        // the residual of the previous iterate, and whether the correction from it used a
+        // factor evaluated elsewhere (a simplified step)
+        let mut previous = f64::INFINITY;
+        let mut stale = false;
         let mut it = 0;
         while it <= self.newton_max_iterations {
             model.rhs(&self.xs, u, &mut self.k[0]);
@@ -217,11 +223,35 @@ impl Integrator {
             if it == self.newton_max_iterations {
                 break;
             }
-            model.jacobians(&self.xs, u, &mut self.fx, &mut self.fu);
-            if !all_finite(self.fx.as_slice()) {
-                return Err(OcpError::NonFiniteDynamics { stage: "jacobian" });
+            // full Newton: a Jacobian at every iterate. Simplified: the interval's last factor
+            // while each simplified step contracts the residual by SIMPLIFIED_NEWTON_MAX_RATE;
+            // a simplified step that contracts less is undone and replaced by the full Newton
+            // step from its start (far from the solution the iteration then follows full
+            // Newton's path), a full Newton step that contracts less is followed by another
+            let slow = residual > SIMPLIFIED_NEWTON_MAX_RATE * previous;
+            let refresh = if !self.simplified_newton || !self.newton_factored {
+                true
+            } else if stale && slow {
+                self.xs.copy_from_slice(&self.m_prev);
+                self.t.copy_from_slice(&self.r_prev);
+                residual = previous;
+                true
+            } else {
+                slow
+            };
+            if self.simplified_newton {
+                self.m_prev.copy_from_slice(&self.xs);
+                self.r_prev.copy_from_slice(&self.t);
+                previous = residual;
+                stale = !refresh;
             }
-            self.factor_newton()?;
+            if refresh {
+                model.jacobians(&self.xs, u, &mut self.fx, &mut self.fu);
+                if !all_finite(self.fx.as_slice()) {
+                    return Err(OcpError::NonFiniteDynamics { stage: "jacobian" });
+                }
+                self.factor_newton()?;
+            }
             Self::solve_newton(&self.lu, &self.perm, &self.perm_inv, &mut self.mem, &mut self.t, 1);
             for i in 0..nx {
                 self.xs[i] -= self.t[i];

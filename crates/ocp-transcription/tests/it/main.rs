@@ -6,4 +6,5 @@ mod hessian;
 mod integrators;
 mod quasi_newton;
 mod reference;
+mod simplified_newton;
 mod sqp;
