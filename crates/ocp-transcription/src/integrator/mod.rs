@@ -498,7 +498,9 @@ impl Integrator {
         }
         for n in 0..self.substeps {
             match self.kind {
-                IntegratorKind::ImplicitMidpoint => self.midpoint_substep(model, u, sens)?,
+                IntegratorKind::ImplicitMidpoint => {
+                    self.midpoint_substep(model, u, sens, n == 0)?
+                }
                 _ => {
                     self.explicit_substep(model, u, sens, if tape { Some(4 * n) } else { None })?
                 }

@@ -10,6 +10,12 @@ use faer::linalg::lu::partial_pivoting::{factor as lu_factor, solve as lu_solve}
 use faer::{Conj, Par};
 use nalgebra::DMatrix;
 
+/// A simplified Newton step whose residual contraction is weaker than this is undone: the
+/// full Newton step from its start replaces it (far from the solution, a poor step from a stale
+/// factor can leave full Newton's basin; a contraction between
+/// [`SIMPLIFIED_NEWTON_MAX_RATE`] and this only refreshes the factor at the new iterate).
+const SIMPLIFIED_NEWTON_UNDO_RATE: f64 = 0.5;
+
 impl Integrator {
     /// Evaluates stage `j` at `(xs, u)` (and its sensitivity at `sx`).
     pub(super) fn stage<D: Dynamics + ?Sized>(
@@ -190,16 +196,25 @@ impl Integrator {
         model: &D,
         u: &[f64],
         sens: bool,
+        first: bool,
     ) -> Result<()> {
         let h = self.h;
         let nx = self.nx;
-        // initial guess: explicit half step
-        model.rhs(&self.x, u, &mut self.k[0]);
-        if !all_finite(&self.k[0]) {
-            return Err(OcpError::NonFiniteDynamics { stage: "rhs" });
-        }
+        // initial guess. Simplified Newton: the previous substep's slope `k = f(m)` (left in
+        // `k[0]` by its converged residual), `m = x + h/2 k`, and the start `x` itself in the
+        // first substep (its residual `−h/2 f(x)` is the only evaluation; the first Newton step
+        // from it is the linearly implicit Euler half step, stable for the stiff modes). Full
+        // Newton: the explicit half step `m = x + h/2 f(x)` (one more evaluation)
         self.xs.copy_from_slice(&self.x);
-        axpy(&mut self.xs, 0.5 * h, &self.k[0]);
+        if !self.simplified_newton {
+            model.rhs(&self.x, u, &mut self.k[0]);
+            if !all_finite(&self.k[0]) {
+                return Err(OcpError::NonFiniteDynamics { stage: "rhs" });
+            }
+            axpy(&mut self.xs, 0.5 * h, &self.k[0]);
+        } else if !first {
+            axpy(&mut self.xs, 0.5 * h, &self.k[0]);
+        }
         let mut converged = false;
         let mut residual = f64::INFINITY;
         // the residual of the previous iterate, and whether the correction from it used a
@@ -224,14 +239,15 @@ impl Integrator {
                 break;
             }
             // full Newton: a Jacobian at every iterate. Simplified: the interval's last factor
-            // while each simplified step contracts the residual by SIMPLIFIED_NEWTON_MAX_RATE;
-            // a simplified step that contracts less is undone and replaced by the full Newton
-            // step from its start (far from the solution the iteration then follows full
-            // Newton's path), a full Newton step that contracts less is followed by another
+            // while each step contracts the residual by SIMPLIFIED_NEWTON_MAX_RATE; a weaker
+            // contraction refreshes the factor at the current iterate, and a simplified step
+            // contracting by less than SIMPLIFIED_NEWTON_UNDO_RATE is undone and replaced by
+            // the full Newton step from its start (far from the solution the iteration then
+            // follows full Newton's path)
             let slow = residual > SIMPLIFIED_NEWTON_MAX_RATE * previous;
             let refresh = if !self.simplified_newton || !self.newton_factored {
                 true
-            } else if stale && slow {
+            } else if stale && residual > SIMPLIFIED_NEWTON_UNDO_RATE * previous {
                 self.xs.copy_from_slice(&self.m_prev);
                 self.t.copy_from_slice(&self.r_prev);
                 residual = previous;
