@@ -374,7 +374,7 @@ fn exact_joints_3d() -> CaseOutcome {
 
 /// The ω0 that `mpc/3d-exact-joints` runs per plant: the largest ω0 of the scene's sweep that
 /// meets the criterion on each plant (docs/mpc.md, "3D sweep": FE 1.0, ✗ from 1.125; ROM
-/// 1.25, ✗ from 1.375). The two loops ≈ 5 s CPU.
+/// 1.25, ✗ from 1.375). The two loops ≈ 8 s CPU.
 const EXACT_JOINTS_3D_OMEGAS: &[(PlantKind, &[f64])] =
     &[(PlantKind::Fe, &[1.0]), (PlantKind::Rom, &[1.25])];
 
