@@ -70,9 +70,10 @@ struct AddTo<'a>(&'a mut [f64]);
 impl Sink for AddTo<'_> {
     #[inline(always)]
     fn put<const W: usize>(&mut self, _slot0: usize, pos: &[u32], acc: &[f64; W]) {
+        // padding (`u32::MAX`) is out of range: one check per lane for both
         for (&p, &a) in pos.iter().zip(acc) {
-            if p != u32::MAX {
-                self.0[p as usize] += a;
+            if let Some(d) = self.0.get_mut(p as usize) {
+                *d += a;
             }
         }
     }
@@ -438,7 +439,12 @@ impl QuadraticTerms {
         assert_eq!(out.len(), self.n, "out must have length n");
         assert_eq!(x.len(), self.n, "x must have length n");
         let (half, rows) = (&self.half, &self.rows);
-        if self.n < PAD && rows.slots < 2048 {
+        // the buffer is zeroed at every call: the smallest of a few sizes that holds the slots
+        if self.n < PAD && rows.slots < 1024 {
+            Arch::new().dispatch(TwoPass::<1024> { half, rows, x, out });
+        } else if self.n < PAD && rows.slots < 1536 {
+            Arch::new().dispatch(TwoPass::<1536> { half, rows, x, out });
+        } else if self.n < PAD && rows.slots < 2048 {
             Arch::new().dispatch(TwoPass::<2048> { half, rows, x, out });
         } else if self.n < PAD && rows.slots < MAX_SLOTS {
             Arch::new().dispatch(TwoPass::<MAX_SLOTS> { half, rows, x, out });
