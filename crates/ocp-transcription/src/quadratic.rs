@@ -57,9 +57,11 @@ struct Layout {
     dense: Vec<DenseCluster>,
 }
 
-/// Where a position's sum goes.
+/// Where the sums of a chunk of positions go: `slot0` is the chunk's first slot (groups and
+/// dense chunks numbered in evaluation order, [`Layout::slots`] in all), `pos` its positions
+/// (`u32::MAX` = padding), `acc` their sums.
 trait Sink {
-    fn put(&mut self, p: u32, a: f64);
+    fn put<const W: usize>(&mut self, slot0: usize, pos: &[u32], acc: &[f64; W]);
 }
 
 /// `fx[p] += a` (the Jacobian).
@@ -67,13 +69,123 @@ struct AddTo<'a>(&'a mut [f64]);
 
 impl Sink for AddTo<'_> {
     #[inline(always)]
-    fn put(&mut self, p: u32, a: f64) {
-        self.0[p as usize] += a;
+    fn put<const W: usize>(&mut self, _slot0: usize, pos: &[u32], acc: &[f64; W]) {
+        // padding (`u32::MAX`) is out of range: one check per lane for both
+        for (&p, &a) in pos.iter().zip(acc) {
+            if let Some(d) = self.0.get_mut(p as usize) {
+                *d += a;
+            }
+        }
     }
 }
 
-/// `out[i] += a x_l` with `(i, l) = pairs[p]` (the right-hand side from the row sums
-/// `Σ_j v x_j` of the pairs `(i, l)`).
+/// `sums[slot] = a`: every slot's sum stored in evaluation order (the first pass of the
+/// right-hand side).
+struct ToSlots<'a>(&'a mut [f64]);
+
+impl Sink for ToSlots<'_> {
+    #[inline(always)]
+    fn put<const W: usize>(&mut self, slot0: usize, _pos: &[u32], acc: &[f64; W]) {
+        let d: &mut [f64; W] = (&mut self.0[slot0..slot0 + W]).try_into().expect("chunk width");
+        *d = *acc;
+    }
+}
+
+/// Rows evaluated side by side in the second pass of the right-hand side.
+const RLANES: usize = 8;
+/// Largest slot buffer of the two-pass right-hand side (stack), in `f64`s; a model with more
+/// slots uses the single pass.
+const MAX_SLOTS: usize = 4096;
+
+/// The second pass of the right-hand side: `out_i ← fma(sum_p, x_l, out_i)` over the pairs
+/// `p = (i, l)` of each row in the order in which a single pass would apply them (evaluation
+/// order of the slots), as a sliced-ELLPACK layout by output row (groups of [`RLANES`] rows,
+/// longest first; padding reads the slot holding `−0` and a zero `x` entry, which leaves
+/// every sum as it is, sign of zero included). Each row's chain is then independent of the
+/// others', where a single pass makes consecutive updates of one row wait for each other.
+#[derive(Clone, Debug, Default)]
+struct RowPass {
+    /// Output row of each group lane (`u32::MAX` = padding).
+    rows: Vec<u32>,
+    /// `(offset into slot/xl, width)` of each group.
+    groups: Vec<(usize, usize)>,
+    slot: Vec<u32>,
+    xl: Vec<u32>,
+    /// Slot count of the first pass; the slot `zero` (= `slots`) holds `−0`.
+    slots: usize,
+}
+
+impl RowPass {
+    /// From the half layout's slots, the pairs `(i, l)` of its positions and the dimension
+    /// `n` (the padding's `x` index, a zero of the padded copy of `x`).
+    fn new(half: &Layout, pairs: &[(u32, u32)], n: usize) -> Self {
+        let mut by_row: Vec<Vec<(u32, u32)>> = vec![Vec::new(); n];
+        for (slot, &p) in half.slot_positions().iter().enumerate() {
+            if p != u32::MAX {
+                let (i, l) = pairs[p as usize];
+                by_row[i as usize].push((slot as u32, l));
+            }
+        }
+        let slots = half.slots();
+        let mut rows: Vec<(u32, Vec<(u32, u32)>)> = by_row
+            .into_iter()
+            .enumerate()
+            .filter(|(_, list)| !list.is_empty())
+            .map(|(i, list)| (i as u32, list))
+            .collect();
+        rows.sort_by_key(|r| std::cmp::Reverse(r.1.len()));
+        let mut out = RowPass { slots, ..RowPass::default() };
+        for chunk in rows.chunks(RLANES) {
+            let width = chunk[0].1.len();
+            out.groups.push((out.slot.len(), width));
+            for k in 0..width {
+                for lane in 0..RLANES {
+                    let (sl, l) = chunk
+                        .get(lane)
+                        .and_then(|r| r.1.get(k))
+                        .copied()
+                        .unwrap_or((slots as u32, n as u32));
+                    out.slot.push(sl);
+                    out.xl.push(l);
+                }
+            }
+            for lane in 0..RLANES {
+                out.rows.push(chunk.get(lane).map_or(u32::MAX, |r| r.0));
+            }
+        }
+        out
+    }
+
+    /// The second pass over the slot sums `sums` (`sums[slots] = −0`), `x` read through `xr`.
+    #[inline(always)]
+    fn eval(&self, sums: &[f64], xr: impl Fn(u32) -> f64, out: &mut [f64]) {
+        for (g, &(off, width)) in self.groups.iter().enumerate() {
+            let rows: &[u32; RLANES] =
+                self.rows[g * RLANES..(g + 1) * RLANES].try_into().expect("group width");
+            let mut acc = [0.0_f64; RLANES];
+            for lane in 0..RLANES {
+                if rows[lane] != u32::MAX {
+                    acc[lane] = out[rows[lane] as usize];
+                }
+            }
+            let (sl, xl) =
+                (&self.slot[off..off + width * RLANES], &self.xl[off..off + width * RLANES]);
+            for (si, li) in sl.chunks_exact(RLANES).zip(xl.chunks_exact(RLANES)) {
+                for lane in 0..RLANES {
+                    acc[lane] = sums[si[lane] as usize].mul_add(xr(li[lane]), acc[lane]);
+                }
+            }
+            for lane in 0..RLANES {
+                if rows[lane] != u32::MAX {
+                    out[rows[lane] as usize] = acc[lane];
+                }
+            }
+        }
+    }
+}
+
+/// `out_i += x_l · sum` for every slot (single pass, for models whose slots exceed
+/// [`MAX_SLOTS`] or whose dimension is not below [`PAD`]).
 struct RhsSink<'a> {
     out: &'a mut [f64],
     x: &'a [f64],
@@ -82,18 +194,36 @@ struct RhsSink<'a> {
 
 impl Sink for RhsSink<'_> {
     #[inline(always)]
-    fn put(&mut self, p: u32, a: f64) {
-        let (i, l) = self.pairs[p as usize];
-        self.out[i as usize] = a.mul_add(self.x[l as usize], self.out[i as usize]);
+    fn put<const W: usize>(&mut self, _slot0: usize, pos: &[u32], acc: &[f64; W]) {
+        for (&p, &a) in pos.iter().zip(acc) {
+            if p != u32::MAX {
+                let (i, l) = self.pairs[p as usize];
+                self.out[i as usize] = a.mul_add(self.x[l as usize], self.out[i as usize]);
+            }
+        }
     }
 }
 
-#[inline(always)]
-fn scatter<S: Sink>(pos: &[u32], acc: &[f64], sink: &mut S) {
-    for (&p, &a) in pos.iter().zip(acc) {
-        if p != u32::MAX {
-            sink.put(p, a);
-        }
+/// Both passes of the right-hand side with a stack buffer of `CAP ≥ slots + 1` sums,
+/// compiled for the best SIMD level (pulp dispatch); `x.len() < PAD`.
+struct TwoPass<'a, const CAP: usize> {
+    half: &'a Layout,
+    rows: &'a RowPass,
+    x: &'a [f64],
+    out: &'a mut [f64],
+}
+
+impl<const CAP: usize> WithSimd for TwoPass<'_, CAP> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<T: Simd>(self, _simd: T) {
+        let TwoPass { half, rows, x, out } = self;
+        let mut xa = [0.0_f64; PAD];
+        xa[..x.len()].copy_from_slice(x);
+        let mut sums = [0.0_f64; CAP];
+        half.eval(x, |j| xa[j as usize & (PAD - 1)], &mut ToSlots(&mut sums));
+        sums[rows.slots] = -0.0;
+        rows.eval(&sums, |j| xa[j as usize & (PAD - 1)], out);
     }
 }
 
@@ -139,10 +269,22 @@ impl Layout {
             .count()
     }
 
+    /// Number of slots of one evaluation (group lanes and dense chunk lanes, padding
+    /// included), the length of the [`ToSlots`] buffer.
+    fn slots(&self) -> usize {
+        self.groups.len() * LANES + self.dense.iter().map(|c| c.pos.len()).sum::<usize>()
+    }
+
+    /// The position of every slot in evaluation order (`u32::MAX` = padding).
+    fn slot_positions(&self) -> Vec<u32> {
+        self.pos.iter().chain(self.dense.iter().flat_map(|c| &c.pos)).copied().collect()
+    }
+
     /// Every position's sum into `sink`: the ELLPACK groups with `x` read through `xr`, then
     /// the dense clusters; each sum in ascending `x` index by fused multiply–adds.
     #[inline(always)]
     fn eval<S: Sink>(&self, x: &[f64], xr: impl Fn(u32) -> f64, sink: &mut S) {
+        let mut slot = 0;
         for (g, &(off, width)) in self.groups.iter().enumerate() {
             let mut acc = [0.0_f64; LANES];
             let (idx, val) =
@@ -152,7 +294,8 @@ impl Layout {
                     acc[lane] = v[lane].mul_add(xr(ix[lane]), acc[lane]);
                 }
             }
-            scatter(&self.pos[g * LANES..(g + 1) * LANES], &acc, sink);
+            sink.put(slot, &self.pos[g * LANES..(g + 1) * LANES], &acc);
+            slot += LANES;
         }
         for c in &self.dense {
             let k = c.support.len();
@@ -168,7 +311,8 @@ impl Layout {
                         acc[lane] = col[lane].mul_add(xv, acc[lane]);
                     }
                 }
-                scatter(pos, &acc, sink);
+                sink.put(slot, pos, &acc);
+                slot += DLANES;
             }
         }
     }
@@ -211,6 +355,8 @@ pub struct QuadraticTerms {
     /// `v x_j` over the terms `(i, l, j)`; then `f_i += x_l · sum`.
     half: Layout,
     pairs: Vec<(u32, u32)>,
+    /// The second pass of the right-hand side (by output row).
+    rows: RowPass,
 }
 
 impl QuadraticTerms {
@@ -252,11 +398,13 @@ impl QuadraticTerms {
                 (ix(p), ix(j), v)
             })
             .collect();
+        let half = Layout::new(half_contrib);
         Ok(Self {
             n,
             terms: terms.iter().map(|&(i, l, j, v)| (ix(i), ix(l), ix(j), v)).collect(),
             jac: Layout::new(contrib),
-            half: Layout::new(half_contrib),
+            rows: RowPass::new(&half, &pairs, n),
+            half,
             pairs,
         })
     }
@@ -283,10 +431,32 @@ impl QuadraticTerms {
 
     /// `out_i += Σ v x_l x_j` (`x`, `out` of length `n`): for every pair `(i, l)` the sum
     /// `Σ_j v x_j` (the Jacobian's layout: dense clusters and ELLPACK groups), then
-    /// `out_i += x_l · sum` by a fused multiply–add, pairs in a fixed order.
+    /// `out_i += x_l · sum` by a fused multiply–add, each row's pairs in a fixed order. The
+    /// sums go to a stack buffer first and the rows are then updated side by side
+    /// ([`RowPass`]); models beyond its size update `out` as each sum is formed (same order,
+    /// same bits).
     pub fn add_rhs(&self, x: &[f64], out: &mut [f64]) {
         assert_eq!(out.len(), self.n, "out must have length n");
         assert_eq!(x.len(), self.n, "x must have length n");
+        let (half, rows) = (&self.half, &self.rows);
+        // the buffer is zeroed at every call: the smallest of a few sizes that holds the slots
+        if self.n < PAD && rows.slots < 1024 {
+            Arch::new().dispatch(TwoPass::<1024> { half, rows, x, out });
+        } else if self.n < PAD && rows.slots < 1536 {
+            Arch::new().dispatch(TwoPass::<1536> { half, rows, x, out });
+        } else if self.n < PAD && rows.slots < 2048 {
+            Arch::new().dispatch(TwoPass::<2048> { half, rows, x, out });
+        } else if self.n < PAD && rows.slots < MAX_SLOTS {
+            Arch::new().dispatch(TwoPass::<MAX_SLOTS> { half, rows, x, out });
+        } else {
+            self.half.eval_dispatch(x, &mut RhsSink { out, x, pairs: &self.pairs });
+        }
+    }
+
+    /// The single-pass right-hand side (every sum applied to `out` as it is formed); the
+    /// reference of the two-pass [`QuadraticTerms::add_rhs`] in the tests.
+    #[cfg(test)]
+    fn add_rhs_single_pass(&self, x: &[f64], out: &mut [f64]) {
         self.half.eval_dispatch(x, &mut RhsSink { out, x, pairs: &self.pairs });
     }
 
@@ -431,6 +601,52 @@ mod tests {
             }
         }
         assert!(QuadraticTerms::new(3, &[(0, 3, 1, 1.0)]).is_err());
+    }
+
+    /// The two-pass right-hand side gives the single pass's bits (same fused multiply–adds
+    /// in the same order per row), on random and class-structured terms, with a nonzero `out`
+    /// to add to (and an exact `−0` in it, which the padding must keep).
+    #[test]
+    fn two_pass_rhs_matches_the_single_pass_bit_for_bit() {
+        for (n, structured) in [(7, false), (61, false), (48, true), (53, true)] {
+            let mut rng = seeded(11 + n as u64);
+            let class: Vec<usize> = (0..n).map(|_| rng.random_range(0..4)).collect();
+            let mut terms = Vec::new();
+            if structured {
+                for i in 0..n {
+                    for l in 0..n {
+                        for j in l..n {
+                            if class[i] ^ class[l] ^ class[j] == 0
+                                && rng.random_range(0.0..1.0) < 0.6
+                            {
+                                terms.push((i, l, j, rng.random_range(-1.0..1.0)));
+                            }
+                        }
+                    }
+                }
+            } else {
+                for _ in 0..20 * n {
+                    let (i, l, j) =
+                        (rng.random_range(0..n), rng.random_range(0..n), rng.random_range(0..n));
+                    terms.push((i, l, j, rng.random_range(-1.0..1.0)));
+                }
+            }
+            let q = QuadraticTerms::new(n, &terms).unwrap();
+            assert!(q.rows.slots < MAX_SLOTS, "n = {n}: two-pass path");
+            for trial in 0..4 {
+                let x: Vec<f64> = (0..n).map(|_| rng.random_range(-2.0..2.0)).collect();
+                let mut a: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+                if trial == 0 {
+                    a.fill(-0.0);
+                }
+                let mut b = a.clone();
+                q.add_rhs(&x, &mut a);
+                q.add_rhs_single_pass(&x, &mut b);
+                for i in 0..n {
+                    assert_eq!(a[i].to_bits(), b[i].to_bits(), "n = {n}, row {i}");
+                }
+            }
+        }
     }
 
     /// `q`'s Jacobian at `x` against the term list summed directly (to 1e-13); returns it.
