@@ -19,6 +19,7 @@ pub mod multibody;
 pub mod ocp;
 pub mod perf;
 pub mod reconfiguration;
+pub mod scenes;
 pub mod stress;
 
 use std::time::Instant;
@@ -115,6 +116,7 @@ pub fn all_cases() -> Vec<Case> {
     cases.extend(mpc_2d::cases());
     cases.extend(kick::cases());
     cases.extend(reconfiguration::cases());
+    cases.extend(scenes::cases());
     cases.extend(stress::cases());
     cases
 }
