@@ -11,6 +11,7 @@
 //! ambient Jacobian.
 
 use crate::error::Result;
+use crate::exact_joints::columns::Batch;
 use crate::exact_joints::frame::{
     cholesky, gemm, gemv, gemv_t, right_solve_lt, skew_apply, view, view_mut,
 };
@@ -63,25 +64,16 @@ pub(crate) struct Workspace {
     pub(super) mm: Vec<f64>,
     pub(super) adat: Vec<f64>,
     pub(super) adat_g: Vec<f64>,
-    pub(super) gaac: Vec<f64>,
-    pub(super) x1: Vec<f64>,
     pub(super) dv: Vec<f64>,
-    pub(super) dw: Vec<f64>,
     pub(super) rtmp: Vec<f64>,
     pub(super) ktmp: Vec<f64>,
     pub(super) mtmp2: Vec<f64>,
     pub(super) big: Vec<f64>,
-    pub(super) eqc: Vec<Vec<f64>>,
     pub(super) af1: Vec<f64>,
     pub(super) gf: Vec<f64>,
     pub(super) zc: Vec<f64>,
     pub(super) epf: Vec<Vec<f64>>,
     pub(super) wp: Vec<f64>,
-    pub(super) vcp: Vec<f64>,
-    pub(super) lp: Vec<f64>,
-    pub(super) a1: Vec<f64>,
-    pub(super) dvec: Vec<f64>,
-    pub(super) gd: Vec<f64>,
     pub(super) colp: Vec<f64>,
     pub(super) tj: Vec<f64>,
     pub(super) dxd: Vec<Vector4<f64>>,
@@ -90,11 +82,10 @@ pub(crate) struct Workspace {
     pub(super) hy: Vec<f64>,
     /// `U(ω_b) − Ū(ω_a)` per joint.
     pub(super) mjs: Vec<Matrix4<f64>>,
-    pub(super) aac: Vec<f64>,
-    pub(super) x1tmp: Vec<f64>,
-    pub(super) phitmp: Vec<f64>,
     pub(super) dkp: Vec<f64>,
     pub(super) ambient_tmp: Vec<f64>,
+    /// The batched joint-quaternion columns' buffers.
+    pub(super) batch: Batch,
 }
 
 thread_local! {
@@ -167,36 +158,25 @@ impl Workspace {
             mm: zeros(m * m.max(m2)),
             adat: zeros(rj * r),
             adat_g: zeros(rj * rmax),
-            gaac: zeros(r * rmax),
-            x1: zeros(rj * rmax),
             dv: zeros(rj * m),
-            dw: zeros(rj * m),
             rtmp: zeros(r.max(kk).max(1) * 4),
             ktmp: zeros(kk.max(1)),
             mtmp2: zeros(m),
             big: zeros(big.max(1)),
-            eqc: rom.tracked.iter().map(|t| zeros(t.rows.nrows())).collect(),
             af1: zeros(r),
             gf: zeros(r),
             zc: zeros(na),
             epf: joints.iter().map(|j| zeros(j.e.nrows())).collect(),
             wp: zeros(r),
-            vcp: zeros(rmax),
-            lp: zeros(m),
-            a1: zeros(kk),
-            dvec: zeros(r),
-            gd: zeros(r),
             colp: zeros(m),
             tj: zeros(rmax),
             dxd: vec![Vector4::zeros(); joints.len()],
             mjs: vec![Matrix4::zeros(); joints.len()],
             py: zeros(m),
             hy: zeros(r),
-            aac: zeros(r * rmax),
-            x1tmp: zeros(kk * rmax),
-            phitmp: zeros(2 * r * rmax),
             dkp: zeros(m),
             ambient_tmp: zeros(rom.ops.scratch_len()),
+            batch: Batch::new(rom),
         }
     }
 }
