@@ -187,23 +187,41 @@ fn lowrank_right_solve_lt_imp(
 ) {
     let acc = &mut acc[..rows * q];
     acc.fill(0.0);
+    // rows in chunks of four (one vector), each row's value kept while the q terms are added
+    let full = rows / 4 * 4;
     for (i, &di) in d.iter().enumerate() {
         let xi = &mut x[i * rows..(i + 1) * rows];
         let (yi, hi) = (&y[i * q..(i + 1) * q], &h[i * q..(i + 1) * q]);
-        for k in 0..q {
-            let s = yi[k];
-            xi.iter_mut()
-                .zip(&acc[k * rows..(k + 1) * rows])
-                .for_each(|(x, a)| *x = s.mul_add(*a, *x));
-        }
         let inv = 1.0 / di;
-        xi.iter_mut().for_each(|x| *x *= inv);
-        for k in 0..q {
-            let s = hi[k];
-            acc[k * rows..(k + 1) * rows]
-                .iter_mut()
-                .zip(xi.iter())
-                .for_each(|(a, x)| *a = s.mul_add(*x, *a));
+        for c in (0..full).step_by(4) {
+            let mut v = [xi[c], xi[c + 1], xi[c + 2], xi[c + 3]];
+            for k in 0..q {
+                let a = &acc[k * rows + c..k * rows + c + 4];
+                for e in 0..4 {
+                    v[e] = yi[k].mul_add(a[e], v[e]);
+                }
+            }
+            for e in &mut v {
+                *e *= inv;
+            }
+            xi[c..c + 4].copy_from_slice(&v);
+            for k in 0..q {
+                let a = &mut acc[k * rows + c..k * rows + c + 4];
+                for e in 0..4 {
+                    a[e] = hi[k].mul_add(v[e], a[e]);
+                }
+            }
+        }
+        for c in full..rows {
+            let mut v = xi[c];
+            for k in 0..q {
+                v = yi[k].mul_add(acc[k * rows + c], v);
+            }
+            v *= inv;
+            xi[c] = v;
+            for k in 0..q {
+                acc[k * rows + c] = hi[k].mul_add(v, acc[k * rows + c]);
+            }
         }
     }
 }
