@@ -128,6 +128,15 @@ enum Kernel<'a> {
         s1: &'a mut [L],
         s2: &'a mut [f64],
     },
+    Kappa {
+        a: &'a [L],
+        w: &'a [f64],
+        ra: usize,
+        p: &'a [f64],
+        out: &'a mut [L],
+        sa: &'a mut [L],
+        sw: &'a mut [f64],
+    },
     Skew {
         dvw: &'a [L],
         pvw: &'a [f64],
@@ -151,6 +160,7 @@ impl WithSimd for Kernel<'_> {
             Kernel::RightPhi { pm, q, a, w, ra, m, out, s1, s2 } => {
                 right_phi_t_lanes(pm, q, a, w, ra, m, out, s1, s2)
             }
+            Kernel::Kappa { a, w, ra, p, out, sa, sw } => kappa_lanes(a, w, ra, p, out, sa, sw),
             Kernel::Skew { dvw, pvw, rj, p, t, sd, sv } => skew_lanes(dvw, pvw, rj, p, t, sd, sv),
         }
     }
@@ -192,6 +202,43 @@ fn phi_apply_lanes(
         for k in 0..ra {
             axpy(&mut sa[k], h, &ai[k]);
             sw[k] = h.mul_add(wi[k], sw[k]);
+        }
+    }
+}
+
+/// `out = K(a, w) p` per lane: `out_i = w_iᵀ Σ_{l>i} p_l a_l − a_iᵀ Σ_{l<i} p_l w_l`
+/// ([`super::frame::skew_apply`]; `a` lanes and `w`: `ra × m`).
+#[inline(always)]
+fn kappa_lanes(
+    a: &[L],
+    w: &[f64],
+    ra: usize,
+    p: &[f64],
+    out: &mut [L],
+    sa: &mut [L],
+    sw: &mut [f64],
+) {
+    let m = p.len();
+    let (sa, sw, out) = (&mut sa[..ra], &mut sw[..ra], &mut out[..m]);
+    out.fill([0.0; LANES]);
+    sa.fill([0.0; LANES]);
+    for i in (0..m).rev() {
+        let (ai, wi) = (&a[i * ra..(i + 1) * ra], &w[i * ra..(i + 1) * ra]);
+        for k in 0..ra {
+            axpy(&mut out[i], wi[k], &sa[k]);
+        }
+        for k in 0..ra {
+            axpy(&mut sa[k], p[i], &ai[k]);
+        }
+    }
+    sw.fill(0.0);
+    for i in 0..m {
+        let (ai, wi) = (&a[i * ra..(i + 1) * ra], &w[i * ra..(i + 1) * ra]);
+        for k in 0..ra {
+            axpy(&mut out[i], -sw[k], &ai[k]);
+        }
+        for k in 0..ra {
+            sw[k] = p[i].mul_add(wi[k], sw[k]);
         }
     }
 }
@@ -337,6 +384,27 @@ impl ExactJointsRom {
         for (b, &c) in cs.iter().enumerate() {
             for (v, x) in vcs.iter_mut().zip(&ws.vc[j][c]) {
                 v[b] = *x;
+            }
+        }
+        // − κ Ξ in the p columns, κ_jc = K(V_c, W_j) p, Ξ = ∂ξ̇_j/∂p
+        let lanes = &mut bt.lanes[..m];
+        Arch::new().dispatch(Kernel::Kappa {
+            a: vcs,
+            w: wjj,
+            ra: rjj,
+            p,
+            out: lanes,
+            sa: &mut bt.sal,
+            sw: &mut bt.sw,
+        });
+        for k in 0..m {
+            let mut s = [0.0; LANES];
+            for (b, &c) in cs.iter().enumerate() {
+                s[b] = ws.xi_p[j][k * 4 + c];
+            }
+            let col = &mut jx[k * n..k * n + m];
+            for (x, kap) in col.iter_mut().zip(lanes.iter()) {
+                *x -= s.iter().zip(kap).map(|(a, b)| a * b).sum::<f64>();
             }
         }
         // Λ_cᵀ p (−), a1 = ∂C_jcᵀ W_j p, d = V_c p − A A_cᵀ W p

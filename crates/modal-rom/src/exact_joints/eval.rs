@@ -80,7 +80,6 @@ pub(crate) struct Workspace {
     pub(super) zc: Vec<f64>,
     pub(super) epf: Vec<Vec<f64>>,
     pub(super) wp: Vec<f64>,
-    pub(super) colp: Vec<f64>,
     pub(super) tj: Vec<f64>,
     pub(super) dxd: Vec<Vector4<f64>>,
     /// `y = L⁻ᵀ p` (`m`) and `H y` (`r`) of [`ExactJointsRom::apply_z`].
@@ -178,7 +177,6 @@ impl Workspace {
             zc: zeros(na),
             epf: joints.iter().map(|j| zeros(j.e.nrows())).collect(),
             wp: zeros(r),
-            colp: zeros(m),
             tj: zeros(rmax),
             dxd: vec![Vector4::zeros(); joints.len()],
             mjs: vec![Matrix4::zeros(); joints.len()],

@@ -50,7 +50,6 @@ impl ExactJointsRom {
         let rs = self.cons.support.nrows();
         let rj = r - rs;
         let nj = self.n_joints();
-        let p = &x[..m];
         jx.fill(0.0);
         ju.fill(0.0);
         let nf = na + nb;
@@ -145,11 +144,16 @@ impl ExactJointsRom {
             view(&ws.wj, rj, m),
             1.0,
         );
+        gemm(
+            view_mut(&mut ws.big, m, m),
+            false,
+            view(&ws.wj, rj, m).transpose(),
+            view(&ws.v, rj, m),
+            1.0,
+        );
         for l in 0..m {
             let col = &mut jx[l * n..l * n + m];
-            for (i, v) in col[..l].iter_mut().enumerate() {
-                *v -= ws.mm[i * m + l];
-            }
+            col[..l].iter_mut().zip(&ws.big[l * m..l * m + l]).for_each(|(v, w)| *v -= w);
             col[l + 1..]
                 .iter_mut()
                 .zip(&ws.mm[l * m + l + 1..(l + 1) * m])
@@ -183,7 +187,8 @@ impl ExactJointsRom {
                 }
             }
         }
-        // − κ Ξ, κ_jc = K(∂A/∂ξ_jc) p
+        // V_c = ∂A/∂ξ_jc Z (the term − κ Ξ, κ_jc = K(V_c, W_j) p, with the joint columns: κ_jc = 0
+        // where ∂A/∂ξ_jc = 0)
         for (j, jr) in self.cons.joints.iter().enumerate() {
             let kk = jr.e.nrows();
             for c in 0..4 {
@@ -194,18 +199,6 @@ impl ExactJointsRom {
                     view(&ws.tz[j], kk, m),
                     1.0,
                 );
-                let kap = &mut ws.colp;
-                kap.fill(0.0);
-                skew_apply(&ws.vc[j][c], &ws.wjj[j], jr.rows, p, kap, &mut ws.rtmp);
-                for k in 0..m {
-                    let s = ws.xi_p[j][k * 4 + c];
-                    if s != 0.0 {
-                        jx[k * n..k * n + m]
-                            .iter_mut()
-                            .zip(kap.iter())
-                            .for_each(|(a, b)| *a -= s * b);
-                    }
-                }
             }
         }
         // inputs: ZᵀB_u
