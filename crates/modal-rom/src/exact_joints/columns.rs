@@ -1,12 +1,15 @@
 //! The joint-quaternion columns of the exact Jacobian (theory.md §10.5), all moving columns of
-//! one joint at once: the `na`-long pieces `Z_c p` of the (up to four) columns `c` of joint `j`
-//! form one `na × nc` matrix, so their products with `ZᵀJ11`, `Z2ᵀJ21`, the tracked rows and
-//! `Z` are single products with `nc` columns; the row-space pieces `∂V`, `∂W` of all `c` are
-//! stacked into one `nc·2r_J × m` matrix `[∂V_c; ∂W_c]_c` built by one product per joint
-//! (`∂Ȧ Z`, `−ȦAᵀG V_c` and `G[J, j] V_c` all have the form `(· ∂C_jc) (E_i Z)`), one product
-//! with `W_j` (`−X1_c W_j`, `−G A A_cᵀ W_j`), the triangle `−[V; W_J] Λ_cᵀ` of all `c` in one
-//! pass of running sums (the sums `Σ P_i W_jiᵀ` shared by the four `c`), and `−∂(K p)` of all
-//! `c` in one pass (module docs of [`super::jacobian`] for the formulas).
+//! one joint at once (those with `∂A/∂ξ_jc ≠ 0`: four in 3D, two at a planar model's in-plane
+//! joint rotation): the `na`-long pieces `Z_c p` of the `nc` columns form one `na × nc` matrix,
+//! so their products with `ZᵀJ11`, `Z2ᵀJ21`, the tracked rows and `Z` are single products with
+//! `nc` columns; the row-space pieces `[∂V_c; ∂W_c]` (`2r_J × m` each) are kept as
+//! [`LANES`] values per entry, one per column `c`, built by one product per joint (`∂Ȧ Z`,
+//! `−ȦAᵀG V_c` and `G[J, j] V_c` all have the form `(· ∂C_jc)(E_i Z)`) and one product with
+//! `W_j` (`−X1_c W_j`, `−G A A_cᵀ W_j`); the running-sum recurrences (the triangle
+//! applications `Λ_cᵀp`, `Λ_c Zᵀf1`, `−[V; W_J]Λ_cᵀ`, and the skew applications `κ_jc`,
+//! `∂(Kp)`) advance all `c` together, one vector operation per step, compiled for the
+//! processor's vector instructions by pulp's run-time dispatch (as faer's kernels). Module docs
+//! of [`super::jacobian`] for the formulas.
 
 use crate::exact_joints::eval::{joint_rate_matrix, rates, Workspace};
 use crate::exact_joints::frame::{gemm, gemv, gemv_t, view, view_mut};
