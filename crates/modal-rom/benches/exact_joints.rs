@@ -126,6 +126,13 @@ fn paper_basis_models(spatial: bool, elements: usize) -> (ExactJointsRom, ModalR
 }
 
 fn bench_pair(c: &mut Criterion, name: &str, spatial: bool, elastic: Option<usize>) {
+    // `EXACT_JOINTS_PAIR=<name>` runs one pairing only; `EXACT_JOINTS_PROFILE=<calls>` runs
+    // only that many exact-joints rhs + Jacobian calls (a loop for `perf record`).
+    if std::env::var("EXACT_JOINTS_PAIR").is_ok_and(|p| p != name) {
+        return;
+    }
+    let profile: Option<usize> =
+        std::env::var("EXACT_JOINTS_PROFILE").ok().and_then(|s| s.parse().ok());
     let (exact, paper) = match elastic {
         Some(e) => models(spatial, 20, e),
         None => paper_basis_models(spatial, 20),
@@ -143,6 +150,14 @@ fn bench_pair(c: &mut Criterion, name: &str, spatial: bool, elastic: Option<usiz
         exact.n_p2(),
         paper.n_modes()
     );
+    if let Some(calls) = profile {
+        cpu_report(&format!("{name}/exact_rhs_and_jacobian"), calls, || {
+            exact
+                .rhs_and_jacobian(black_box(&x), black_box(&u), &mut f, &mut jx, &mut ju)
+                .expect("exact")
+        });
+        return;
+    }
     cpu_report(&format!("{name}/exact_rhs_and_jacobian"), 2_000, || {
         exact
             .rhs_and_jacobian(black_box(&x), black_box(&u), &mut f, &mut jx, &mut ju)

@@ -303,9 +303,12 @@ impl LinkBasis {
     }
 }
 
-/// `Γ1`, `Γ2` of one link, dense (the link's fields couple only among themselves), each in two
-/// orders so that every contraction is one matrix–vector product: `g1_lj[i + m(j + m l)] =
-/// g1_jl[i + m(l + m j)] = Γ1^l_ij`, `g2_lj[i + m(j + m2 l)] = g2_jl[i + m(l + m2 j)] = Γ2^l_ij`.
+/// `Γ1`, `Γ2` of one link, dense (the link's fields couple only among themselves), laid out so
+/// that every contraction is one matrix–vector product: `g1_lj[i + m(j + m l)] = Γ1^l_ij`,
+/// `g2_lj[i + m(j + m2 l)] = g2_jl[i + m(l + m2 j)] = Γ2^l_ij`, and the symmetrised
+/// `g1s[i + m(j + m l)] = Γ1^l_ij + Γ1^j_il`: with `M = Σ_l q_l (Γ1^l_ij + Γ1^j_il)`, the `Γ1`
+/// term of `f1` is `−Σ_jl Γ1^l_ij q_j q_l = −½ M q` and its Jacobian `−M`, one pass over the
+/// tensor for both.
 #[derive(Clone, Debug)]
 pub(crate) struct LinkTensors {
     /// First column and count of the link's velocity fields.
@@ -313,7 +316,7 @@ pub(crate) struct LinkTensors {
     /// First column and count of the link's force fields.
     c2: (usize, usize),
     g1_lj: Vec<f64>,
-    g1_jl: Vec<f64>,
+    g1s: Vec<f64>,
     g2_lj: Vec<f64>,
     g2_jl: Vec<f64>,
 }
@@ -393,13 +396,13 @@ impl AmbientOps {
                 }
             }
             // re-layout (l, i, j) → both orders of the docs of `LinkTensors`
-            let (mut g1_lj, mut g1_jl) = (vec![0.0; m * m * m], vec![0.0; m * m * m]);
+            let (mut g1_lj, mut g1s) = (vec![0.0; m * m * m], vec![0.0; m * m * m]);
             for l in 0..m {
                 for i in 0..m {
                     for j in 0..m {
                         let v = g1[(l * m + i) * m + j];
                         g1_lj[i + m * (j + m * l)] = v;
-                        g1_jl[i + m * (l + m * j)] = v;
+                        g1s[i + m * (j + m * l)] = v + g1[(j * m + i) * m + l];
                     }
                 }
             }
@@ -413,7 +416,7 @@ impl AmbientOps {
                     }
                 }
             }
-            links.push(LinkTensors { c1: (c1.0, m), c2: (c2.0, m2), g1_lj, g1_jl, g2_lj, g2_jl });
+            links.push(LinkTensors { c1: (c1.0, m), c2: (c2.0, m2), g1_lj, g1s, g2_lj, g2_jl });
         }
 
         let mut b_u = Mat::<f64>::zeros(na, inputs.len());
@@ -497,22 +500,20 @@ impl AmbientOps {
         for lt in &self.links {
             let ((o1, m), (o2, m2)) = (lt.c1, lt.c2);
             let (u1, rest) = tmp[..2 * m * m + 2 * m * m2 + m2 * m2].split_at_mut(m * m);
-            let (j1, rest) = rest.split_at_mut(m * m);
+            let (_, rest) = rest.split_at_mut(m * m);
             let (t2, rest) = rest.split_at_mut(m * m2);
             let (s2, k22) = rest.split_at_mut(m * m2);
             let q1b = &q1[o1..o1 + m];
             let q2b = &q2[o2..o2 + m2];
-            // Γ1: U[i, l] = Σ_j Γ1^l_ij q_j, f1 −= U q, J[·, l] −= U[·, l]
-            mv(u1, &lt.g1_jl, m * m, q1b);
-            gemv(&mut f1[o1..o1 + m], true, u1, m, q1b, -1.0);
+            // Γ1: M[i, j] = Σ_l (Γ1^l_ij + Γ1^j_il) q_l, f1 −= ½ M q, J[·, j] −= M[·, j]
+            mv(u1, &lt.g1s, m * m, q1b);
+            gemv(&mut f1[o1..o1 + m], true, u1, m, q1b, -0.5);
             // Γ2: T[i, j] = Σ_l Γ2^l_ij q2_l, S[i, l] = Σ_j Γ2^l_ij q2_j; f1 −= S q2, f2 += Tᵀ q1
             mv(t2, &lt.g2_lj, m * m2, q2b);
             mv(s2, &lt.g2_jl, m * m2, q2b);
             gemv(&mut f1[o1..o1 + m], true, s2, m, q2b, -1.0);
             gemv_t(&mut f2[o2..o2 + m2], true, t2, m, q1b, 1.0);
             let Some(jm) = jac.as_deref_mut() else { continue };
-            // Γ1: Jc[i, j] = Σ_l Γ1^l_ij q_l; J[·, j] −= Jc[·, j] + U[·, j]
-            mv(j1, &lt.g1_lj, m * m, q1b);
             // Γ2: K22[j, l] = Σ_i Γ2^l_ij q1_i
             gemm(
                 view_mut(k22, m2 * m2, 1),
@@ -523,10 +524,7 @@ impl AmbientOps {
             );
             for c in 0..m {
                 let col = &mut jm[(o1 + c) * n + o1..(o1 + c) * n + o1 + m];
-                col.iter_mut()
-                    .zip(&j1[c * m..(c + 1) * m])
-                    .zip(&u1[c * m..(c + 1) * m])
-                    .for_each(|((x, a), b)| *x -= a + b);
+                col.iter_mut().zip(&u1[c * m..(c + 1) * m]).for_each(|(x, a)| *x -= a);
             }
             for c in 0..m2 {
                 let cc = na + o2 + c;

@@ -11,8 +11,10 @@
 //! ambient Jacobian.
 
 use crate::error::Result;
+use crate::exact_joints::columns::Batch;
 use crate::exact_joints::frame::{
-    cholesky, gemm, gemv, gemv_t, right_solve_lt, skew_apply, view, view_mut,
+    cholesky, gemm, gemv, gemv_t, lowrank_cholesky, lowrank_right_solve_lt, lowrank_solve_l,
+    lowrank_solve_lt, skew_apply, view, view_mut,
 };
 use crate::exact_joints::model::{u_left, u_right, ExactJointsRom};
 use nalgebra::{Matrix4, Vector3, Vector4};
@@ -39,8 +41,13 @@ pub(crate) struct Workspace {
     /// `W` restricted to all joint rows (`rJ × m`) and to each joint's rows (`r_j × m`).
     pub(super) wj: Vec<f64>,
     pub(super) wjj: Vec<Vec<f64>>,
-    /// Cholesky factor of `S` (`m × m`).
-    pub(super) l: Vec<f64>,
+    /// Cholesky factor `L` of `S = I − YᵀY` in generator form: `Y`, `H` (`rJ × m`), the diagonal
+    /// (`m`) (frame::lowrank_cholesky), its `rJ × rJ` scratch and a `max(na, r, t) × rJ` scratch.
+    pub(super) ly: Vec<f64>,
+    pub(super) lh: Vec<f64>,
+    pub(super) ld: Vec<f64>,
+    pub(super) lmm: Vec<f64>,
+    pub(super) lacc: Vec<f64>,
     pub(super) z: Vec<f64>,
     pub(super) q1: Vec<f64>,
     pub(super) q2: Vec<f64>,
@@ -63,26 +70,16 @@ pub(crate) struct Workspace {
     pub(super) mm: Vec<f64>,
     pub(super) adat: Vec<f64>,
     pub(super) adat_g: Vec<f64>,
-    pub(super) gaac: Vec<f64>,
-    pub(super) x1: Vec<f64>,
     pub(super) dv: Vec<f64>,
-    pub(super) dw: Vec<f64>,
     pub(super) rtmp: Vec<f64>,
     pub(super) ktmp: Vec<f64>,
     pub(super) mtmp2: Vec<f64>,
     pub(super) big: Vec<f64>,
-    pub(super) eqc: Vec<Vec<f64>>,
     pub(super) af1: Vec<f64>,
     pub(super) gf: Vec<f64>,
     pub(super) zc: Vec<f64>,
     pub(super) epf: Vec<Vec<f64>>,
     pub(super) wp: Vec<f64>,
-    pub(super) vcp: Vec<f64>,
-    pub(super) lp: Vec<f64>,
-    pub(super) a1: Vec<f64>,
-    pub(super) dvec: Vec<f64>,
-    pub(super) gd: Vec<f64>,
-    pub(super) colp: Vec<f64>,
     pub(super) tj: Vec<f64>,
     pub(super) dxd: Vec<Vector4<f64>>,
     /// `y = L⁻ᵀ p` (`m`) and `H y` (`r`) of [`ExactJointsRom::apply_z`].
@@ -90,11 +87,10 @@ pub(crate) struct Workspace {
     pub(super) hy: Vec<f64>,
     /// `U(ω_b) − Ū(ω_a)` per joint.
     pub(super) mjs: Vec<Matrix4<f64>>,
-    pub(super) aac: Vec<f64>,
-    pub(super) x1tmp: Vec<f64>,
-    pub(super) phitmp: Vec<f64>,
     pub(super) dkp: Vec<f64>,
     pub(super) ambient_tmp: Vec<f64>,
+    /// The batched joint-quaternion columns' buffers.
+    pub(super) batch: Batch,
 }
 
 thread_local! {
@@ -147,7 +143,11 @@ impl Workspace {
             w: zeros(r * m),
             wj: zeros(rj * m),
             wjj: per(&|rj, _| rj * m),
-            l: zeros(m * m),
+            ly: zeros(rj * m),
+            lh: zeros(rj * m),
+            ld: zeros(m),
+            lmm: zeros(rj * rj),
+            lacc: zeros(na.max(r).max(kk).max(rs).max(1) * rj.max(1)),
             z: zeros(na * m),
             q1: zeros(na),
             q2: zeros(nb),
@@ -167,36 +167,24 @@ impl Workspace {
             mm: zeros(m * m.max(m2)),
             adat: zeros(rj * r),
             adat_g: zeros(rj * rmax),
-            gaac: zeros(r * rmax),
-            x1: zeros(rj * rmax),
             dv: zeros(rj * m),
-            dw: zeros(rj * m),
             rtmp: zeros(r.max(kk).max(1) * 4),
             ktmp: zeros(kk.max(1)),
             mtmp2: zeros(m),
             big: zeros(big.max(1)),
-            eqc: rom.tracked.iter().map(|t| zeros(t.rows.nrows())).collect(),
             af1: zeros(r),
             gf: zeros(r),
             zc: zeros(na),
             epf: joints.iter().map(|j| zeros(j.e.nrows())).collect(),
             wp: zeros(r),
-            vcp: zeros(rmax),
-            lp: zeros(m),
-            a1: zeros(kk),
-            dvec: zeros(r),
-            gd: zeros(r),
-            colp: zeros(m),
             tj: zeros(rmax),
             dxd: vec![Vector4::zeros(); joints.len()],
             mjs: vec![Matrix4::zeros(); joints.len()],
             py: zeros(m),
             hy: zeros(r),
-            aac: zeros(r * rmax),
-            x1tmp: zeros(kk * rmax),
-            phitmp: zeros(2 * r * rmax),
             dkp: zeros(m),
             ambient_tmp: zeros(rom.ops.scratch_len()),
+            batch: Batch::new(rom),
         }
     }
 }
@@ -328,34 +316,34 @@ impl ExactJointsRom {
             }
         }
         gemm(view_mut(&mut ws.h, r, m), false, view(&ws.g, r, r), view(&ws.c0, r, m), 1.0);
-        // S = I − sym(C0ᵀ G C0) = L Lᵀ
+        // S = I − C0ᵀ G C0 = I − YᵀY with Y = L_g⁻¹[J, J] C0_J (C0 vanishes on the support
+        // rows and L_g⁻¹ is lower triangular, so G[J, J] = L_g⁻¹[J, J]ᵀ L_g⁻¹[J, J]) = L Lᵀ, `L` in
+        // generator form (frame::lowrank_cholesky)
         {
+            let rj = r - rs;
             gemm(
-                view_mut(&mut ws.l, m, m),
+                view_mut(&mut ws.ly, rj, m),
                 false,
-                view(&ws.c0, r, m).transpose(),
-                view(&ws.h, r, m),
+                view(&ws.big, r, r).submatrix(rs, rs, rj, rj),
+                view(&ws.c0, r, m).subrows(rs, rj),
                 1.0,
             );
-            for c in 0..m {
-                for i in 0..=c {
-                    let s =
-                        -0.5 * (ws.l[c * m + i] + ws.l[i * m + c]) + if i == c { 1.0 } else { 0.0 };
-                    ws.l[c * m + i] = s;
-                    ws.l[i * m + c] = s;
-                }
-            }
+            lowrank_cholesky(
+                &ws.ly,
+                rj,
+                m,
+                &mut ws.ld,
+                &mut ws.lh,
+                &mut ws.lmm,
+                &mut ws.lacc,
+                1e-10,
+                "null-space basis Z(ξ)",
+                "the joint rotation is outside the range of the fields (ZᵀP Z0 singular)",
+            )?;
         }
-        cholesky(
-            &mut ws.l,
-            m,
-            1e-10,
-            false,
-            "null-space basis Z(ξ)",
-            "the joint rotation is outside the range of the fields (ZᵀP Z0 singular)",
-        )?;
+        let rj = r - rs;
         ws.w.copy_from_slice(&ws.h);
-        right_solve_lt(&ws.l, m, &mut ws.w, r);
+        lowrank_right_solve_lt(&ws.ly, &ws.lh, &ws.ld, rj, &mut ws.w, r, &mut ws.lacc);
         // T Z = (T Z0 − T Aᵀ H) L⁻ᵀ
         for (t, tr) in self.tracked.iter().enumerate() {
             let nt = tr.rows.nrows();
@@ -367,7 +355,7 @@ impl ExactJointsRom {
                 view(&ws.h, r, m),
                 -1.0,
             );
-            right_solve_lt(&ws.l, m, &mut ws.tz[t], nt);
+            lowrank_right_solve_lt(&ws.ly, &ws.lh, &ws.ld, rj, &mut ws.tz[t], nt, &mut ws.lacc);
         }
         // Z = (Z0 − AᵀH) L⁻ᵀ, AᵀH = SᵀH_s + Σ E_jᵀ C_jᵀ H_j
         if with_z {
@@ -392,7 +380,7 @@ impl ExactJointsRom {
                 );
                 gemm(view_mut(&mut ws.z, na, m), true, jr.e.transpose(), view(tmp, kk, m), -1.0);
             }
-            right_solve_lt(&ws.l, m, &mut ws.z, na);
+            lowrank_right_solve_lt(&ws.ly, &ws.lh, &ws.ld, rj, &mut ws.z, na, &mut ws.lacc);
         }
         // W on the joint rows
         for c in 0..m {
@@ -450,15 +438,12 @@ impl ExactJointsRom {
     /// `q1 = Z p = Z0 y − Aᵀ(H y)` with `y = L⁻ᵀ p` (theory.md §10.4), from the factors of
     /// [`ExactJointsRom::frame_into`]: `O(na m + m²)` without forming `Z`.
     fn apply_z(&self, ws: &mut Workspace, p: &[f64]) {
-        let (na, m, r) = (self.basis.n1(), self.n_p(), self.cons.n_rows());
-        // Lᵀ y = p, back substitution (column i of L holds L_ki, k ≥ i)
+        let (na, r) = (self.basis.n1(), self.cons.n_rows());
+        let rj = r - self.cons.support.nrows();
+        // Lᵀ y = p
         let y = &mut ws.py;
         y.copy_from_slice(p);
-        for i in (0..m).rev() {
-            let col = &ws.l[i * m..(i + 1) * m];
-            let s: f64 = col[i + 1..].iter().zip(&y[i + 1..]).map(|(a, b)| a * b).sum();
-            y[i] = (y[i] - s) / col[i];
-        }
+        lowrank_solve_lt(&ws.ly, &ws.lh, &ws.ld, rj, y, &mut ws.lacc);
         gemv(&mut ws.hy, false, &ws.h, r, y, 1.0);
         gemv(&mut ws.q1, false, self.z0_flat(), na, y, 1.0);
         self.rows_t_times(&ws.c, &ws.hy, -1.0, &mut ws.q1, &mut ws.ktmp);
@@ -466,18 +451,14 @@ impl ExactJointsRom {
 
     /// `Zᵀf1 = L⁻¹ (Z0ᵀ f1 − Hᵀ(A f1))` into `ws.ztf` (and `A f1` into `ws.af1`).
     fn apply_z_t(&self, ws: &mut Workspace) {
-        let (na, m, r) = (self.basis.n1(), self.n_p(), self.cons.n_rows());
+        let (na, r) = (self.basis.n1(), self.cons.n_rows());
+        let rj = r - self.cons.support.nrows();
         self.rows_times(&ws.c, &ws.f1, &mut ws.af1, &mut ws.ktmp);
         let t = &mut ws.ztf;
         gemv_t(t, false, self.z0_flat(), na, &ws.f1, 1.0);
         gemv_t(t, true, &ws.h, r, &ws.af1, -1.0);
-        // L t = ·, forward substitution by columns
-        for k in 0..m {
-            let col = &ws.l[k * m..(k + 1) * m];
-            t[k] /= col[k];
-            let tk = t[k];
-            t[k + 1..].iter_mut().zip(&col[k + 1..]).for_each(|(a, b)| *a -= b * tk);
-        }
+        // L t = ·
+        lowrank_solve_l(&ws.ly, &ws.lh, &ws.ld, rj, t, &mut ws.lacc);
     }
 
     /// Right-hand side into `f`, and with `jac = Some((jx, ju))` the exact Jacobians

@@ -11,7 +11,7 @@ use crate::error::{ModalError, Result};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch};
 use faer::linalg::matmul::matmul;
-use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
+use faer::traits::pulp::{Arch, Simd, WithSimd};
 use faer::{Accum, MatMut, MatRef, Par};
 
 /// `r × c` column-major view of `d`.
@@ -96,14 +96,6 @@ pub(crate) fn cholesky(
     Ok(())
 }
 
-/// `M ← M L⁻ᵀ` for `M` (`r × n`, column-major) and lower `L` (`n × n`).
-pub(crate) fn right_solve_lt(l: &[f64], n: usize, m: &mut [f64], r: usize) {
-    if r == 0 || n == 0 {
-        return;
-    }
-    solve_lower_triangular_in_place(view(l, n, n), view_mut(m, r, n).transpose_mut(), Par::Seq);
-}
-
 /// `out (+)= K(a, b) p` with `K(a, b)_il = a_lᵀb_i (l > i)`, `−a_iᵀb_l (l < i)`, `0 (l = i)`
 /// (module docs): `out_i = b_iᵀ Σ_{l>i} p_l a_l − a_iᵀ Σ_{l<i} p_l b_l`. `a`, `b`: `r × m`
 /// column-major; `tmp`: `r` scratch.
@@ -134,74 +126,177 @@ pub(crate) fn skew_apply(
     }
 }
 
-/// `out (+)= alpha · Φ(aᵀb + bᵀa)ᵀ p` (`upper`, the transposed triangle) or
-/// `alpha · Φ(aᵀb + bᵀa) p` (lower), `Φ` the lower triangle with half its diagonal.
+/// The lower Cholesky factor `L` of `S = I − YᵀY` (`Y`: `q × m`, `q` small) in generator form
+/// `L = diag(d) − strictly lower(Yᵀ Hᵀ…)`, i.e. `L_ij = −y_iᵀ h_j` (`i > j`), `L_jj = d_j`:
+/// eliminating column `j` of `I − Y_ᵀ M Y` (`M = I` at first) leaves `I − Yᵀ(M + h_j h_jᵀ)Y`
+/// with `g = M y_j`, `d_j² = 1 − y_jᵀ g`, `h_j = g / d_j`: `O(m q²)` instead of `O(m³)`, the same
+/// factor (Cholesky factors are unique). `h`: `q × m`; `mm`: `q × q` and `g`: `q` scratch.
+/// Errors when a pivot `d_j²` is not above `tol`.
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn phi_apply(
-    a: &[f64],
-    b: &[f64],
-    r: usize,
-    p: &[f64],
-    upper: bool,
-    alpha: f64,
-    out: &mut [f64],
-    tmp: &mut [f64],
+pub(crate) fn lowrank_cholesky(
+    y: &[f64],
+    q: usize,
+    m: usize,
+    d: &mut [f64],
+    h: &mut [f64],
+    mm: &mut [f64],
+    g: &mut [f64],
+    tol: f64,
+    stage: &str,
+    reason: &str,
+) -> Result<()> {
+    let (mm, g) = (&mut mm[..q * q], &mut g[..q]);
+    mm.fill(0.0);
+    for k in 0..q {
+        mm[k * q + k] = 1.0;
+    }
+    for j in 0..m {
+        let yj = &y[j * q..(j + 1) * q];
+        gemv(g, false, mm, q, yj, 1.0);
+        let d2 = 1.0 - yj.iter().zip(g.iter()).map(|(a, b)| a * b).sum::<f64>();
+        if d2.is_nan() || d2 <= tol {
+            return Err(ModalError::Numerical {
+                stage: stage.to_string(),
+                reason: reason.to_string(),
+            });
+        }
+        let dj = d2.sqrt();
+        d[j] = dj;
+        let hj = &mut h[j * q..(j + 1) * q];
+        hj.iter_mut().zip(g.iter()).for_each(|(h, g)| *h = g / dj);
+        for c in 0..q {
+            let s = hj[c];
+            mm[c * q..(c + 1) * q].iter_mut().zip(hj.iter()).for_each(|(a, b)| *a += s * b);
+        }
+    }
+    Ok(())
+}
+
+/// `X ← X L⁻ᵀ` for `X` (`rows × m`, column-major) and `L` of [`lowrank_cholesky`]: column
+/// `i` of `X Lᵀ` is `d_i X_i − (Σ_{j<i} X_j h_jᵀ) y_i`, so `X_i = (M_i + A y_i) / d_i` with the
+/// running sum `A = Σ_{j<i} X_j h_jᵀ` (`rows × q`, scratch `acc`): `O(rows m q)`.
+#[inline(always)]
+fn lowrank_right_solve_lt_imp(
+    y: &[f64],
+    h: &[f64],
+    d: &[f64],
+    q: usize,
+    x: &mut [f64],
+    rows: usize,
+    acc: &mut [f64],
 ) {
-    let m = p.len();
-    let (sa, sb) = tmp[..2 * r].split_at_mut(r);
-    sa.fill(0.0);
-    sb.fill(0.0);
-    let mut step = |i: usize| {
-        let (ai, bi) = (&a[i * r..(i + 1) * r], &b[i * r..(i + 1) * r]);
-        let h = 0.5 * p[i];
-        sa.iter_mut().zip(ai).for_each(|(s, x)| *s += h * x);
-        sb.iter_mut().zip(bi).for_each(|(s, x)| *s += h * x);
-        let v: f64 = ai.iter().zip(sb.iter()).map(|(x, y)| x * y).sum::<f64>()
-            + bi.iter().zip(sa.iter()).map(|(x, y)| x * y).sum::<f64>();
-        out[i] += alpha * v;
-        sa.iter_mut().zip(ai).for_each(|(s, x)| *s += h * x);
-        sb.iter_mut().zip(bi).for_each(|(s, x)| *s += h * x);
-    };
-    if upper {
-        (0..m).rev().for_each(&mut step);
-    } else {
-        (0..m).for_each(&mut step);
+    let acc = &mut acc[..rows * q];
+    acc.fill(0.0);
+    // rows in chunks of four (one vector), each row's value kept while the q terms are added
+    let full = rows / 4 * 4;
+    for (i, &di) in d.iter().enumerate() {
+        let xi = &mut x[i * rows..(i + 1) * rows];
+        let (yi, hi) = (&y[i * q..(i + 1) * q], &h[i * q..(i + 1) * q]);
+        let inv = 1.0 / di;
+        for c in (0..full).step_by(4) {
+            let mut v = [xi[c], xi[c + 1], xi[c + 2], xi[c + 3]];
+            for k in 0..q {
+                let a = &acc[k * rows + c..k * rows + c + 4];
+                for e in 0..4 {
+                    v[e] = yi[k].mul_add(a[e], v[e]);
+                }
+            }
+            for e in &mut v {
+                *e *= inv;
+            }
+            xi[c..c + 4].copy_from_slice(&v);
+            for k in 0..q {
+                let a = &mut acc[k * rows + c..k * rows + c + 4];
+                for e in 0..4 {
+                    a[e] = hi[k].mul_add(v[e], a[e]);
+                }
+            }
+        }
+        for c in full..rows {
+            let mut v = xi[c];
+            for k in 0..q {
+                v = yi[k].mul_add(acc[k * rows + c], v);
+            }
+            v *= inv;
+            xi[c] = v;
+            for k in 0..q {
+                acc[k * rows + c] = hi[k].mul_add(v, acc[k * rows + c]);
+            }
+        }
     }
 }
 
-/// `out += alpha · P Φ(X)ᵀ` for `X = −(bᵀa + aᵀb)` (`a`, `b`: `r × m`; `P`: `q × m`; `out`:
-/// `q × m`): column `l` of `PΦ(X)ᵀ` is `−(Σ_{i≤l} c_il P_i a_iᵀ) b_l − (Σ_{i≤l} c_il P_i b_iᵀ) a_l`,
-/// `c_il = 1`, `c_ll = ½`. `tmp`: `2 q r` scratch.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn right_phi_t(
-    pm: &[f64],
+struct RightSolve<'a> {
+    y: &'a [f64],
+    h: &'a [f64],
+    d: &'a [f64],
     q: usize,
-    a: &[f64],
-    b: &[f64],
-    r: usize,
-    m: usize,
-    alpha: f64,
-    out: &mut [f64],
-    tmp: &mut [f64],
+    x: &'a mut [f64],
+    rows: usize,
+    acc: &'a mut [f64],
+}
+
+impl WithSimd for RightSolve<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) {
+        lowrank_right_solve_lt_imp(self.y, self.h, self.d, self.q, self.x, self.rows, self.acc)
+    }
+}
+
+/// [`lowrank_right_solve_lt_imp`] compiled for the processor's vector instructions.
+pub(crate) fn lowrank_right_solve_lt(
+    y: &[f64],
+    h: &[f64],
+    d: &[f64],
+    q: usize,
+    x: &mut [f64],
+    rows: usize,
+    acc: &mut [f64],
 ) {
-    // column l: −(S1 b_l + S2 a_l) − (a_l·b_l) P_l with S1 = Σ_{i<l} P_i a_iᵀ, S2 = Σ_{i<l} P_i b_iᵀ
-    let (s1, s2) = tmp[..2 * q * r].split_at_mut(q * r);
-    s1.fill(0.0);
-    s2.fill(0.0);
-    let add_outer = |s: &mut [f64], pl: &[f64], x: &[f64]| {
-        for (k, &xk) in x.iter().enumerate() {
-            s[k * q..(k + 1) * q].iter_mut().zip(pl).for_each(|(s, p)| *s += xk * p);
-        }
-    };
-    for l in 0..m {
-        let pl = &pm[l * q..(l + 1) * q];
-        let (al, bl) = (&a[l * r..(l + 1) * r], &b[l * r..(l + 1) * r]);
-        let o = &mut out[l * q..(l + 1) * q];
-        gemv(o, true, s1, q, bl, -alpha);
-        gemv(o, true, s2, q, al, -alpha);
-        let d: f64 = al.iter().zip(bl).map(|(x, y)| x * y).sum();
-        o.iter_mut().zip(pl).for_each(|(o, p)| *o -= alpha * d * p);
-        add_outer(s1, pl, al);
-        add_outer(s2, pl, bl);
+    if rows == 0 {
+        return;
+    }
+    Arch::new().dispatch(RightSolve { y, h, d, q, x, rows, acc });
+}
+
+/// `t ← L⁻¹ t` (forward: `t_i = (t_i + y_iᵀ a) / d_i`, `a += h_i t_i`) with `L` of
+/// [`lowrank_cholesky`]; `a`: `q` scratch.
+pub(crate) fn lowrank_solve_l(
+    y: &[f64],
+    h: &[f64],
+    d: &[f64],
+    q: usize,
+    t: &mut [f64],
+    a: &mut [f64],
+) {
+    let a = &mut a[..q];
+    a.fill(0.0);
+    for (i, &di) in d.iter().enumerate() {
+        let (yi, hi) = (&y[i * q..(i + 1) * q], &h[i * q..(i + 1) * q]);
+        let ti = (t[i] + yi.iter().zip(a.iter()).map(|(x, y)| x * y).sum::<f64>()) / di;
+        t[i] = ti;
+        a.iter_mut().zip(hi).for_each(|(a, h)| *a += h * ti);
+    }
+}
+
+/// `t ← L⁻ᵀ t` (backward: `t_j = (t_j + h_jᵀ a) / d_j`, `a += y_j t_j`) with `L` of
+/// [`lowrank_cholesky`]; `a`: `q` scratch.
+pub(crate) fn lowrank_solve_lt(
+    y: &[f64],
+    h: &[f64],
+    d: &[f64],
+    q: usize,
+    t: &mut [f64],
+    a: &mut [f64],
+) {
+    let a = &mut a[..q];
+    a.fill(0.0);
+    for j in (0..d.len()).rev() {
+        let (yj, hj) = (&y[j * q..(j + 1) * q], &h[j * q..(j + 1) * q]);
+        let tj = (t[j] + hj.iter().zip(a.iter()).map(|(x, y)| x * y).sum::<f64>()) / d[j];
+        t[j] = tj;
+        a.iter_mut().zip(yj).for_each(|(a, y)| *a += y * tj);
     }
 }

@@ -19,9 +19,7 @@
 //! term and `−K(∂Ȧ Z, W) p`.
 
 use crate::exact_joints::eval::{joint_rate_matrix, rates, Workspace};
-use crate::exact_joints::frame::{
-    gemm, gemv, gemv_t, phi_apply, right_phi_t, skew_apply, view, view_mut,
-};
+use crate::exact_joints::frame::{gemm, gemv, skew_apply, view, view_mut};
 use crate::exact_joints::model::{u_right, ExactJointsRom};
 use nalgebra::Vector4;
 
@@ -52,7 +50,6 @@ impl ExactJointsRom {
         let rs = self.cons.support.nrows();
         let rj = r - rs;
         let nj = self.n_joints();
-        let p = &x[..m];
         jx.fill(0.0);
         ju.fill(0.0);
         let nf = na + nb;
@@ -147,11 +144,16 @@ impl ExactJointsRom {
             view(&ws.wj, rj, m),
             1.0,
         );
+        gemm(
+            view_mut(&mut ws.big, m, m),
+            false,
+            view(&ws.wj, rj, m).transpose(),
+            view(&ws.v, rj, m),
+            1.0,
+        );
         for l in 0..m {
             let col = &mut jx[l * n..l * n + m];
-            for (i, v) in col[..l].iter_mut().enumerate() {
-                *v -= ws.mm[i * m + l];
-            }
+            col[..l].iter_mut().zip(&ws.big[l * m..l * m + l]).for_each(|(v, w)| *v -= w);
             col[l + 1..]
                 .iter_mut()
                 .zip(&ws.mm[l * m + l + 1..(l + 1) * m])
@@ -185,7 +187,8 @@ impl ExactJointsRom {
                 }
             }
         }
-        // − κ Ξ, κ_jc = K(∂A/∂ξ_jc) p
+        // V_c = ∂A/∂ξ_jc Z (the term − κ Ξ, κ_jc = K(V_c, W_j) p, with the joint columns: κ_jc = 0
+        // where ∂A/∂ξ_jc = 0)
         for (j, jr) in self.cons.joints.iter().enumerate() {
             let kk = jr.e.nrows();
             for c in 0..4 {
@@ -196,18 +199,6 @@ impl ExactJointsRom {
                     view(&ws.tz[j], kk, m),
                     1.0,
                 );
-                let kap = &mut ws.colp;
-                kap.fill(0.0);
-                skew_apply(&ws.vc[j][c], &ws.wjj[j], jr.rows, p, kap, &mut ws.rtmp);
-                for k in 0..m {
-                    let s = ws.xi_p[j][k * 4 + c];
-                    if s != 0.0 {
-                        jx[k * n..k * n + m]
-                            .iter_mut()
-                            .zip(kap.iter())
-                            .for_each(|(a, b)| *a -= s * b);
-                    }
-                }
             }
         }
         // inputs: ZᵀB_u
@@ -232,7 +223,7 @@ impl ExactJointsRom {
         root_xi: Option<Vector4<f64>>,
         jx: &mut [f64],
     ) {
-        let (na, m, m2) = (self.basis.n1(), self.n_p(), self.n_p2());
+        let m = self.n_p();
         let n = self.n_state();
         let r = self.cons.n_rows();
         let rs = self.cons.support.nrows();
@@ -259,8 +250,9 @@ impl ExactJointsRom {
         for j in 0..nj {
             ws.mjs[j] = joint_rate_matrix(self, &ws.eq[j]);
         }
+        self.stack_vw(ws);
         for (j, jr) in self.cons.joints.iter().enumerate() {
-            let (rjj, kk, o) = (jr.rows, jr.e.nrows(), self.row_offsets[j]);
+            let (rjj, o) = (jr.rows, self.row_offsets[j]);
             // A_cᵀ-free pieces shared by the four c: G[:, rows j], ȦAᵀ G[:, rows j]
             gemm(
                 view_mut(&mut ws.adat_g, rj, rjj),
@@ -269,6 +261,8 @@ impl ExactJointsRom {
                 view(&ws.g, r, r).subcols(o, rjj),
                 1.0,
             );
+            let mut cs = [0usize; 4];
+            let mut nc = 0;
             for c in 0..4 {
                 let col = self.joint_offset(j) + c;
                 if ws.dc[j][c].iter().all(|&v| v == 0.0) {
@@ -302,152 +296,13 @@ impl ExactJointsRom {
                     for i in 0..m {
                         jx[col * n + i] = -t[i];
                     }
-                    continue;
+                } else {
+                    cs[nc] = c;
+                    nc += 1;
                 }
-                let vc = &ws.vc[j][c];
-                let dcj = &ws.dc[j][c];
-                let wjj = &ws.wjj[j];
-                // V_c p, Λ_cᵀ p, a1 = ∂C_jcᵀ W_j p
-                gemv(&mut ws.vcp, false, dcj, rjj, &ws.eq[j], 1.0);
-                ws.lp.fill(0.0);
-                phi_apply(vc, wjj, rjj, p, true, -1.0, &mut ws.lp, &mut ws.rtmp);
-                gemv_t(&mut ws.a1, false, dcj, rjj, &ws.wp[o..o + rjj], 1.0);
-                // d = V_c p − A A_cᵀ W p, z_c = −AᵀG d − E_jᵀ a1 − Z Λ_cᵀ p
-                gemv_t(&mut ws.dvec, false, &ws.ta[j], kk, &ws.a1, -1.0);
-                for i in 0..rjj {
-                    ws.dvec[o + i] += ws.vcp[i];
-                }
-                gemv(&mut ws.gd, false, &ws.g, r, &ws.dvec, 1.0);
-                ws.zc.fill(0.0);
-                self.rows_t_times(&ws.c, &ws.gd, -1.0, &mut ws.zc, &mut ws.ktmp);
-                gemv_t(&mut ws.zc, true, self.e_flat(j), kk, &ws.a1, -1.0);
-                gemv(&mut ws.zc, true, &ws.z, na, &ws.lp, -1.0);
-                // Z_cᵀ f1 + ZᵀJ11 z_c
-                let colp = &mut ws.colp;
-                colp.fill(0.0);
-                gemv_t(colp, true, vc, rjj, &ws.gf[o..o + rjj], -1.0);
-                gemv(&mut ws.tj, false, dcj, rjj, &ws.epf[j], 1.0);
-                gemv_t(colp, true, wjj, rjj, &ws.tj[..rjj], -1.0);
-                phi_apply(vc, wjj, rjj, &ws.ztf, false, 1.0, colp, &mut ws.rtmp);
-                gemv(colp, true, &ws.t11, m, &ws.zc, 1.0);
-                // p2 rows
-                gemv(&mut jx[col * n + m..col * n + m + m2], false, &ws.u21, m2, &ws.zc, 1.0);
-                // ∂ξ̇ (all joints, root)
-                for (t, tr) in self.tracked.iter().enumerate() {
-                    let nt = tr.rows.nrows();
-                    gemv(&mut ws.eqc[t], false, &tr.rows_flat, nt, &ws.zc, 1.0);
-                }
-                for i in 0..nj {
-                    let mut d = joint_rate_matrix(self, &ws.eqc[i]) * ws.xi[i];
-                    if i == j {
-                        d += ws.mjs[j].column(c);
-                    }
-                    ws.dxd[i] = d;
-                    let oi = self.joint_offset(i);
-                    jx[col * n + oi..col * n + oi + 4].copy_from_slice(d.as_slice());
-                }
-                if let Some(xr) = root_xi {
-                    let d = u_right(&rates(self, &ws.eqc[nj], 0)) * xr;
-                    let oi = self.root_offset();
-                    jx[col * n + oi..col * n + oi + 4].copy_from_slice(d.as_slice());
-                }
-                // ∂Ȧ Z
-                self.dadot_z(
-                    DadotZ {
-                        dxd: &ws.dxd,
-                        xi_dot: &ws.xi_dot,
-                        dc: &ws.dc,
-                        tz: &ws.tz,
-                        cdot2: &mut ws.cdot2,
-                        dv: &mut ws.dv,
-                    },
-                    j,
-                    c,
-                );
-                // − ȦAᵀG V_c
-                gemm(
-                    view_mut(&mut ws.dv, rj, m),
-                    true,
-                    view(&ws.adat_g, rj, rjj),
-                    view(vc, rjj, m),
-                    -1.0,
-                );
-                // X1 = ȦA_cᵀ − ȦAᵀ G A A_cᵀ; A A_cᵀ = (E_j Aᵀ)ᵀ ∂C_jcᵀ
-                gemm(
-                    view_mut(&mut ws.aac, r, rjj),
-                    false,
-                    view(&ws.ta[j], kk, r).transpose(),
-                    view(dcj, rjj, kk).transpose(),
-                    1.0,
-                );
-                gemm(
-                    view_mut(&mut ws.gaac, r, rjj),
-                    false,
-                    view(&ws.g, r, r),
-                    view(&ws.aac, r, rjj),
-                    1.0,
-                );
-                for (i, ir) in self.cons.joints.iter().enumerate() {
-                    let ki = ir.e.nrows();
-                    gemm(
-                        view_mut(&mut ws.x1tmp, ki, rjj),
-                        false,
-                        view(&self.tracked[i].e[j], ki, kk),
-                        view(dcj, rjj, kk).transpose(),
-                        1.0,
-                    );
-                    gemm(
-                        view_mut(&mut ws.x1, rj, rjj)
-                            .subrows_mut(self.row_offsets[i] - rs, ir.rows),
-                        false,
-                        view(&ws.cdot[i], ir.rows, ki),
-                        view(&ws.x1tmp, ki, rjj),
-                        1.0,
-                    );
-                }
-                gemm(
-                    view_mut(&mut ws.x1, rj, rjj),
-                    true,
-                    view(&ws.adat, rj, r),
-                    view(&ws.gaac, r, rjj),
-                    -1.0,
-                );
-                gemm(
-                    view_mut(&mut ws.dv, rj, m),
-                    true,
-                    view(&ws.x1, rj, rjj),
-                    view(wjj, rjj, m),
-                    -1.0,
-                );
-                right_phi_t(&ws.v, rj, vc, wjj, rjj, m, -1.0, &mut ws.dv, &mut ws.phitmp);
-                // ∂W on the joint rows: ∂G B + G ∂B with ∂G = −G(Q + Qᵀ)G, Q = A_cAᵀ (rows j
-                // only), W = GB, ∂B = V_c + QW − BΛ_cᵀ (V_c, QW on rows j): the QW terms cancel,
-                // ∂W = G[:, j] V_c − (G Qᵀ) W − W Λ_cᵀ, and G Qᵀ = G A A_cᵀ is `gaac`.
-                gemm(
-                    view_mut(&mut ws.dw, rj, m),
-                    false,
-                    view(&ws.g, r, r).submatrix(rs, o, rj, rjj),
-                    view(vc, rjj, m),
-                    1.0,
-                );
-                gemm(
-                    view_mut(&mut ws.dw, rj, m),
-                    true,
-                    view(&ws.gaac, r, rjj).subrows(rs, rj),
-                    view(wjj, rjj, m),
-                    -1.0,
-                );
-                // − G_J B Λ_cᵀ = − W_J Λ_cᵀ
-                right_phi_t(&ws.wj, rj, vc, wjj, rjj, m, -1.0, &mut ws.dw, &mut ws.phitmp);
-                // − ∂(K p)
-                let colp = &mut ws.colp;
-                let t = &mut ws.dkp;
-                t.fill(0.0);
-                skew_apply(&ws.dv, &ws.wj, rj, p, t, &mut ws.rtmp);
-                skew_apply(&ws.v, &ws.dw, rj, p, t, &mut ws.rtmp);
-                for i in 0..m {
-                    jx[col * n + i] = colp[i] - t[i];
-                }
+            }
+            if nc > 0 {
+                self.joint_block(ws, p, root_xi, jx, j, &cs[..nc]);
             }
         }
     }

@@ -16,6 +16,7 @@
 //! `Z = Z0` and `ZᵀŻ = 0` there.
 
 mod ambient;
+mod columns;
 mod eval;
 mod frame;
 mod jacobian;
