@@ -433,7 +433,7 @@ impl QuadraticTerms {
     /// `Σ_j v x_j` (the Jacobian's layout: dense clusters and ELLPACK groups), then
     /// `out_i += x_l · sum` by a fused multiply–add, each row's pairs in a fixed order. The
     /// sums go to a stack buffer first and the rows are then updated side by side
-    /// ([`RowPass`]); models beyond its size update `out` as each sum is formed (same order,
+    /// (`RowPass`); models beyond its size update `out` as each sum is formed (same order,
     /// same bits).
     pub fn add_rhs(&self, x: &[f64], out: &mut [f64]) {
         assert_eq!(out.len(), self.n, "out must have length n");
