@@ -8,9 +8,9 @@
 //!   [`paper_reduction`]: same velocity and force coordinates, plus 4 quaternion entries for the
 //!   root and each joint, against the paper model's quaternion states).
 
-#![allow(missing_docs)] // criterion's macros generate undocumented items
+#![allow(missing_docs)] // a bench binary
 
-use criterion::{criterion_group, criterion_main, Criterion};
+use criterion::Criterion;
 use modal_rom::exact_joints::{from_fields, paper_reduction, ExactJointsRom};
 use modal_rom::samples;
 use modal_rom::{
@@ -125,85 +125,183 @@ fn paper_basis_models(spatial: bool, elements: usize) -> (ExactJointsRom, ModalR
     (exact, paper)
 }
 
-fn bench_pair(c: &mut Criterion, name: &str, spatial: bool, elastic: Option<usize>) {
-    // `EXACT_JOINTS_PAIR=<name>` runs one pairing only; `EXACT_JOINTS_PROFILE=<calls>` runs
-    // only that many exact-joints rhs + Jacobian calls (a loop for `perf record`).
-    if std::env::var("EXACT_JOINTS_PAIR").is_ok_and(|p| p != name) {
-        return;
-    }
-    let profile: Option<usize> =
-        std::env::var("EXACT_JOINTS_PROFILE").ok().and_then(|s| s.parse().ok());
-    let (exact, paper) = match elastic {
-        Some(e) => models(spatial, 20, e),
-        None => paper_basis_models(spatial, 20),
-    };
-    let x = exact_state(&exact, spatial);
-    let (n, nu) = (exact.n_state(), exact.n_inputs());
-    let u: Vec<f64> = (0..nu).map(|i| 0.3 * (i as f64 + 1.0)).collect();
-    let (mut f, mut jx, mut ju) = (vec![0.0; n], vec![0.0; n * n], vec![0.0; n * nu]);
-    let np = paper.n_state();
-    let q: Vec<f64> = (0..np).map(|i| 0.1 * (i as f64 * 0.37).sin()).collect();
-    let (mut fp, mut jp, mut jup) = (vec![0.0; np], vec![0.0; np * np], vec![0.0; np * nu]);
-    eprintln!(
-        "{name}: exact-joints state {n} (p {}, p2 {}), paper state {np} ({} modes)",
-        exact.n_p(),
-        exact.n_p2(),
-        paper.n_modes()
-    );
-    if let Some(calls) = profile {
-        cpu_report(&format!("{name}/exact_rhs_and_jacobian"), calls, || {
-            exact
-                .rhs_and_jacobian(black_box(&x), black_box(&u), &mut f, &mut jx, &mut ju)
-                .expect("exact")
-        });
-        return;
-    }
-    cpu_report(&format!("{name}/exact_rhs_and_jacobian"), 2_000, || {
-        exact
-            .rhs_and_jacobian(black_box(&x), black_box(&u), &mut f, &mut jx, &mut ju)
-            .expect("exact")
-    });
-    cpu_report(&format!("{name}/paper_rhs_and_jacobian"), 20_000, || {
-        paper
-            .rhs_and_jacobian(black_box(&q), black_box(&u), &mut fp, &mut jp, &mut jup)
-            .expect("paper")
-    });
-    cpu_report(&format!("{name}/exact_rhs"), 2_000, || {
-        exact.rhs(black_box(&x), black_box(&u), &mut f).expect("exact")
-    });
-    cpu_report(&format!("{name}/paper_rhs"), 20_000, || {
-        paper.rhs(black_box(&q), black_box(&u), &mut fp).expect("paper")
-    });
-    let mut group = c.benchmark_group("exact_joints");
-    group.bench_function(format!("{name}/exact_rhs_and_jacobian"), |b| {
-        b.iter(|| {
-            exact
-                .rhs_and_jacobian(black_box(&x), black_box(&u), &mut f, &mut jx, &mut ju)
-                .expect("exact")
-        })
-    });
-    group.bench_function(format!("{name}/paper_rhs_and_jacobian"), |b| {
-        b.iter(|| {
-            paper
-                .rhs_and_jacobian(black_box(&q), black_box(&u), &mut fp, &mut jp, &mut jup)
-                .expect("paper")
-        })
-    });
-    group.bench_function(format!("{name}/exact_rhs"), |b| {
-        b.iter(|| exact.rhs(black_box(&x), black_box(&u), &mut f).expect("exact"))
-    });
-    group.bench_function(format!("{name}/paper_rhs"), |b| {
-        b.iter(|| paper.rhs(black_box(&q), black_box(&u), &mut fp).expect("paper"))
-    });
-    group.finish();
+/// One timed evaluation: its name, the calls of its thread-CPU line, the call.
+type Call<'a> = (&'static str, usize, Box<dyn FnMut() + 'a>);
+
+/// One pairing: its models, state and buffers.
+struct Pair {
+    exact: ExactJointsRom,
+    paper: ModalRom,
+    x: Vec<f64>,
+    q: Vec<f64>,
+    u: Vec<f64>,
 }
 
-fn exact_joints(c: &mut Criterion) {
-    bench_pair(c, "2d_rigid+4", false, Some(4));
-    bench_pair(c, "3d_rigid+16", true, Some(16));
-    bench_pair(c, "2d_paper_basis", false, None);
-    bench_pair(c, "3d_paper_basis", true, None);
+impl Pair {
+    fn new(name: &str, spatial: bool, elastic: Option<usize>) -> Self {
+        let (exact, paper) = match elastic {
+            Some(e) => models(spatial, 20, e),
+            None => paper_basis_models(spatial, 20),
+        };
+        let x = exact_state(&exact, spatial);
+        let nu = exact.n_inputs();
+        let u: Vec<f64> = (0..nu).map(|i| 0.3 * (i as f64 + 1.0)).collect();
+        let np = paper.n_state();
+        let q: Vec<f64> = (0..np).map(|i| 0.1 * (i as f64 * 0.37).sin()).collect();
+        eprintln!(
+            "{name}: exact-joints state {} (p {}, p2 {}), paper state {np} ({} modes)",
+            exact.n_state(),
+            exact.n_p(),
+            exact.n_p2(),
+            paper.n_modes()
+        );
+        Pair { exact, paper, x, q, u }
+    }
+
+    /// The four evaluations, each as a closure over its own output buffers.
+    fn calls(&self) -> [Call<'_>; 4] {
+        let (n, nu, np) = (self.exact.n_state(), self.u.len(), self.paper.n_state());
+        let (mut f, mut jx, mut ju) = (vec![0.0; n], vec![0.0; n * n], vec![0.0; n * nu]);
+        let mut f2 = vec![0.0; n];
+        let (mut fp, mut jp, mut jup) = (vec![0.0; np], vec![0.0; np * np], vec![0.0; np * nu]);
+        let mut fp2 = vec![0.0; np];
+        let (exact, paper, x, q, u) = (&self.exact, &self.paper, &self.x, &self.q, &self.u);
+        [
+            (
+                "exact_rhs_and_jacobian",
+                2_000,
+                Box::new(move || {
+                    exact
+                        .rhs_and_jacobian(black_box(x), black_box(u), &mut f, &mut jx, &mut ju)
+                        .expect("exact")
+                }),
+            ),
+            (
+                "paper_rhs_and_jacobian",
+                20_000,
+                Box::new(move || {
+                    paper
+                        .rhs_and_jacobian(black_box(q), black_box(u), &mut fp, &mut jp, &mut jup)
+                        .expect("paper")
+                }),
+            ),
+            (
+                "exact_rhs",
+                2_000,
+                Box::new(move || exact.rhs(black_box(x), black_box(u), &mut f2).expect("exact")),
+            ),
+            (
+                "paper_rhs",
+                20_000,
+                Box::new(move || paper.rhs(black_box(q), black_box(u), &mut fp2).expect("paper")),
+            ),
+        ]
+    }
 }
 
-criterion_group!(benches, exact_joints);
-criterion_main!(benches);
+/// The pairings: name, spatial, elastic modes per link (`None`: the paper's basis).
+const PAIRS: [(&str, bool, Option<usize>); 4] = [
+    ("2d_rigid+4", false, Some(4)),
+    ("3d_rigid+16", true, Some(16)),
+    ("2d_paper_basis", false, None),
+    ("3d_paper_basis", true, None),
+];
+
+/// The bench's own arguments (without them: criterion, with criterion's arguments).
+const USAGE: &str = "\
+usage: cargo bench -p modal-rom --bench exact_joints -- [CRITERION ARGS]
+       cargo bench -p modal-rom --bench exact_joints -- --cpu [--pair NAME] [--profile CALLS]
+
+  (no --cpu)        thread-CPU lines of every pairing, then the criterion benches
+  --cpu             the thread-CPU lines only (no criterion)
+  --pair NAME       with --cpu: this pairing only (2d_rigid+4, 3d_rigid+16, 2d_paper_basis,
+                    3d_paper_basis)
+  --profile CALLS   with --cpu: only a loop of CALLS exact-joints rhs + Jacobian calls (for
+                    `perf record`)";
+
+/// `--cpu` options: the pairing filter and the profile loop length.
+#[derive(Default)]
+struct CpuOnly {
+    pair: Option<String>,
+    profile: Option<usize>,
+}
+
+/// `Ok(None)`: no `--cpu`, run criterion; `Err`: a message naming the argument.
+fn parse(args: &[String]) -> Result<Option<CpuOnly>, String> {
+    let (mut cpu, mut opts) = (false, CpuOnly::default());
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        let mut value =
+            |name: &str| it.next().cloned().ok_or_else(|| format!("`{name}` needs a value"));
+        match a.as_str() {
+            "--cpu" => cpu = true,
+            "--pair" => {
+                let v = value("--pair")?;
+                if !PAIRS.iter().any(|p| p.0 == v) {
+                    return Err(format!("`--pair {v}`: no such pairing"));
+                }
+                opts.pair = Some(v);
+            }
+            "--profile" => {
+                let v = value("--profile")?;
+                let n =
+                    v.parse().ok().filter(|n: &usize| *n > 0).ok_or_else(|| {
+                        format!("`--profile {v}`: not a positive number of calls")
+                    })?;
+                opts.profile = Some(n);
+            }
+            _ => {}
+        }
+    }
+    match (cpu, opts.pair.is_some() || opts.profile.is_some()) {
+        (false, false) => Ok(None),
+        (false, true) => Err("`--pair` and `--profile` go with `--cpu`".into()),
+        (true, _) => Ok(Some(opts)),
+    }
+}
+
+/// Thread-CPU lines (or the profile loop) of the selected pairings.
+fn cpu_lines(opts: &CpuOnly) {
+    for (name, spatial, elastic) in PAIRS {
+        if opts.pair.as_deref().is_some_and(|p| p != name) {
+            continue;
+        }
+        let pair = Pair::new(name, spatial, elastic);
+        for (what, calls, mut f) in pair.calls() {
+            match opts.profile {
+                Some(n) if what == "exact_rhs_and_jacobian" => {
+                    cpu_report(&format!("{name}/{what}"), n, &mut f)
+                }
+                Some(_) => {}
+                None => cpu_report(&format!("{name}/{what}"), calls, &mut f),
+            }
+        }
+    }
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.iter().any(|a| a == "--help" || a == "-h") && !args.iter().any(|a| a == "--cpu") {
+        println!("{USAGE}\n\ncriterion's arguments:");
+    }
+    match parse(&args) {
+        Ok(Some(opts)) => cpu_lines(&opts),
+        Ok(None) => {
+            cpu_lines(&CpuOnly::default());
+            let mut c = Criterion::default().configure_from_args();
+            let mut group = c.benchmark_group("exact_joints");
+            for (name, spatial, elastic) in PAIRS {
+                let pair = Pair::new(name, spatial, elastic);
+                for (what, _, mut f) in pair.calls() {
+                    group.bench_function(format!("{name}/{what}"), |b| b.iter(&mut f));
+                }
+            }
+            group.finish();
+            c.final_summary();
+        }
+        Err(e) => {
+            eprintln!("error: {e}\n\n{USAGE}");
+            std::process::exit(2);
+        }
+    }
+}
