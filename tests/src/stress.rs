@@ -1165,7 +1165,8 @@ pub mod scene_fuzz {
 
     use super::panic_message;
 
-    /// The shipped scenes (`scenes/*.toml`), the seeds of the mutations.
+    /// Shipped scenes (`scenes/`), the seeds of the mutations: every structure kind and both
+    /// paper closed loops.
     pub const SHIPPED: [(&str, &str); 8] = [
         ("ball-joint-3.toml", include_str!("../../scenes/ball-joint-3.toml")),
         ("cantilever.toml", include_str!("../../scenes/cantilever.toml")),

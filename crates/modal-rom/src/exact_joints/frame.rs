@@ -271,14 +271,7 @@ pub(crate) fn lowrank_solve_l(
     t: &mut [f64],
     a: &mut [f64],
 ) {
-    let a = &mut a[..q];
-    a.fill(0.0);
-    for (i, &di) in d.iter().enumerate() {
-        let (yi, hi) = (&y[i * q..(i + 1) * q], &h[i * q..(i + 1) * q]);
-        let ti = (t[i] + yi.iter().zip(a.iter()).map(|(x, y)| x * y).sum::<f64>()) / di;
-        t[i] = ti;
-        a.iter_mut().zip(hi).for_each(|(a, h)| *a += h * ti);
-    }
+    lowrank_sweep(y, h, d, q, t, a, 0..d.len());
 }
 
 /// `t ← L⁻ᵀ t` (backward: `t_j = (t_j + h_jᵀ a) / d_j`, `a += y_j t_j`) with `L` of
@@ -291,12 +284,26 @@ pub(crate) fn lowrank_solve_lt(
     t: &mut [f64],
     a: &mut [f64],
 ) {
+    lowrank_sweep(h, y, d, q, t, a, (0..d.len()).rev());
+}
+
+/// The triangular sweep of both solves: for `i` in `order`, `t_i = (t_i + g_iᵀ a) / d_i`,
+/// then `a += e_i t_i` (`g`, `e`: `q` entries per row).
+fn lowrank_sweep(
+    g: &[f64],
+    e: &[f64],
+    d: &[f64],
+    q: usize,
+    t: &mut [f64],
+    a: &mut [f64],
+    order: impl Iterator<Item = usize>,
+) {
     let a = &mut a[..q];
     a.fill(0.0);
-    for j in (0..d.len()).rev() {
-        let (yj, hj) = (&y[j * q..(j + 1) * q], &h[j * q..(j + 1) * q]);
-        let tj = (t[j] + hj.iter().zip(a.iter()).map(|(x, y)| x * y).sum::<f64>()) / d[j];
-        t[j] = tj;
-        a.iter_mut().zip(yj).for_each(|(a, y)| *a += y * tj);
+    for i in order {
+        let (gi, ei) = (&g[i * q..(i + 1) * q], &e[i * q..(i + 1) * q]);
+        let ti = (t[i] + gi.iter().zip(a.iter()).map(|(x, y)| x * y).sum::<f64>()) / d[i];
+        t[i] = ti;
+        a.iter_mut().zip(ei).for_each(|(a, e)| *a += e * ti);
     }
 }
