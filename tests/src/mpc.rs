@@ -331,7 +331,7 @@ fn exact_joints_3d() -> CaseOutcome {
 /// The largest ω0 on the FE plant with `scenes/paper-3d-mpc-full-range.toml` (the full SQP on
 /// 24 elastic modes per link, implicit midpoint × 4; docs/mpc.md, "Beyond ω0 = 1": ✓ FE
 /// 0.25…1.25, ✗ 1.375 and 1.5), the same assertions as `mpc/3d-exact-joints`. One loop,
-/// ≈ 35 s thread CPU.
+/// ≈ 38 s CPU.
 fn exact_joints_3d_full_range() -> CaseOutcome {
     let text = include_str!("../../scenes/paper-3d-mpc-full-range.toml");
     exact_joints_3d_scene("paper-3d-mpc-full-range.toml", text, &[(PlantKind::Fe, &[1.25])])
