@@ -373,6 +373,7 @@ fn shipped_mpc_scenes_match_the_mpc_presets() {
     for (file, preset) in [
         ("paper-2d-mpc.toml", mpc::Scenario::paper_2d(50).unwrap()),
         ("paper-3d-mpc.toml", mpc::Scenario::paper_3d(50).unwrap()),
+        ("paper-3d-mpc-full-range.toml", mpc::Scenario::paper_3d(50).unwrap()),
         ("paper-3d-mpc-paper-model.toml", mpc::Scenario::paper_3d(50).unwrap()),
         ("paper-3d-mpc-ku1.toml", {
             let mut p = mpc::Scenario::paper_3d(50).unwrap();
@@ -411,6 +412,17 @@ fn shipped_mpc_scenes_match_the_mpc_presets() {
         }
         if file == "paper-3d-mpc.toml" {
             assert_eq!(c.controller, mpc::ControllerSettings::exact_joints());
+        }
+        if file == "paper-3d-mpc-full-range.toml" {
+            // the full SQP on 24 elastic modes per link (docs/mpc.md, "Beyond ω0 = 1")
+            let full = mpc::ControllerSettings {
+                real_time_iteration: false,
+                max_iterations: 10,
+                levenberg_marquardt: 0.0,
+                link_elastic_modes: Some(24),
+                ..mpc::ControllerSettings::exact_joints()
+            };
+            assert_eq!(c.controller, full);
         }
         if file == "paper-3d-mpc-paper-model.toml" {
             assert_eq!(c.controller.model, mpc::ModelKind::Paper);
