@@ -20,6 +20,7 @@ const SCENES: &[(&str, &str)] = &[
     ("paper-2d-mpc.toml", include_str!("../../scenes/paper-2d-mpc.toml")),
     ("paper-2d-mpc-exact-joints.toml", include_str!("../../scenes/paper-2d-mpc-exact-joints.toml")),
     ("paper-3d-mpc.toml", include_str!("../../scenes/paper-3d-mpc.toml")),
+    ("paper-3d-mpc-full-range.toml", include_str!("../../scenes/paper-3d-mpc-full-range.toml")),
     ("paper-3d-mpc-paper-model.toml", include_str!("../../scenes/paper-3d-mpc-paper-model.toml")),
     ("paper-3d-mpc-ku1.toml", include_str!("../../scenes/paper-3d-mpc-ku1.toml")),
     ("fold-2d.toml", include_str!("../../scenes/fold-2d.toml")),
