@@ -648,7 +648,7 @@ fn run(cli: &Cli) -> Result<()> {
                 say!("{}", serde_json::to_string_pretty(&v)?);
             } else if !cli.quiet {
                 say!(
-                    "{} first sample, ω0 = {} ({}): cost {:.6e}, KKT {}, {} iterations, {}, status {} ({})",
+                    "{} first sample, ω0 = {} ({}): cost {:.6e}, KKT {}, {} iteration{}, {}, status {} ({})",
                     v["controller"].as_str().unwrap_or("?").to_uppercase(),
                     v["omega0"],
                     v["mode"].as_str().unwrap_or("?"),
@@ -658,6 +658,7 @@ fn run(cli: &Cli) -> Result<()> {
                         |k| format!("{k:.1e}")
                     ),
                     v["iterations"],
+                    if v["iterations"].as_u64() == Some(1) { "" } else { "s" },
                     v["solve_time_s"]
                         .as_f64()
                         .map_or_else(|| "time not shown".to_string(), |t| format!("{t:.3} s")),
