@@ -23,11 +23,28 @@ pub const SOLVE_TIME_GOAL_S: f64 = 0.05;
 /// The files that hold measured timings (everything else is reproducible).
 pub const FILES: [&str; 3] = ["timings.json", "timings.csv", "solve_times.svg"];
 
-/// Keys of the summary (and of `summary_json`) that hold measured timings.
-pub const SUMMARY_KEYS: [&str; 3] = ["solve_time_worst_s", "solve_time_median_s", "wall_time_s"];
+/// Keys of the summary (and of `summary_json`) that hold measured timings (and the thread
+/// count they were measured on, which `--threads` sets).
+pub const SUMMARY_KEYS: [&str; 8] = [
+    "solve_time_worst_s",
+    "solve_time_median_s",
+    "wall_time_s",
+    "solve_threads",
+    "solve_cpu_per_thread_worst_s",
+    "solve_cpu_per_thread_median_s",
+    "solve_wall_worst_s",
+    "solve_wall_median_s",
+];
 
-/// Key of a per-sample report that holds its measured solve time.
-pub const SAMPLE_KEY: &str = "solve_time";
+/// Keys of a per-sample report that hold its measured solve times ([`mpc::SampleReport`]'s
+/// `solve_time` and [`mpc::SolveTiming`]).
+pub const SAMPLE_KEYS: [&str; 5] = [
+    "solve_time",
+    "solve_cpu_all_threads",
+    "solve_wall_time",
+    "solve_threads",
+    "solve_cpu_per_thread",
+];
 
 /// A sample time rounded to 1 ns, so that `0.6000000000000001` prints as `0.6`.
 fn round_t(t: f64) -> f64 {
@@ -62,20 +79,30 @@ pub fn samples_without_timings(r: &RunResult) -> Value {
     let mut v = serde_json::to_value(&r.samples).unwrap_or(Value::Null);
     if let Value::Array(a) = &mut v {
         for s in a {
-            strip(s, &[SAMPLE_KEY]);
+            strip(s, &SAMPLE_KEYS);
         }
     }
     v
 }
 
-/// The measured timings of one run: wall time, median and worst solve time, and each
-/// sample's `(t, solve_time_s, iterations)`.
+/// The measured timings of one run: wall time, median and worst solve time in each measure,
+/// and each sample's `(t, solve_time_s, cpu_all_threads_s, cpu_per_thread_s, wall_s,
+/// iterations)`.
 pub fn run_json(r: &RunResult) -> Value {
     let s = &r.summary;
     let samples: Vec<Value> = r
         .samples
         .iter()
-        .map(|x| json!({ "t": round_t(x.t), "solve_time_s": x.solve_time, "iterations": x.iterations }))
+        .map(|x| {
+            json!({
+                "t": round_t(x.t),
+                "solve_time_s": x.solve_time,
+                "cpu_all_threads_s": x.timing.solve_cpu_all_threads,
+                "cpu_per_thread_s": x.timing.solve_cpu_per_thread,
+                "wall_s": x.timing.solve_wall_time,
+                "iterations": x.iterations,
+            })
+        })
         .collect();
     json!({
         "controller": s.controller,
@@ -84,6 +111,11 @@ pub fn run_json(r: &RunResult) -> Value {
         "wall_time_s": r.wall_time_s,
         "solve_time_median_s": s.solve_time_median_s,
         "solve_time_worst_s": s.solve_time_worst_s,
+        "solve_threads": s.solve_threads,
+        "solve_cpu_per_thread_median_s": s.solve_cpu_per_thread_median_s,
+        "solve_cpu_per_thread_worst_s": s.solve_cpu_per_thread_worst_s,
+        "solve_wall_median_s": s.solve_wall_median_s,
+        "solve_wall_worst_s": s.solve_wall_worst_s,
         "samples": samples,
     })
 }
@@ -94,8 +126,13 @@ fn header(sampling: f64) -> Map<String, Value> {
         "note".into(),
         json!(
             "measured times: they differ from run to run (every other output file is \
-               reproducible); solve_time_s is the CPU time of the solving thread for the whole \
-               sample's solve, all attempts included"
+               reproducible). Per sample, for the whole solve, all attempts included: \
+               solve_time_s is the CPU time of the calling thread (all of the solve's CPU when \
+               solve_threads = 1); cpu_all_threads_s the CPU time of every thread of the \
+               process (with parallel_intervals the rayon pool's idle spinning counts, and in \
+               a sweep the runs going on at the same time); cpu_per_thread_s is \
+               cpu_all_threads_s / solve_threads when the intervals run in parallel, else \
+               solve_time_s; wall_s the wall-clock time. The plot shows cpu_per_thread_s."
         ),
     );
     m.insert("sampling_s".into(), json!(sampling));
@@ -124,12 +161,14 @@ fn solve_axes(title: String, sampling: f64) -> Axes {
     }
 }
 
+/// Each sample's CPU time per thread ([`mpc::SolveTiming::solve_cpu_per_thread`]: the
+/// calling thread's CPU unless the intervals run in parallel).
 fn solve_series(r: &RunResult) -> Vec<(f64, f64)> {
-    r.samples.iter().map(|s| (s.t, s.solve_time)).collect()
+    r.samples.iter().map(|s| (s.t, s.timing.solve_cpu_per_thread)).collect()
 }
 
-/// `flexmpc mpc`: writes `timings.json`, `timings.csv` (`t, solve_time_s, iterations` per
-/// sample) and `solve_times.svg` (solve time per sample against `τs` and the 50 ms goal) into
+/// `flexmpc mpc`: writes `timings.json`, `timings.csv` (`t, solve_time_s, iterations,
+/// cpu_all_threads_s, cpu_per_thread_s, wall_s` per sample) and `solve_times.svg` (solve time per sample against `τs` and the 50 ms goal) into
 /// `out`; returns their paths.
 pub fn write_run(r: &RunResult, sampling: f64, out: &Path) -> Result<Vec<PathBuf>> {
     let mut v = header(sampling);
@@ -141,9 +180,18 @@ pub fn write_run(r: &RunResult, sampling: f64, out: &Path) -> Result<Vec<PathBuf
         .with_context(|| format!("writing {}", json_path.display()))?;
     let csv_path = out.join(FILES[1]);
     let mut f = create(&csv_path)?;
-    writeln!(f, "t,solve_time_s,iterations")?;
+    writeln!(f, "t,solve_time_s,iterations,cpu_all_threads_s,cpu_per_thread_s,wall_s")?;
     for s in &r.samples {
-        writeln!(f, "{},{:.6e},{}", round_t(s.t), s.solve_time, s.iterations)?;
+        writeln!(
+            f,
+            "{},{:.6e},{},{:.6e},{:.6e},{:.6e}",
+            round_t(s.t),
+            s.solve_time,
+            s.iterations,
+            s.timing.solve_cpu_all_threads,
+            s.timing.solve_cpu_per_thread,
+            s.timing.solve_wall_time
+        )?;
     }
     f.flush()?;
     let svg = out.join(FILES[2]);

@@ -2,7 +2,9 @@
 //! control for `τs` on the plant; time series, snapshots, per-sample reports and the summary
 //! metrics; sweeps over `ω0` in parallel.
 
-use crate::controller::{Controller, ControllerKind, ControllerSettings, SampleReport, Strategy};
+use crate::controller::{
+    Controller, ControllerKind, ControllerSettings, SampleReport, SolveTiming, Strategy,
+};
 use crate::dynamics::RomDynamics;
 use crate::error::{invalid, Result};
 use crate::exact_dynamics::{default_link_elastic_modes, ExactDynamics, ModelKind};
@@ -103,10 +105,30 @@ pub struct RunSummary {
     /// Per joint command: rotation angle between the commanded and the plant's rotation at T
     /// (deg; empty without commands).
     pub command_errors_deg: Vec<f64>,
-    /// Worst per-sample solve time (s).
+    /// Worst per-sample solve time (s): the calling thread's CPU
+    /// ([`SampleReport::solve_time`]; with `ControllerSettings::parallel_intervals` on it
+    /// misses the pool's work, see [`Self::solve_cpu_per_thread_worst_s`]).
     pub solve_time_worst_s: f64,
-    /// Median per-sample solve time (s).
+    /// Median per-sample solve time (s), the same measure.
     pub solve_time_median_s: f64,
+    /// Threads each solve ran on ([`crate::SolveTiming::solve_threads`], largest over the
+    /// samples).
+    #[serde(default)]
+    pub solve_threads: usize,
+    /// Worst per-sample CPU time per thread (s, [`crate::SolveTiming::solve_cpu_per_thread`]:
+    /// all threads' CPU over `solve_threads` with the intervals in parallel, else the calling
+    /// thread's CPU).
+    #[serde(default)]
+    pub solve_cpu_per_thread_worst_s: f64,
+    /// Median per-sample CPU time per thread (s), the same measure.
+    #[serde(default)]
+    pub solve_cpu_per_thread_median_s: f64,
+    /// Worst per-sample wall time of the solve (s, [`crate::SolveTiming::solve_wall_time`]).
+    #[serde(default)]
+    pub solve_wall_worst_s: f64,
+    /// Median per-sample wall time of the solve (s).
+    #[serde(default)]
+    pub solve_wall_median_s: f64,
     /// Samples whose first NMPC attempt failed.
     pub failed_first_attempts: usize,
     /// Samples solved by the relaxed retry (sub-relaxation + LM).
@@ -155,8 +177,14 @@ impl RunResult {
         r.wall_time_s = 0.0;
         r.summary.solve_time_worst_s = 0.0;
         r.summary.solve_time_median_s = 0.0;
+        r.summary.solve_threads = 0;
+        r.summary.solve_cpu_per_thread_worst_s = 0.0;
+        r.summary.solve_cpu_per_thread_median_s = 0.0;
+        r.summary.solve_wall_worst_s = 0.0;
+        r.summary.solve_wall_median_s = 0.0;
         for s in &mut r.samples {
             s.solve_time = 0.0;
+            s.timing = SolveTiming::default();
         }
         r
     }
@@ -562,6 +590,20 @@ pub fn open_loop(
     Ok(records)
 }
 
+/// Largest and median of `times` (0 for none).
+fn worst_median(times: impl Iterator<Item = f64>) -> (f64, f64) {
+    let mut times: Vec<f64> = times.collect();
+    times.sort_by(|a, b| a.total_cmp(b));
+    let median = if times.is_empty() {
+        0.0
+    } else if times.len() % 2 == 1 {
+        times[times.len() / 2]
+    } else {
+        0.5 * (times[times.len() / 2 - 1] + times[times.len() / 2])
+    };
+    (times.last().copied().unwrap_or(0.0), median)
+}
+
 fn summarise(
     setup: &Setup,
     omega0: f64,
@@ -591,16 +633,10 @@ fn summarise(
     let root = setup.root_joint;
     let max_orient = records.iter().map(|r| r.joint_angles[root].abs()).fold(0.0, f64::max);
     let orient = last.joint_angles[root].abs();
-    let mut times: Vec<f64> = samples.iter().map(|s| s.solve_time).collect();
-    times.sort_by(|a, b| a.total_cmp(b));
-    let median = if times.is_empty() {
-        0.0
-    } else if times.len() % 2 == 1 {
-        times[times.len() / 2]
-    } else {
-        0.5 * (times[times.len() / 2 - 1] + times[times.len() / 2])
-    };
-    let worst = times.last().copied().unwrap_or(0.0);
+    let (worst, median) = worst_median(samples.iter().map(|s| s.solve_time));
+    let (per_thread_worst, per_thread_median) =
+        worst_median(samples.iter().map(|s| s.timing.solve_cpu_per_thread));
+    let (wall_worst, wall_median) = worst_median(samples.iter().map(|s| s.timing.solve_wall_time));
     let completed = error.is_none();
     let peak = records.iter().map(|r| r.energy).fold(0.0, f64::max);
     let energy_ratio_final = if peak > 0.0 { last.energy / peak } else { 0.0 };
@@ -627,6 +663,11 @@ fn summarise(
         command_errors_deg,
         solve_time_worst_s: worst,
         solve_time_median_s: median,
+        solve_threads: samples.iter().map(|s| s.timing.solve_threads).max().unwrap_or(1),
+        solve_cpu_per_thread_worst_s: per_thread_worst,
+        solve_cpu_per_thread_median_s: per_thread_median,
+        solve_wall_worst_s: wall_worst,
+        solve_wall_median_s: wall_median,
         failed_first_attempts: samples
             .iter()
             .filter(|s| matches!(s.strategy, Strategy::Relaxed | Strategy::Fallback))

@@ -110,6 +110,15 @@ pub struct ControllerSettings {
     /// elastic modes (the lowest constrained modes at the reference, split per link);
     /// `None`: 4 for planar, 16 for spatial structures (docs/exact-joints-results.md) \[None\].
     pub link_elastic_modes: Option<usize>,
+    /// Integrate the shooting intervals of each NMPC linearisation on the rayon thread pool
+    /// ([`ocp_transcription::SqpSettings::parallel_intervals`], for the first attempt and the
+    /// relaxed retry; the line-search trials and the linear MPC stay on the calling thread)
+    /// \[false\]. Every value is valid, and the result does not depend on it: each interval is
+    /// integrated alone and the sums over intervals run in interval order, so the plans and
+    /// the closed loop are the same bits for any pool size, on or off. It shortens a sample's
+    /// wall time on more than one core; its CPU time is then spread over the pool
+    /// ([`SampleReport::solve_cpu_per_thread`]).
+    pub parallel_intervals: bool,
 }
 
 /// The default is the real-time NMPC ([`ControllerSettings::real_time`] with merit line
@@ -153,6 +162,7 @@ impl ControllerSettings {
             fallback_hold: DEFAULT_FALLBACK_HOLD,
             model: ModelKind::Paper,
             link_elastic_modes: None,
+            parallel_intervals: false,
         }
     }
 
@@ -253,6 +263,7 @@ impl ControllerSettings {
                 return Err(invalid("plan_joint_limit_deg", a, "must be in (0, 180]"));
             }
         }
+        // `parallel_intervals`: every value is valid (it does not change the result)
         if self.model == ModelKind::ExactJoints {
             if self.kind == ControllerKind::Lmpc {
                 return Err(invalid(
@@ -305,10 +316,14 @@ pub struct SampleReport {
     pub iterations: usize,
     /// CPU time the calling thread spent on the whole sample's solve (all attempts) (s), from
     /// [`ocp_transcription::thread_cpu_time`]: not inflated by other processes sharing the
-    /// cores. The controller runs every solve on the calling thread (its SQP settings keep
-    /// `parallel_intervals` off), so this is all the solve's CPU time. Wall time where the
-    /// thread clock is unavailable (off Unix).
+    /// cores. With [`ControllerSettings::parallel_intervals`] off every solve runs on the
+    /// calling thread, so this is all the solve's CPU time; with it on, the work of the pool's
+    /// threads is missing here ([`SolveTiming`] has the measures that count it). Wall time
+    /// where the thread clock is unavailable (off Unix).
     pub solve_time: f64,
+    /// The sample's solve measured by the whole process's CPU and by the wall clock.
+    #[serde(flatten)]
+    pub timing: SolveTiming,
     /// Optimal cost of the accepted plan.
     pub cost: f64,
     /// KKT residual of the accepted plan.
@@ -324,6 +339,30 @@ pub struct SampleReport {
     /// NMPC attempts of this sample that converged (or were acceptable) but were rejected
     /// because their plan left [`ControllerSettings::plan_joint_limit_deg`].
     pub joint_limit_rejections: usize,
+}
+
+/// One sample's solve (all attempts) measured three ways besides the calling thread's CPU
+/// ([`SampleReport::solve_time`]). Where the solve runs on `n > 1` threads
+/// ([`ControllerSettings::parallel_intervals`]) the calling thread's CPU misses the pool's
+/// work, so the time per sample on `n` cores is stated as `solve_cpu_all_threads / n` (the
+/// CPU each core spent on average) beside the wall time.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct SolveTiming {
+    /// CPU time of every thread of the process during the solve (s), from
+    /// [`ocp_transcription::process_cpu_time`]. It counts the pool's idle spinning between
+    /// the parallel sections (CPU taken from other work, so it is counted), and in a sweep
+    /// the other runs going on at the same time; 0 where the clock is unavailable.
+    pub solve_cpu_all_threads: f64,
+    /// Wall-clock time of the solve (s): includes the time other processes hold the cores.
+    pub solve_wall_time: f64,
+    /// Threads the solve ran on: the rayon pool's size with
+    /// [`ControllerSettings::parallel_intervals`] on (NMPC), else 1.
+    pub solve_threads: usize,
+    /// The solve's CPU time per thread (s): with [`ControllerSettings::parallel_intervals`]
+    /// on, `solve_cpu_all_threads / solve_threads` (the calling thread waits while the pool
+    /// works); off, the calling thread's CPU ([`SampleReport::solve_time`]).
+    pub solve_cpu_per_thread: f64,
 }
 
 /// A receding-horizon controller on a reduced model `D`: the paper's augmented modal model
@@ -401,6 +440,7 @@ impl<D: Dynamics + Clone> Controller<D> {
                     globalisation: settings.globalisation,
                     levenberg_marquardt: settings.levenberg_marquardt,
                     max_iterations: settings.max_iterations,
+                    parallel_intervals: settings.parallel_intervals,
                     ..base
                 };
                 let relaxed = match settings.retry_relaxation {
@@ -561,7 +601,11 @@ impl<D: Dynamics + Clone> Controller<D> {
             None => 0.0,
         };
         self.last_start = Some(start);
-        let (clock, cpu) = (Instant::now(), ocp_transcription::thread_cpu_time());
+        let (clock, cpu, all) = (
+            Instant::now(),
+            ocp_transcription::thread_cpu_time(),
+            ocp_transcription::process_cpu_time(),
+        );
         self.apply_schedule(start)?;
         let report = match self.settings.kind {
             ControllerKind::Lmpc => {
@@ -571,11 +615,40 @@ impl<D: Dynamics + Clone> Controller<D> {
             ControllerKind::Nmpc => self.step_nmpc(t, start, x0, shift)?,
         };
         self.samples += 1;
-        let solve_time = match (cpu, ocp_transcription::thread_cpu_time()) {
+        let (all_end, cpu_end) =
+            (ocp_transcription::process_cpu_time(), ocp_transcription::thread_cpu_time());
+        let wall = clock.elapsed().as_secs_f64();
+        let solve_time = match (cpu, cpu_end) {
             (Some(a), Some(b)) => b - a,
-            _ => clock.elapsed().as_secs_f64(),
+            _ => wall,
         };
-        Ok(SampleReport { solve_time, ..report })
+        let solve_cpu_all_threads = match (all, all_end) {
+            (Some(a), Some(b)) => b - a,
+            _ => 0.0,
+        };
+        let parallel =
+            self.settings.parallel_intervals && self.settings.kind == ControllerKind::Nmpc;
+        let timing = if parallel {
+            let threads = rayon::current_num_threads().max(1);
+            SolveTiming {
+                solve_cpu_all_threads,
+                solve_wall_time: wall,
+                solve_threads: threads,
+                solve_cpu_per_thread: if all.is_some() {
+                    solve_cpu_all_threads / threads as f64
+                } else {
+                    wall
+                },
+            }
+        } else {
+            SolveTiming {
+                solve_cpu_all_threads,
+                solve_wall_time: wall,
+                solve_threads: 1,
+                solve_cpu_per_thread: solve_time,
+            }
+        };
+        Ok(SampleReport { solve_time, timing, ..report })
     }
 
     fn step_nmpc(&mut self, t: f64, start: f64, x0: &[f64], shift: f64) -> Result<SampleReport> {
@@ -681,6 +754,7 @@ impl<D: Dynamics + Clone> Controller<D> {
             strategy: Strategy::Fallback,
             iterations,
             solve_time: 0.0,
+            timing: SolveTiming::default(),
             cost: st.cost,
             kkt: st.kkt,
             u,
@@ -711,6 +785,7 @@ impl<D: Dynamics + Clone> Controller<D> {
             strategy,
             iterations: st.iterations,
             solve_time: 0.0,
+            timing: SolveTiming::default(),
             cost: st.cost,
             kkt: st.kkt,
             u: self.lmpc.first_control().iter().copied().collect(),
@@ -739,6 +814,7 @@ impl<D: Dynamics + Clone> Controller<D> {
             strategy,
             iterations,
             solve_time: 0.0,
+            timing: SolveTiming::default(),
             cost: st.cost,
             kkt: st.kkt,
             u,

@@ -196,7 +196,7 @@ pub use closed_loop::{
     ENERGY_RATIO_LIMIT,
 };
 pub use controller::{
-    Controller, ControllerKind, ControllerSettings, SampleReport, Strategy,
+    Controller, ControllerKind, ControllerSettings, SampleReport, SolveTiming, Strategy,
     DEFAULT_PLAN_JOINT_LIMIT,
 };
 pub use dynamics::RomDynamics;

@@ -772,3 +772,75 @@ fn exact_joints_closed_loop_slows_the_spin() {
     );
     assert!(r.rigid_rate_ratio < 1.0, "rigid rate ratio {}", r.rigid_rate_ratio);
 }
+
+/// The shooting intervals in parallel (`parallel_intervals`) change no bit of the closed loop:
+/// a 2 s full-SQP loop on the FE plant (2D, coarse mesh, several SQP iterations per sample)
+/// gives the same records, reports and summary off, and on pools of one and two threads; so
+/// does the exact-joints model (1 s, off and on two threads). The timings say what they
+/// measured: one thread off, the pool's size on, and the CPU per thread is the calling
+/// thread's CPU off and all threads' CPU over the pool size on.
+#[test]
+fn parallel_intervals_give_the_same_closed_loop_for_any_thread_count() {
+    let mut sc = setup_2d().scenario.clone();
+    sc.duration = 2.0;
+    let setup = Setup::new(&sc).unwrap();
+    let off = ControllerSettings::full_sqp();
+    assert!(!off.parallel_intervals && !ControllerSettings::default().parallel_intervals);
+    let on = ControllerSettings { parallel_intervals: true, ..off.clone() };
+    on.validate().unwrap();
+    let pooled = |threads: usize, c: &ControllerSettings| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| run(&setup, 1.0, c, PlantKind::Fe).unwrap())
+    };
+    let a = pooled(2, &off);
+    let b = pooled(1, &on);
+    let c = pooled(2, &on);
+    assert!(a.summary.error.is_none(), "{:?}", a.summary);
+    assert_eq!(a.samples.len(), 10);
+    assert!(a.samples.iter().any(|s| s.iterations > 1), "{:?}", a.samples);
+    assert_eq!(a.without_timings(), b.without_timings());
+    assert_eq!(a.without_timings(), c.without_timings());
+    for (r, threads) in [(&a, 1), (&b, 1), (&c, 2)] {
+        assert_eq!(r.summary.solve_threads, threads);
+        for s in &r.samples {
+            let t = &s.timing;
+            assert_eq!(t.solve_threads, threads);
+            assert!(t.solve_wall_time > 0.0 && t.solve_cpu_all_threads > 0.0, "{s:?}");
+            assert!(t.solve_cpu_per_thread > 0.0 && s.solve_time > 0.0, "{s:?}");
+        }
+    }
+    for s in &a.samples {
+        assert_eq!(s.timing.solve_cpu_per_thread, s.solve_time);
+    }
+    for s in &c.samples {
+        assert_eq!(s.timing.solve_cpu_per_thread, s.timing.solve_cpu_all_threads / 2.0);
+    }
+    let worst = c.samples.iter().map(|s| s.timing.solve_wall_time).fold(0.0, f64::max);
+    assert_eq!(c.summary.solve_wall_worst_s, worst);
+    // the timings serialise flat beside `solve_time` and read back
+    let v = serde_json::to_value(&c.samples[0]).unwrap();
+    for k in ["solve_time", "solve_cpu_all_threads", "solve_wall_time", "solve_threads"] {
+        assert!(v.get(k).is_some(), "{k} missing: {v}");
+    }
+    let back: SampleReport = serde_json::from_value(v).unwrap();
+    assert_eq!(back, c.samples[0]);
+    // the exact-joints model too (1 s)
+    sc.duration = 1.0;
+    let setup = Setup::new(&sc).unwrap();
+    let exact = ControllerSettings {
+        model: ModelKind::ExactJoints,
+        plan_joint_limit_deg: None,
+        ..ControllerSettings::full_sqp()
+    };
+    let exact_on = ControllerSettings { parallel_intervals: true, ..exact.clone() };
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+    let (a, c) = pool.install(|| {
+        (
+            run(&setup, 1.0, &exact, PlantKind::Fe).unwrap(),
+            run(&setup, 1.0, &exact_on, PlantKind::Fe).unwrap(),
+        )
+    });
+    assert!(a.summary.error.is_none(), "{:?}", a.summary);
+    assert_eq!(a.without_timings(), c.without_timings());
+    assert_eq!(c.summary.solve_threads, 2);
+}

@@ -296,6 +296,9 @@ pub struct ControllerSpec {
     /// `exact-joints` only: elastic modes per link of its basis (rigid link motions + this
     /// many of the lowest constrained modes, split per link).
     pub link_elastic_modes: Option<usize>,
+    /// Integrate the NMPC's shooting intervals on the rayon pool (`--threads`); same results
+    /// for any pool size, on or off ([`mpc::ControllerSettings::parallel_intervals`]).
+    pub parallel_intervals: Option<bool>,
 }
 
 /// `[scenario]`: one closed-loop stabilisation run (paper §5.2–5.3) of `flexmpc mpc`.
