@@ -50,7 +50,9 @@ struct Cli {
     /// Print a machine-readable JSON summary on stdout (and nothing else there).
     #[arg(long, global = true)]
     json: bool,
-    /// Worker threads of the parallel runs (rayon pool; default: one per core).
+    /// Worker threads of the parallel runs, and with `[controller] parallel_intervals` of
+    /// each solve's shooting intervals (rayon pool; default: one per core; the results do not
+    /// depend on it).
     #[arg(long, global = true)]
     threads: Option<usize>,
     /// Leave the measured timings out (`mpc`, `sweep`, `ocp`, default run): no
