@@ -377,13 +377,13 @@ pub fn write(
     if timings {
         let _ = writeln!(
             h,
-            r#"<p>Measured times: per-sample solve times are the solving thread's CPU time, the loop time is wall-clock (they change from run to run, so they are kept in their own files: <a href="timings.json">timings.json</a> has the median and worst solve time and the loop's wall time, <a href="timings.csv">timings.csv</a> each sample's; every other file of this folder is reproducible).</p>"#
+            r#"<p>Measured times: per-sample solve times are CPU time per thread (the solving thread's CPU; with parallel shooting intervals all threads' CPU over the pool size), with each sample's wall time beside them, the loop time is wall-clock (they change from run to run, so they are kept in their own files: <a href="timings.json">timings.json</a> has the median and worst solve time and the loop's wall time, <a href="timings.csv">timings.csv</a> each sample's; every other file of this folder is reproducible).</p>"#
         );
         figure(
             &mut h,
             "solve_times.svg",
             &format!(
-                "Wall time of each sample's solve (all attempts) against the sampling time τs = {} s and the {} ms goal.",
+                "CPU time per thread of each sample's solve (all attempts) against the sampling time τs = {} s and the {} ms goal.",
                 sc.mpc.timing.sampling,
                 crate::timings::SOLVE_TIME_GOAL_S * 1e3
             ),
@@ -645,7 +645,7 @@ pub fn write_sweep(
             &mut h,
             "solve_times.svg",
             &format!(
-                "Measured wall time of each sample's solve against τs = {} s and the {} ms goal (timings.json, timings.csv).",
+                "Measured CPU time per thread of each sample's solve against τs = {} s and the {} ms goal (timings.json, timings.csv).",
                 control.scenario.mpc.timing.sampling,
                 crate::timings::SOLVE_TIME_GOAL_S * 1e3
             ),
