@@ -110,9 +110,10 @@ pub struct ControllerSettings {
     /// elastic modes (the lowest constrained modes at the reference, split per link);
     /// `None`: 4 for planar, 16 for spatial structures (docs/exact-joints-results.md) \[None\].
     pub link_elastic_modes: Option<usize>,
-    /// Integrate the shooting intervals of each NMPC linearisation on the rayon thread pool
-    /// ([`ocp_transcription::SqpSettings::parallel_intervals`], for the first attempt and the
-    /// relaxed retry; the line-search trials and the linear MPC stay on the calling thread)
+    /// Integrate the NMPC's shooting intervals on the rayon thread pool
+    /// ([`ocp_transcription::SqpSettings::parallel_intervals`]: the linearisation's
+    /// sensitivity sweeps and the line search's trial passes, for the first attempt and the
+    /// relaxed retry; condensing, the QP and the linear MPC stay on the calling thread)
     /// \[false\]. Every value is valid, and the result does not depend on it: each interval is
     /// integrated alone and the sums over intervals run in interval order, so the plans and
     /// the closed loop are the same bits for any pool size, on or off. It shortens a sample's
