@@ -118,7 +118,7 @@ pub struct ControllerSettings {
     /// integrated alone and the sums over intervals run in interval order, so the plans and
     /// the closed loop are the same bits for any pool size, on or off. It shortens a sample's
     /// wall time on more than one core; its CPU time is then spread over the pool
-    /// ([`SampleReport::solve_cpu_per_thread`]).
+    /// ([`SolveTiming::solve_cpu_per_thread`]).
     pub parallel_intervals: bool,
 }
 
