@@ -441,7 +441,7 @@ impl ExactJointsRom {
         gemm(
             view_mut(&mut bt.zc, na, nc),
             true,
-            self.cons.support.transpose(),
+            view(self.support_t_flat(), na, rs),
             view(&bt.gd, r, nc).subrows(0, rs),
             -1.0,
         );
@@ -450,14 +450,20 @@ impl ExactJointsRom {
             gemm(
                 view_mut(&mut bt.cg, ki, nc),
                 false,
-                view(&ws.c[i], ir.rows, ki).transpose(),
+                view(&ws.ct[i], ki, ir.rows),
                 view(&bt.gd, r, nc).subrows(self.row_offsets[i], ir.rows),
                 1.0,
             );
             if i == j {
                 bt.cg[..ki * nc].iter_mut().zip(&bt.a1[..kk * nc]).for_each(|(x, y)| *x += y);
             }
-            gemm(view_mut(&mut bt.zc, na, nc), true, ir.e.transpose(), view(&bt.cg, ki, nc), -1.0);
+            gemm(
+                view_mut(&mut bt.zc, na, nc),
+                true,
+                view(self.e_t_flat(i), na, ki),
+                view(&bt.cg, ki, nc),
+                -1.0,
+            );
         }
         // Z_cᵀ f1 + ZᵀJ11 Z_c p
         gemm(view_mut(&mut bt.colp, m, nc), false, view(&ws.t11, m, na), view(&bt.zc, na, nc), 1.0);

@@ -55,24 +55,25 @@ impl ExactJointsRom {
         let nf = na + nb;
         let jf = view(&ws.jf, nf, nf);
         let z = view(&ws.z, na, m);
+        let zt = view(&ws.zt, m, na);
         // ZᵀJ11Z, Z2ᵀJ21Z, ZᵀJ12Z2, Z2ᵀJ22Z2 (link by link when J is block-diagonal by link)
         let j21 = jf.submatrix(na, 0, nb, na);
         let j22 = jf.submatrix(na, na, nb, nb);
         match self.ops.link_blocks() {
             Some(blocks) if self.z2_identity => {
                 for ((o1, k1), (o2, k2)) in blocks {
-                    let zb = z.subrows(o1, k1);
+                    let (zb, zbt) = (z.subrows(o1, k1), zt.subcols(o1, k1));
                     gemm(
                         view_mut(&mut ws.t11, m, na).subcols_mut(o1, k1),
                         false,
-                        zb.transpose(),
+                        zbt,
                         jf.submatrix(o1, o1, k1, k1),
                         1.0,
                     );
                     gemm(
                         view_mut(&mut ws.t12, m, nb).subcols_mut(o2, k2),
                         false,
-                        zb.transpose(),
+                        zbt,
                         jf.submatrix(o1, na + o2, k1, k2),
                         1.0,
                     );
@@ -87,20 +88,8 @@ impl ExactJointsRom {
                 view_mut(&mut ws.u21, nb, na).copy_from(j21);
             }
             _ => {
-                gemm(
-                    view_mut(&mut ws.t11, m, na),
-                    false,
-                    z.transpose(),
-                    jf.submatrix(0, 0, na, na),
-                    1.0,
-                );
-                gemm(
-                    view_mut(&mut ws.t12, m, nb),
-                    false,
-                    z.transpose(),
-                    jf.submatrix(0, na, na, nb),
-                    1.0,
-                );
+                gemm(view_mut(&mut ws.t11, m, na), false, zt, jf.submatrix(0, 0, na, na), 1.0);
+                gemm(view_mut(&mut ws.t12, m, nb), false, zt, jf.submatrix(0, na, na, nb), 1.0);
                 if self.z2_identity {
                     view_mut(&mut ws.u21, nb, na).copy_from(j21);
                 } else {
@@ -202,13 +191,7 @@ impl ExactJointsRom {
             }
         }
         // inputs: ZᵀB_u
-        gemm(
-            view_mut(ju, n, nu).submatrix_mut(0, 0, m, nu),
-            false,
-            z.transpose(),
-            self.ops.b_u.as_ref(),
-            1.0,
-        );
+        gemm(view_mut(ju, n, nu).submatrix_mut(0, 0, m, nu), false, zt, self.ops.b_u.as_ref(), 1.0);
         if nj == 0 {
             return;
         }
