@@ -559,12 +559,14 @@ impl AmbientOps {
             // Γ1: M[i, j] = Σ_l (Γ1^l_ij + Γ1^j_il) q_l, f1 −= ½ M q, J[·, j] −= M[·, j]
             mv(u1, &lt.g1s, m * m, q1b);
             gemv(&mut f1[o1..o1 + m], true, u1, m, q1b, -0.5);
-            // Γ2: T[i, j] = Σ_l Γ2^l_ij q2_l, S[i, l] = Σ_j Γ2^l_ij q2_j; f1 −= S q2, f2 += Tᵀ q1
+            // Γ2: T[i, j] = Σ_l Γ2^l_ij q2_l; f1 −= T q2 (= S q2 with S[i, l] = Σ_j Γ2^l_ij q2_j),
+            // f2 += Tᵀ q1
             mv(t2, &lt.g2_lj, m * m2, q2b);
-            mv(s2, &lt.g2_jl, m * m2, q2b);
-            gemv(&mut f1[o1..o1 + m], true, s2, m, q2b, -1.0);
+            gemv(&mut f1[o1..o1 + m], true, t2, m, q2b, -1.0);
             gemv_t(&mut f2[o2..o2 + m2], true, t2, m, q1b, 1.0);
             let Some(jm) = jac.as_deref_mut() else { continue };
+            // Γ2: S for the Jacobian's q2 columns −(T + S)
+            mv(s2, &lt.g2_jl, m * m2, q2b);
             // Γ2: K22[j, l] = Σ_i Γ2^l_ij q1_i
             gemm(
                 view_mut(k22, m2 * m2, 1),

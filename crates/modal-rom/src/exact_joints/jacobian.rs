@@ -177,10 +177,13 @@ impl ExactJointsRom {
             }
         }
         // V_c = ∂A/∂ξ_jc Z (the term − κ Ξ, κ_jc = K(V_c, W_j) p, with the joint columns: κ_jc = 0
-        // where ∂A/∂ξ_jc = 0)
+        // where ∂A/∂ξ_jc = 0, and V_c is read only where it is not)
         for (j, jr) in self.cons.joints.iter().enumerate() {
             let kk = jr.e.nrows();
             for c in 0..4 {
+                if ws.dc[j][c].iter().all(|&v| v == 0.0) {
+                    continue;
+                }
                 gemm(
                     view_mut(&mut ws.vc[j][c], jr.rows, m),
                     false,
