@@ -85,23 +85,17 @@ impl ExactJointsRom {
                         1.0,
                     );
                 }
-                view_mut(&mut ws.u21, nb, na).copy_from(j21);
             }
             _ => {
                 gemm(view_mut(&mut ws.t11, m, na), false, zt, jf.submatrix(0, 0, na, na), 1.0);
                 gemm(view_mut(&mut ws.t12, m, nb), false, zt, jf.submatrix(0, na, na, nb), 1.0);
-                if self.z2_identity {
-                    view_mut(&mut ws.u21, nb, na).copy_from(j21);
+                let u21 = if self.z2_identity {
+                    j21
                 } else {
                     gemm(view_mut(&mut ws.u21, m2, na), false, self.z2.transpose(), j21, 1.0);
-                }
-                gemm(
-                    view_mut(jx, n, n).submatrix_mut(m, 0, m2, m),
-                    false,
-                    view(&ws.u21, m2, na),
-                    z,
-                    1.0,
-                );
+                    view(&ws.u21, m2, na)
+                };
+                gemm(view_mut(jx, n, n).submatrix_mut(m, 0, m2, m), false, u21, z, 1.0);
             }
         }
         gemm(view_mut(jx, n, n).submatrix_mut(0, 0, m, m), false, view(&ws.t11, m, na), z, 1.0);
