@@ -308,7 +308,9 @@ impl LinkBasis {
 /// `g2_lj[i + m(j + m2 l)] = g2_jl[i + m(l + m2 j)] = Γ2^l_ij`, and the symmetrised
 /// `g1s[i + m(j + m l)] = Γ1^l_ij + Γ1^j_il`: with `M = Σ_l q_l (Γ1^l_ij + Γ1^j_il)`, the `Γ1`
 /// term of `f1` is `−Σ_jl Γ1^l_ij q_j q_l = −½ M q` and its Jacobian `−M`, one pass over the
-/// tensor for both.
+/// tensor for both. With `T = Σ_l q2_l Γ2^l` (from `g2_lj`) and `S[i, l] = Σ_j Γ2^l_ij q2_j`
+/// (from `g2_jl`), `S q2 = T q2`, so the right-hand side's `Γ2` terms (`−T q2` in `f1`, `Tᵀq1`
+/// in `f2`) read `g2_lj` only; `S` enters the Jacobian's `q2` columns `−(T + S)`.
 #[derive(Clone, Debug)]
 pub(crate) struct LinkTensors {
     /// First column and count of the link's velocity fields.
