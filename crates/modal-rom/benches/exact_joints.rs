@@ -217,13 +217,17 @@ usage: cargo bench -p modal-rom --bench exact_joints -- [CRITERION ARGS]
   --pair NAME       with --cpu: this pairing only (2d_rigid+4, 3d_rigid+16, 2d_paper_basis,
                     3d_paper_basis)
   --profile CALLS   with --cpu: only a loop of CALLS exact-joints rhs + Jacobian calls (for
-                    `perf record`)";
+                    `perf record`)
+  --dump PATH       with --cpu: also write the exact-joints rhs (alone and with the
+                    Jacobians), ∂f/∂x and ∂f/∂u of each selected pairing to PATH.NAME, one
+                    value per line (to compare two builds' results)";
 
 /// `--cpu` options: the pairing filter and the profile loop length.
 #[derive(Default)]
 struct CpuOnly {
     pair: Option<String>,
     profile: Option<usize>,
+    dump: Option<String>,
 }
 
 /// `Ok(None)`: no `--cpu`, run criterion; `Err`: a message naming the argument.
@@ -250,13 +254,29 @@ fn parse(args: &[String]) -> Result<Option<CpuOnly>, String> {
                     })?;
                 opts.profile = Some(n);
             }
+            "--dump" => opts.dump = Some(value("--dump")?),
             _ => {}
         }
     }
-    match (cpu, opts.pair.is_some() || opts.profile.is_some()) {
+    match (cpu, opts.pair.is_some() || opts.profile.is_some() || opts.dump.is_some()) {
         (false, false) => Ok(None),
-        (false, true) => Err("`--pair` and `--profile` go with `--cpu`".into()),
+        (false, true) => Err("`--pair`, `--profile` and `--dump` go with `--cpu`".into()),
         (true, _) => Ok(Some(opts)),
+    }
+}
+
+/// The exact-joints model's rhs (alone, then with the Jacobians), `∂f/∂x` and `∂f/∂u` at the
+/// pairing's state, one value per line (`{:e}`, shortest round-trip form).
+fn dump(pair: &Pair, path: &str) {
+    let (n, nu) = (pair.exact.n_state(), pair.u.len());
+    let (mut f0, mut f, mut jx, mut ju) =
+        (vec![0.0; n], vec![0.0; n], vec![0.0; n * n], vec![0.0; n * nu]);
+    pair.exact.rhs(&pair.x, &pair.u, &mut f0).expect("exact rhs");
+    pair.exact.rhs_and_jacobian(&pair.x, &pair.u, &mut f, &mut jx, &mut ju).expect("exact");
+    let text: String = [f0, f, jx, ju].iter().flatten().map(|v| format!("{v:e}\n")).collect();
+    if let Err(e) = std::fs::write(path, text) {
+        eprintln!("error: `--dump`: cannot write {path}: {e}");
+        std::process::exit(2);
     }
 }
 
@@ -267,6 +287,9 @@ fn cpu_lines(opts: &CpuOnly) {
             continue;
         }
         let pair = Pair::new(name, spatial, elastic);
+        if let Some(path) = &opts.dump {
+            dump(&pair, &format!("{path}.{name}"));
+        }
         for (what, calls, mut f) in pair.calls() {
             match opts.profile {
                 Some(n) if what == "exact_rhs_and_jacobian" => {

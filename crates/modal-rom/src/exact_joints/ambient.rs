@@ -308,7 +308,9 @@ impl LinkBasis {
 /// `g2_lj[i + m(j + m2 l)] = g2_jl[i + m(l + m2 j)] = Γ2^l_ij`, and the symmetrised
 /// `g1s[i + m(j + m l)] = Γ1^l_ij + Γ1^j_il`: with `M = Σ_l q_l (Γ1^l_ij + Γ1^j_il)`, the `Γ1`
 /// term of `f1` is `−Σ_jl Γ1^l_ij q_j q_l = −½ M q` and its Jacobian `−M`, one pass over the
-/// tensor for both.
+/// tensor for both. With `T = Σ_l q2_l Γ2^l` (from `g2_lj`) and `S[i, l] = Σ_j Γ2^l_ij q2_j`
+/// (from `g2_jl`), `S q2 = T q2`, so the right-hand side's `Γ2` terms (`−T q2` in `f1`, `Tᵀq1`
+/// in `f2`) read `g2_lj` only; `S` enters the Jacobian's `q2` columns `−(T + S)`.
 #[derive(Clone, Debug)]
 pub(crate) struct LinkTensors {
     /// First column and count of the link's velocity fields.
@@ -447,9 +449,50 @@ impl AmbientOps {
         Ok(AmbientOps { w, sigma, links, block_diagonal, b_u })
     }
 
+    /// `Σ q1 + W q2` into `f1`, `−Wᵀ q1` into `f2` and their (whole, dense) Jacobian into `jac`.
+    fn dense_linear_terms(
+        &self,
+        q1: &[f64],
+        q2: &[f64],
+        f1: &mut [f64],
+        f2: &mut [f64],
+        jac: Option<&mut [f64]>,
+    ) {
+        let (na, nb) = (q1.len(), q2.len());
+        let n = na + nb;
+        for j in 0..na {
+            let c = self.sigma.col_as_slice(j);
+            let s = q1[j];
+            f1.iter_mut().zip(c).for_each(|(f, a)| *f += s * a);
+        }
+        for j in 0..nb {
+            let c = self.w.col_as_slice(j);
+            let s = q2[j];
+            f1.iter_mut().zip(c).for_each(|(f, a)| *f += s * a);
+            f2[j] = -c.iter().zip(q1).map(|(a, q)| a * q).sum::<f64>();
+        }
+        if let Some(j) = jac {
+            let j = &mut j[..n * n];
+            j.fill(0.0);
+            for c in 0..na {
+                j[c * n..c * n + na].copy_from_slice(self.sigma.col_as_slice(c));
+            }
+            for c in 0..nb {
+                let w = self.w.col_as_slice(c);
+                j[(na + c) * n..(na + c) * n + na].copy_from_slice(w);
+                for (r, wr) in w.iter().enumerate() {
+                    j[r * n + na + c] = -wr;
+                }
+            }
+        }
+    }
+
     /// `(f1, f2)` at ambient coordinates `(q1, q2)` and input `u`, and with `jac` the dense
-    /// Jacobian of `(f1, f2)` with respect to `(q1, q2)` (`(na + nb)²`, column-major). `tmp`:
-    /// scratch of `max_link (m + m · m2)`.
+    /// Jacobian of `(f1, f2)` with respect to `(q1, q2)` (`(na + nb)²`, column-major). When the
+    /// operators are block-diagonal by link ([`AmbientOps::link_blocks`]) only the link blocks
+    /// of `jac` are written (entries outside them are zero and must be zero in `jac`: a buffer
+    /// zeroed once and only ever passed here keeps them). `tmp`: scratch of
+    /// [`AmbientOps::scratch_len`].
     #[allow(clippy::too_many_arguments)]
     pub fn eval(
         &self,
@@ -465,34 +508,44 @@ impl AmbientOps {
         let n = na + nb;
         f1.fill(0.0);
         f2.fill(0.0);
-        for j in 0..na {
-            let c = self.sigma.col_as_slice(j);
-            let s = q1[j];
-            f1.iter_mut().zip(c).for_each(|(f, a)| *f += s * a);
-        }
-        for j in 0..nb {
-            let c = self.w.col_as_slice(j);
-            let s = q2[j];
-            f1.iter_mut().zip(c).for_each(|(f, a)| *f += s * a);
-            f2[j] = -c.iter().zip(q1).map(|(a, q)| a * q).sum::<f64>();
+        if self.block_diagonal {
+            // Σ q1 + W q2 and −Wᵀ q1 on the link blocks only (the rest of Σ, W is zero)
+            for lt in &self.links {
+                let ((o1, m), (o2, m2)) = (lt.c1, lt.c2);
+                let f1b = &mut f1[o1..o1 + m];
+                for j in 0..m {
+                    let c = &self.sigma.col_as_slice(o1 + j)[o1..o1 + m];
+                    let s = q1[o1 + j];
+                    f1b.iter_mut().zip(c).for_each(|(f, a)| *f += s * a);
+                }
+                for j in 0..m2 {
+                    let c = &self.w.col_as_slice(o2 + j)[o1..o1 + m];
+                    let s = q2[o2 + j];
+                    f1b.iter_mut().zip(c).for_each(|(f, a)| *f += s * a);
+                    f2[o2 + j] = -c.iter().zip(&q1[o1..o1 + m]).map(|(a, q)| a * q).sum::<f64>();
+                }
+                if let Some(j) = jac.as_deref_mut() {
+                    for c in 0..m {
+                        j[(o1 + c) * n + o1..(o1 + c) * n + o1 + m]
+                            .copy_from_slice(&self.sigma.col_as_slice(o1 + c)[o1..o1 + m]);
+                    }
+                    for c in 0..m2 {
+                        let w = &self.w.col_as_slice(o2 + c)[o1..o1 + m];
+                        let cc = na + o2 + c;
+                        j[cc * n + o1..cc * n + o1 + m].copy_from_slice(w);
+                        for (r, wr) in w.iter().enumerate() {
+                            j[(o1 + r) * n + cc] = -wr;
+                        }
+                        j[cc * n + na + o2..cc * n + na + o2 + m2].fill(0.0);
+                    }
+                }
+            }
+        } else {
+            self.dense_linear_terms(q1, q2, f1, f2, jac.as_deref_mut());
         }
         for (k, &uk) in u.iter().enumerate() {
             let c = self.b_u.col_as_slice(k);
             f1.iter_mut().zip(c).for_each(|(f, a)| *f += uk * a);
-        }
-        if let Some(j) = jac.as_deref_mut() {
-            let j = &mut j[..n * n];
-            j.fill(0.0);
-            for c in 0..na {
-                j[c * n..c * n + na].copy_from_slice(self.sigma.col_as_slice(c));
-            }
-            for c in 0..nb {
-                let w = self.w.col_as_slice(c);
-                j[(na + c) * n..(na + c) * n + na].copy_from_slice(w);
-                for (r, wr) in w.iter().enumerate() {
-                    j[r * n + na + c] = -wr;
-                }
-            }
         }
         let mv = |out: &mut [f64], g: &[f64], rows: usize, x: &[f64]| {
             gemm(view_mut(out, rows, 1), false, view(g, rows, x.len()), view(x, x.len(), 1), 1.0);
@@ -508,12 +561,14 @@ impl AmbientOps {
             // Γ1: M[i, j] = Σ_l (Γ1^l_ij + Γ1^j_il) q_l, f1 −= ½ M q, J[·, j] −= M[·, j]
             mv(u1, &lt.g1s, m * m, q1b);
             gemv(&mut f1[o1..o1 + m], true, u1, m, q1b, -0.5);
-            // Γ2: T[i, j] = Σ_l Γ2^l_ij q2_l, S[i, l] = Σ_j Γ2^l_ij q2_j; f1 −= S q2, f2 += Tᵀ q1
+            // Γ2: T[i, j] = Σ_l Γ2^l_ij q2_l; f1 −= T q2 (= S q2 with S[i, l] = Σ_j Γ2^l_ij q2_j),
+            // f2 += Tᵀ q1
             mv(t2, &lt.g2_lj, m * m2, q2b);
-            mv(s2, &lt.g2_jl, m * m2, q2b);
-            gemv(&mut f1[o1..o1 + m], true, s2, m, q2b, -1.0);
+            gemv(&mut f1[o1..o1 + m], true, t2, m, q2b, -1.0);
             gemv_t(&mut f2[o2..o2 + m2], true, t2, m, q1b, 1.0);
             let Some(jm) = jac.as_deref_mut() else { continue };
+            // Γ2: S for the Jacobian's q2 columns −(T + S)
+            mv(s2, &lt.g2_jl, m * m2, q2b);
             // Γ2: K22[j, l] = Σ_i Γ2^l_ij q1_i
             gemm(
                 view_mut(k22, m2 * m2, 1),
@@ -555,6 +610,13 @@ impl AmbientOps {
     /// `Γ1[i + m(j + m l)] = Γ1^l_ij`, `Γ2[i + m(j + m2 l)] = Γ2^l_ij` (link-local indices).
     pub(crate) fn link_gammas(&self) -> impl Iterator<Item = LinkGammas<'_>> + '_ {
         self.links.iter().map(|l| (l.c1, l.c2, &l.g1_lj[..], &l.g2_lj[..]))
+    }
+
+    /// What decides which entries of the ambient Jacobian [`AmbientOps::eval`] writes: whether
+    /// it is block-diagonal by link, and the links' column ranges.
+    pub(crate) fn layout_key(&self) -> impl Iterator<Item = usize> + '_ {
+        std::iter::once(usize::from(self.block_diagonal))
+            .chain(self.links.iter().flat_map(|l| [l.c1.0, l.c1.1, l.c2.0, l.c2.1]))
     }
 
     /// Scratch length [`AmbientOps::eval`] needs.

@@ -441,7 +441,7 @@ impl ExactJointsRom {
         gemm(
             view_mut(&mut bt.zc, na, nc),
             true,
-            self.cons.support.transpose(),
+            view(self.support_t_flat(), na, rs),
             view(&bt.gd, r, nc).subrows(0, rs),
             -1.0,
         );
@@ -450,14 +450,20 @@ impl ExactJointsRom {
             gemm(
                 view_mut(&mut bt.cg, ki, nc),
                 false,
-                view(&ws.c[i], ir.rows, ki).transpose(),
+                view(&ws.ct[i], ki, ir.rows),
                 view(&bt.gd, r, nc).subrows(self.row_offsets[i], ir.rows),
                 1.0,
             );
             if i == j {
                 bt.cg[..ki * nc].iter_mut().zip(&bt.a1[..kk * nc]).for_each(|(x, y)| *x += y);
             }
-            gemm(view_mut(&mut bt.zc, na, nc), true, ir.e.transpose(), view(&bt.cg, ki, nc), -1.0);
+            gemm(
+                view_mut(&mut bt.zc, na, nc),
+                true,
+                view(self.e_t_flat(i), na, ki),
+                view(&bt.cg, ki, nc),
+                -1.0,
+            );
         }
         // Z_cᵀ f1 + ZᵀJ11 Z_c p
         gemm(view_mut(&mut bt.colp, m, nc), false, view(&ws.t11, m, na), view(&bt.zc, na, nc), 1.0);
@@ -484,7 +490,14 @@ impl ExactJointsRom {
             colp.iter_mut().zip(lanes.iter()).for_each(|(x, l)| *x += l[b]);
         }
         // p2 rows, tracked rows
-        gemm(view_mut(&mut bt.u2, m2, nc), false, view(&ws.u21, m2, na), view(&bt.zc, na, nc), 1.0);
+        // Z2ᵀJ21 (J21 itself, a view of the ambient Jacobian, when Z2 = I)
+        let u21 = if self.z2_identity {
+            let nf = na + self.basis.n2();
+            view(&ws.jf, nf, nf).submatrix(na, 0, m2, na)
+        } else {
+            view(&ws.u21, m2, na)
+        };
+        gemm(view_mut(&mut bt.u2, m2, nc), false, u21, view(&bt.zc, na, nc), 1.0);
         for (t, tr) in self.tracked.iter().enumerate() {
             let nt = tr.rows.nrows();
             gemm(
@@ -521,8 +534,6 @@ impl ExactJointsRom {
         // ∂Ċ_i (from every ξ̇'s change and ∂²C/∂ξ_jc∂ξ_jd); for i = j also −ȦAᵀG[:, j] ∂C_jc
         // on all rows of ∂V and G[J, j] ∂C_jc on those of ∂W.
         let ld = LANES * q;
-        let gj = view(&ws.g, r, r).submatrix(rs, o, rj, rjj);
-        let adg = view(&ws.adat_g, rj, rjj);
         for (i, ir) in self.cons.joints.iter().enumerate() {
             let (ri, ki, oi) = (ir.rows, ir.e.nrows(), self.row_offsets[i] - rs);
             let lm = &mut bt.lm[..ld * ki];
@@ -552,14 +563,20 @@ impl ExactJointsRom {
                     let dcj = &ws.dc[j][c];
                     for col in 0..ki {
                         let dcol = &dcj[col * rjj..(col + 1) * rjj];
-                        let base = col * ld + b;
+                        let (lv, lw) = lm[col * ld..(col + 1) * ld].split_at_mut(rj * LANES);
                         for (k, &x) in dcol.iter().enumerate() {
                             if x == 0.0 {
                                 continue;
                             }
-                            for s in 0..rj {
-                                lm[base + s * LANES] -= adg[(s, k)] * x;
-                                lm[base + (rj + s) * LANES] += gj[(s, k)] * x;
+                            let (adg_k, gj_k) = (
+                                &ws.adat_g[k * rj..(k + 1) * rj],
+                                &ws.g[(o + k) * r + rs..(o + k) * r + rs + rj],
+                            );
+                            for (v, a) in lv.chunks_exact_mut(LANES).zip(adg_k) {
+                                v[b] -= a * x;
+                            }
+                            for (v, g) in lw.chunks_exact_mut(LANES).zip(gj_k) {
+                                v[b] += g * x;
                             }
                         }
                     }

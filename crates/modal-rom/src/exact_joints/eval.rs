@@ -49,6 +49,10 @@ pub(crate) struct Workspace {
     pub(super) lmm: Vec<f64>,
     pub(super) lacc: Vec<f64>,
     pub(super) z: Vec<f64>,
+    /// `Zᵀ` (`m × na`), column-major (with `Z`).
+    pub(super) zt: Vec<f64>,
+    /// Per joint: `C_jᵀ` (`2k × r_j`).
+    pub(super) ct: Vec<Vec<f64>>,
     pub(super) q1: Vec<f64>,
     pub(super) q2: Vec<f64>,
     pub(super) f1: Vec<f64>,
@@ -149,6 +153,8 @@ impl Workspace {
             lmm: zeros(rj * rj),
             lacc: zeros(na.max(r).max(kk).max(rs).max(1) * rj.max(1)),
             z: zeros(na * m),
+            zt: zeros(na * m),
+            ct: per(&|rj, kk| rj * kk),
             q1: zeros(na),
             q2: zeros(nb),
             f1: zeros(na),
@@ -218,6 +224,12 @@ impl ExactJointsRom {
             ws.xi[j] = Vector4::from_column_slice(&x[o..o + 4]);
             let [d0, d1, d2, d3] = &mut ws.dc[j];
             jr.coefficients(&ws.xi[j], &mut ws.c[j], &mut [d0, d1, d2, d3]);
+            let (rjj, kk) = (jr.rows, jr.e.nrows());
+            for col in 0..kk {
+                for row in 0..rjj {
+                    ws.ct[j][row * kk + col] = ws.c[j][col * rjj + row];
+                }
+            }
         }
         // T Aᵀ = [T Sᵀ | T E_iᵀ C_iᵀ]
         for (t, tr) in self.tracked.iter().enumerate() {
@@ -236,7 +248,8 @@ impl ExactJointsRom {
                 );
             }
         }
-        // AAᵀ: support columns [SSᵀ; C_j E_j Sᵀ], joint i columns (E_i Aᵀ)ᵀ C_iᵀ
+        // AAᵀ: support block SSᵀ, joint j's rows C_j (E_j Aᵀ) (all columns), the support rows'
+        // joint columns by symmetry, the joint–joint blocks symmetrised
         {
             let mut gm = view_mut(&mut ws.gram, r, r);
             for c in 0..rs {
@@ -248,22 +261,18 @@ impl ExactJointsRom {
                 let o = self.row_offsets[j];
                 let kk = jr.e.nrows();
                 gemm(
-                    gm.as_mut().submatrix_mut(o, 0, jr.rows, rs),
+                    gm.as_mut().submatrix_mut(o, 0, jr.rows, r),
                     false,
                     view(&ws.c[j], jr.rows, kk),
-                    view(&self.tracked[j].s, kk, rs),
-                    1.0,
-                );
-                gemm(
-                    gm.as_mut().submatrix_mut(0, o, r, jr.rows),
-                    false,
-                    view(&ws.ta[j], kk, r).transpose(),
-                    view(&ws.c[j], jr.rows, kk).transpose(),
+                    view(&ws.ta[j], kk, r),
                     1.0,
                 );
             }
-            for c in 0..r {
-                for i in 0..c {
+            for c in rs..r {
+                for i in 0..rs {
+                    gm[(i, c)] = gm[(c, i)];
+                }
+                for i in rs..c {
                     let s = 0.5 * (gm[(i, c)] + gm[(c, i)]);
                     gm[(i, c)] = s;
                     gm[(c, i)] = s;
@@ -364,7 +373,7 @@ impl ExactJointsRom {
             gemm(
                 view_mut(&mut ws.z, na, m),
                 true,
-                self.cons.support.transpose(),
+                view(self.support_t_flat(), na, rs),
                 hv.subrows(0, rs),
                 -1.0,
             );
@@ -374,13 +383,24 @@ impl ExactJointsRom {
                 gemm(
                     view_mut(tmp, kk, m),
                     false,
-                    view(&ws.c[j], jr.rows, kk).transpose(),
+                    view(&ws.ct[j], kk, jr.rows),
                     hv.subrows(self.row_offsets[j], jr.rows),
                     1.0,
                 );
-                gemm(view_mut(&mut ws.z, na, m), true, jr.e.transpose(), view(tmp, kk, m), -1.0);
+                gemm(
+                    view_mut(&mut ws.z, na, m),
+                    true,
+                    view(self.e_t_flat(j), na, kk),
+                    view(tmp, kk, m),
+                    -1.0,
+                );
             }
             lowrank_right_solve_lt(&ws.ly, &ws.lh, &ws.ld, rj, &mut ws.z, na, &mut ws.lacc);
+            for c in 0..m {
+                for (i, v) in ws.z[c * na..(c + 1) * na].iter().enumerate() {
+                    ws.zt[i * m + c] = *v;
+                }
+            }
         }
         // W on the joint rows
         for c in 0..m {

@@ -55,24 +55,25 @@ impl ExactJointsRom {
         let nf = na + nb;
         let jf = view(&ws.jf, nf, nf);
         let z = view(&ws.z, na, m);
+        let zt = view(&ws.zt, m, na);
         // ZᵀJ11Z, Z2ᵀJ21Z, ZᵀJ12Z2, Z2ᵀJ22Z2 (link by link when J is block-diagonal by link)
         let j21 = jf.submatrix(na, 0, nb, na);
         let j22 = jf.submatrix(na, na, nb, nb);
         match self.ops.link_blocks() {
             Some(blocks) if self.z2_identity => {
                 for ((o1, k1), (o2, k2)) in blocks {
-                    let zb = z.subrows(o1, k1);
+                    let (zb, zbt) = (z.subrows(o1, k1), zt.subcols(o1, k1));
                     gemm(
                         view_mut(&mut ws.t11, m, na).subcols_mut(o1, k1),
                         false,
-                        zb.transpose(),
+                        zbt,
                         jf.submatrix(o1, o1, k1, k1),
                         1.0,
                     );
                     gemm(
                         view_mut(&mut ws.t12, m, nb).subcols_mut(o2, k2),
                         false,
-                        zb.transpose(),
+                        zbt,
                         jf.submatrix(o1, na + o2, k1, k2),
                         1.0,
                     );
@@ -84,35 +85,17 @@ impl ExactJointsRom {
                         1.0,
                     );
                 }
-                view_mut(&mut ws.u21, nb, na).copy_from(j21);
             }
             _ => {
-                gemm(
-                    view_mut(&mut ws.t11, m, na),
-                    false,
-                    z.transpose(),
-                    jf.submatrix(0, 0, na, na),
-                    1.0,
-                );
-                gemm(
-                    view_mut(&mut ws.t12, m, nb),
-                    false,
-                    z.transpose(),
-                    jf.submatrix(0, na, na, nb),
-                    1.0,
-                );
-                if self.z2_identity {
-                    view_mut(&mut ws.u21, nb, na).copy_from(j21);
+                gemm(view_mut(&mut ws.t11, m, na), false, zt, jf.submatrix(0, 0, na, na), 1.0);
+                gemm(view_mut(&mut ws.t12, m, nb), false, zt, jf.submatrix(0, na, na, nb), 1.0);
+                let u21 = if self.z2_identity {
+                    j21
                 } else {
                     gemm(view_mut(&mut ws.u21, m2, na), false, self.z2.transpose(), j21, 1.0);
-                }
-                gemm(
-                    view_mut(jx, n, n).submatrix_mut(m, 0, m2, m),
-                    false,
-                    view(&ws.u21, m2, na),
-                    z,
-                    1.0,
-                );
+                    view(&ws.u21, m2, na)
+                };
+                gemm(view_mut(jx, n, n).submatrix_mut(m, 0, m2, m), false, u21, z, 1.0);
             }
         }
         gemm(view_mut(jx, n, n).submatrix_mut(0, 0, m, m), false, view(&ws.t11, m, na), z, 1.0);
@@ -188,10 +171,13 @@ impl ExactJointsRom {
             }
         }
         // V_c = ∂A/∂ξ_jc Z (the term − κ Ξ, κ_jc = K(V_c, W_j) p, with the joint columns: κ_jc = 0
-        // where ∂A/∂ξ_jc = 0)
+        // where ∂A/∂ξ_jc = 0, and V_c is read only where it is not)
         for (j, jr) in self.cons.joints.iter().enumerate() {
             let kk = jr.e.nrows();
             for c in 0..4 {
+                if ws.dc[j][c].iter().all(|&v| v == 0.0) {
+                    continue;
+                }
                 gemm(
                     view_mut(&mut ws.vc[j][c], jr.rows, m),
                     false,
@@ -202,13 +188,7 @@ impl ExactJointsRom {
             }
         }
         // inputs: ZᵀB_u
-        gemm(
-            view_mut(ju, n, nu).submatrix_mut(0, 0, m, nu),
-            false,
-            z.transpose(),
-            self.ops.b_u.as_ref(),
-            1.0,
-        );
+        gemm(view_mut(ju, n, nu).submatrix_mut(0, 0, m, nu), false, zt, self.ops.b_u.as_ref(), 1.0);
         if nj == 0 {
             return;
         }

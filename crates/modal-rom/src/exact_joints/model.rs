@@ -101,6 +101,9 @@ pub struct ExactJointsRom {
 struct FlatCopies {
     support: Vec<f64>,
     e: Vec<Vec<f64>>,
+    /// `Sᵀ` (`na × rs`) and `E_jᵀ` (`na × 2k`), column-major (left factors of products).
+    support_t: Vec<f64>,
+    e_t: Vec<Vec<f64>>,
     z0: Vec<f64>,
     z2: Vec<f64>,
 }
@@ -248,6 +251,8 @@ impl ExactJointsRom {
             flat: FlatCopies {
                 support: flat(&cons.support),
                 e: cons.joints.iter().map(|j| flat(&j.e)).collect(),
+                support_t: flat(&cons.support.transpose().to_owned()),
+                e_t: cons.joints.iter().map(|j| flat(&j.e.transpose().to_owned())).collect(),
                 ..FlatCopies::default()
             },
             cons,
@@ -285,14 +290,18 @@ impl ExactJointsRom {
         let mut key = self.dims_head().to_vec();
         key.extend(self.tracked.iter().map(|t| t.rows.nrows()));
         key.extend(self.cons.joints.iter().flat_map(|j| [j.rows, j.e.nrows()]));
+        key.extend(self.ops.layout_key());
         key
     }
 
-    /// Whether buffers sized for `key` fit this model.
+    /// Whether buffers sized for `key` fit this model (the ambient Jacobian buffer's zero
+    /// entries included: [`AmbientOps::layout_key`]).
     pub(super) fn dims_match(&self, key: &[usize]) -> bool {
         let head = self.dims_head();
         let nt = self.tracked.len();
-        key.len() == head.len() + nt + 2 * self.n_joints()
+        let tail = head.len() + nt + 2 * self.n_joints();
+        key.len() >= tail
+            && self.ops.layout_key().eq(key[tail..].iter().copied())
             && key[..head.len()] == head
             && self.tracked.iter().zip(&key[head.len()..]).all(|(t, &k)| t.rows.nrows() == k)
             && self
@@ -305,6 +314,16 @@ impl ExactJointsRom {
 
     pub(super) fn support_flat(&self) -> &[f64] {
         &self.flat.support
+    }
+
+    /// `Sᵀ` (`na × rs`), column-major.
+    pub(super) fn support_t_flat(&self) -> &[f64] {
+        &self.flat.support_t
+    }
+
+    /// `E_jᵀ` (`na × 2k`), column-major.
+    pub(super) fn e_t_flat(&self, j: usize) -> &[f64] {
+        &self.flat.e_t[j]
     }
 
     pub(super) fn e_flat(&self, j: usize) -> &[f64] {
