@@ -35,11 +35,14 @@
 mod adjoint;
 mod settings;
 mod stages;
+mod warm_start;
 
 pub use settings::{
     interval_error, AdaptiveSubsteps, IntegratorKind, IntegratorSettings, LinearPart,
     SIMPLIFIED_NEWTON_MAX_RATE,
 };
+pub use warm_start::MidpointRecord;
+use warm_start::Warm;
 
 use crate::dynamics::Dynamics;
 use crate::error::{check_dim, invalid, OcpError, Result};
@@ -487,6 +490,20 @@ impl Integrator {
         sens: bool,
         tape: bool,
     ) -> Result<()> {
+        self.run_warm(model, x0, u, sens, tape, Warm::Cold)
+    }
+
+    /// One interval integration; `warm` records the implicit midpoint substeps or starts
+    /// their Newton iterations from a record (`warm_start`).
+    fn run_warm<D: Dynamics + ?Sized>(
+        &mut self,
+        model: &D,
+        x0: &[f64],
+        u: &[f64],
+        sens: bool,
+        tape: bool,
+        mut warm: Warm<'_>,
+    ) -> Result<()> {
         self.calls += 1;
         self.newton_factored = false;
         self.x.copy_from_slice(x0);
@@ -499,7 +516,7 @@ impl Integrator {
         for n in 0..self.substeps {
             match self.kind {
                 IntegratorKind::ImplicitMidpoint => {
-                    self.midpoint_substep(model, u, sens, n == 0)?
+                    self.midpoint_substep(model, u, sens, n, &mut warm)?
                 }
                 _ => {
                     self.explicit_substep(model, u, sens, if tape { Some(4 * n) } else { None })?
@@ -511,6 +528,9 @@ impl Integrator {
         }
         if sens && !all_finite(self.s.as_slice()) {
             return Err(OcpError::NonFiniteDynamics { stage: "sensitivity" });
+        }
+        if let Warm::Record(record) = warm {
+            self.finish_record(record, u);
         }
         Ok(())
     }

@@ -1,7 +1,7 @@
 //! Stage evaluations and substeps of the explicit (RK4, Lawson RK4) and implicit midpoint
 //! methods, forward sensitivities alongside.
 
-use super::{Integrator, Pow, SIMPLIFIED_NEWTON_MAX_RATE};
+use super::{Integrator, Pow, Warm, SIMPLIFIED_NEWTON_MAX_RATE};
 use crate::dynamics::Dynamics;
 use crate::error::{OcpError, Result};
 use crate::la::{all_finite, axpy, lincomb, lincomb3, norm_inf};
@@ -196,17 +196,22 @@ impl Integrator {
         model: &D,
         u: &[f64],
         sens: bool,
-        first: bool,
+        j: usize,
+        warm: &mut Warm<'_>,
     ) -> Result<()> {
         let h = self.h;
         let nx = self.nx;
+        let first = j == 0;
         // initial guess. Simplified Newton: the previous substep's slope `k = f(m)` (left in
         // `k[0]` by its converged residual), `m = x + h/2 k`, and the start `x` itself in the
         // first substep (its residual `−h/2 f(x)` is the only evaluation; the first Newton step
         // from it is the linearly implicit Euler half step, stable for the stiff modes). Full
         // Newton: the explicit half step `m = x + h/2 f(x)` (one more evaluation)
+        // (from a record: its first-order predictor and Newton matrix, `warm_start`)
         self.xs.copy_from_slice(&self.x);
-        if !self.simplified_newton {
+        if let Warm::Start(record) = warm {
+            self.predict_midpoint(record, j, u);
+        } else if !self.simplified_newton {
             model.rhs(&self.x, u, &mut self.k[0]);
             if !all_finite(&self.k[0]) {
                 return Err(OcpError::NonFiniteDynamics { stage: "rhs" });
@@ -309,6 +314,9 @@ impl Integrator {
             }
             self.s *= -1.0;
             axpy(self.s.as_mut_slice(), 2.0, self.tm.as_slice());
+            if let Warm::Record(record) = warm {
+                self.record_substep(record, j);
+            }
         }
         for i in 0..nx {
             self.x[i] = 2.0 * self.xs[i] - self.x[i];

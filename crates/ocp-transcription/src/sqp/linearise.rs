@@ -49,22 +49,18 @@ impl<D: Dynamics> SqpSolver<D> {
         if self.settings.parallel_intervals && !exact && self.lq.is_none() {
             use rayon::prelude::*;
             let (model, s, u, counts) = (&self.model, &self.s, &self.u, &self.counts);
+            let records = &mut self.records;
             self.integrators
                 .par_iter_mut()
                 .zip(self.phi.par_iter_mut())
                 .zip(self.lin.a.par_iter_mut())
                 .zip(self.lin.b.par_iter_mut())
+                .zip(records.par_iter_mut())
                 .enumerate()
-                .try_for_each(|(k, (((int, phi), a), b))| {
+                .try_for_each(|(k, ((((int, phi), a), b), record))| {
                     int.set_substeps(counts[k])?;
-                    int.integrate_with_sensitivities(
-                        model,
-                        s[k].as_slice(),
-                        u[k].as_slice(),
-                        phi.as_mut_slice(),
-                        a,
-                        b,
-                    )
+                    let (s, u, phi) = (s[k].as_slice(), u[k].as_slice(), phi.as_mut_slice());
+                    int.integrate_with_sensitivities_recorded(model, s, u, phi, a, b, record)
                 })?;
         }
         for k in 0..n {
@@ -102,13 +98,14 @@ impl<D: Dynamics> SqpSolver<D> {
                 self.lin.hr[k].copy_from(&self.hdyn.view((nx, nx), (self.nu, self.nu)));
                 self.lin.hs[k].copy_from(&self.hdyn.view((nx, 0), (self.nu, nx)));
             } else {
-                self.integrators[0].integrate_with_sensitivities(
+                self.integrators[0].integrate_with_sensitivities_recorded(
                     &self.model,
                     self.s[k].as_slice(),
                     self.u[k].as_slice(),
                     self.phi[k].as_mut_slice(),
                     &mut self.lin.a[k],
                     &mut self.lin.b[k],
+                    &mut self.records[k],
                 )?;
             }
         }

@@ -17,7 +17,7 @@ pub use status::{IterationLog, SqpStats, SqpStatus};
 
 use crate::dynamics::Dynamics;
 use crate::error::{check_dim, invalid, OcpError, Result};
-use crate::integrator::Integrator;
+use crate::integrator::{Integrator, MidpointRecord};
 use crate::la::all_finite;
 use crate::ocp::Ocp;
 use crate::qp::{BoxQp, Condenser, Linearisation, QpForm, Step};
@@ -51,6 +51,10 @@ pub struct SqpSolver<D: Dynamics> {
     integrators: Vec<Integrator>,
     /// Substep count of each interval, fixed during one SQP iteration.
     counts: Vec<usize>,
+    /// Each interval's converged implicit midpoint substeps at the last linearisation: the
+    /// warm start of the line-search trials' Newton iterations (empty records for the
+    /// explicit methods).
+    records: Vec<MidpointRecord>,
     s: Vec<DVector<f64>>,
     u: Vec<DVector<f64>>,
     lam: Vec<DVector<f64>>,
@@ -157,7 +161,9 @@ impl<D: Dynamics> SqpSolver<D> {
             u0[i] = u0[i].clamp(ocp.u_min[i], ocp.u_max[i]);
         }
         let counts = vec![settings.integrator.substeps; n];
+        let records = (0..n).map(|_| integrators[0].new_record()).collect();
         let mut solver = Self {
+            records,
             n,
             nx,
             nu,

@@ -184,7 +184,9 @@ impl<D: Dynamics> SqpSolver<D> {
     /// Cost `J` and ℓ1 constraint violation `θ = Σ‖d‖₁ + ‖x0 − s_0‖₁ + state-bound
     /// violations` at the trial point `(s + tΔs, u + tΔu)` (stored in the shift buffers, its
     /// `Φ` in `trial_phi`); `None` when the dynamics fail there. A trial needs only the
-    /// states: the intervals are integrated without sensitivities (in parallel with
+    /// states: the intervals are integrated without sensitivities, the implicit midpoint
+    /// rule's Newton iterations warm-started from the linearisation's converged substeps
+    /// ([`Integrator::integrate_near`](crate::Integrator::integrate_near)), (in parallel with
     /// [`crate::SqpSettings::parallel_intervals`]; the sums run in interval order either way,
     /// so the result is the same to the bit).
     pub(super) fn trial_at(&mut self, t: f64) -> Option<(f64, f64)> {
@@ -204,11 +206,18 @@ impl<D: Dynamics> SqpSolver<D> {
         let ok = if self.integrators.len() == n && n > 1 {
             use rayon::prelude::*;
             let (model, s, u, counts) = (&self.model, &self.shift_s, &self.shift_u, &self.counts);
+            let records = &self.records;
             self.integrators.par_iter_mut().zip(self.trial_phi.par_iter_mut()).enumerate().all(
                 |(k, (int, phi))| {
                     int.set_substeps(counts[k]).is_ok()
                         && int
-                            .integrate(model, s[k].as_slice(), u[k].as_slice(), phi.as_mut_slice())
+                            .integrate_near(
+                                model,
+                                s[k].as_slice(),
+                                u[k].as_slice(),
+                                phi.as_mut_slice(),
+                                &records[k],
+                            )
                             .is_ok()
                 },
             )
@@ -217,11 +226,12 @@ impl<D: Dynamics> SqpSolver<D> {
             for k in 0..n {
                 if self.integrators[0].set_substeps(self.counts[k]).is_err()
                     || self.integrators[0]
-                        .integrate(
+                        .integrate_near(
                             &self.model,
                             self.shift_s[k].as_slice(),
                             self.shift_u[k].as_slice(),
                             self.trial_phi[k].as_mut_slice(),
+                            &self.records[k],
                         )
                         .is_err()
                 {

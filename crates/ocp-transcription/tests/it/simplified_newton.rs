@@ -7,18 +7,18 @@ use ocp_transcription::{Dynamics, Integrator, IntegratorKind, IntegratorSettings
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// A model that counts its evaluations.
-struct Counting<D> {
+pub(crate) struct Counting<D> {
     inner: D,
     rhs: AtomicUsize,
     jacobians: AtomicUsize,
 }
 
 impl<D> Counting<D> {
-    fn new(inner: D) -> Self {
+    pub(crate) fn new(inner: D) -> Self {
         Self { inner, rhs: AtomicUsize::new(0), jacobians: AtomicUsize::new(0) }
     }
     /// `(rhs, jacobians)` since the last call.
-    fn take(&self) -> (usize, usize) {
+    pub(crate) fn take(&self) -> (usize, usize) {
         (self.rhs.swap(0, Ordering::Relaxed), self.jacobians.swap(0, Ordering::Relaxed))
     }
 }
@@ -50,7 +50,7 @@ fn settings(simplified: bool, substeps: usize) -> IntegratorSettings {
 /// The paper-sized ROM-structured sample (61 states, up to 175 rad/s, so `h ω` = 2.7 per
 /// substep of 16 in a 0.25 s interval: the stiff regime of the exact-joints NMPC) from the
 /// rotating state with perturbed elastic coordinates and a nonzero input.
-fn stiff_case() -> (ModalLike, Vec<f64>, Vec<f64>) {
+pub(crate) fn stiff_case() -> (ModalLike, Vec<f64>, Vec<f64>) {
     let m = ModalLike::paper_sized_rom();
     let mut x = m.rotating_state(1.5).unwrap();
     for (i, v) in x.iter_mut().enumerate().skip(2) {
@@ -60,7 +60,7 @@ fn stiff_case() -> (ModalLike, Vec<f64>, Vec<f64>) {
     (m, x, u)
 }
 
-fn max_rel(a: &[f64], b: &[f64]) -> f64 {
+pub(crate) fn max_rel(a: &[f64], b: &[f64]) -> f64 {
     let scale = 1.0 + a.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
     a.iter().zip(b).fold(0.0_f64, |m, (p, q)| m.max((p - q).abs())) / scale
 }
