@@ -202,23 +202,29 @@ impl Integrator {
         let h = self.h;
         let nx = self.nx;
         let first = j == 0;
-        // initial guess. Simplified Newton: the previous substep's slope `k = f(m)` (left in
-        // `k[0]` by its converged residual), `m = x + h/2 k`, and the start `x` itself in the
-        // first substep (its residual `−h/2 f(x)` is the only evaluation; the first Newton step
-        // from it is the linearly implicit Euler half step, stable for the stiff modes). Full
-        // Newton: the explicit half step `m = x + h/2 f(x)` (one more evaluation)
-        // (from a record: its first-order predictor and Newton matrix, `warm_start`)
-        self.xs.copy_from_slice(&self.x);
+        // initial guess. Simplified Newton: the previous substep's midpoint `m_{j−1}`, whose
+        // residual for this substep, `m_{j−1} − x − h/2 f(m_{j−1})`, is known without an
+        // evaluation (`xs` and its slope `k[0]` are left by the previous substep's converged
+        // residual), so the first step is the previous factor's linearly implicit step
+        // `m_{j−1} + M⁻¹ (x − x_{j−1})`, exact for linear dynamics; in the first substep the
+        // start `x` itself (its residual `−h/2 f(x)` is the only evaluation; the first Newton
+        // step from it is the linearly implicit Euler half step, stable for the stiff modes).
+        // Full Newton: the explicit half step `m = x + h/2 f(x)` (one more evaluation). From a
+        // record: its first-order predictor and Newton matrix (`warm_start`)
+        let mut known_slope = false;
         if let Warm::Start(record) = warm {
             self.predict_midpoint(record, j, u);
         } else if !self.simplified_newton {
+            self.xs.copy_from_slice(&self.x);
             model.rhs(&self.x, u, &mut self.k[0]);
             if !all_finite(&self.k[0]) {
                 return Err(OcpError::NonFiniteDynamics { stage: "rhs" });
             }
             axpy(&mut self.xs, 0.5 * h, &self.k[0]);
-        } else if !first {
-            axpy(&mut self.xs, 0.5 * h, &self.k[0]);
+        } else if first {
+            self.xs.copy_from_slice(&self.x);
+        } else {
+            known_slope = true;
         }
         let mut converged = false;
         let mut residual = f64::INFINITY;
@@ -228,10 +234,13 @@ impl Integrator {
         let mut stale = false;
         let mut it = 0;
         while it <= self.newton_max_iterations {
-            model.rhs(&self.xs, u, &mut self.k[0]);
-            if !all_finite(&self.k[0]) {
-                return Err(OcpError::NonFiniteDynamics { stage: "rhs" });
+            if !known_slope {
+                model.rhs(&self.xs, u, &mut self.k[0]);
+                if !all_finite(&self.k[0]) {
+                    return Err(OcpError::NonFiniteDynamics { stage: "rhs" });
+                }
             }
+            known_slope = false;
             for i in 0..nx {
                 self.t[i] = self.xs[i] - self.x[i] - 0.5 * h * self.k[0][i];
             }

@@ -50,18 +50,37 @@ impl<D: Dynamics> SqpSolver<D> {
             use rayon::prelude::*;
             let (model, s, u, counts) = (&self.model, &self.s, &self.u, &self.counts);
             let records = &mut self.records;
-            self.integrators
+            let integrate =
+                |k: usize,
+                 int: &mut crate::Integrator,
+                 phi: &mut nalgebra::DVector<f64>,
+                 a: &mut nalgebra::DMatrix<f64>,
+                 b: &mut nalgebra::DMatrix<f64>,
+                 record: Option<&mut crate::MidpointRecord>| {
+                    int.set_substeps(counts[k])?;
+                    let (s, u, phi) = (s[k].as_slice(), u[k].as_slice(), phi.as_mut_slice());
+                    match record {
+                        Some(r) => {
+                            int.integrate_with_sensitivities_recorded(model, s, u, phi, a, b, r)
+                        }
+                        None => int.integrate_with_sensitivities(model, s, u, phi, a, b),
+                    }
+                };
+            let items = self
+                .integrators
                 .par_iter_mut()
                 .zip(self.phi.par_iter_mut())
                 .zip(self.lin.a.par_iter_mut())
                 .zip(self.lin.b.par_iter_mut())
-                .zip(records.par_iter_mut())
-                .enumerate()
-                .try_for_each(|(k, ((((int, phi), a), b), record))| {
-                    int.set_substeps(counts[k])?;
-                    let (s, u, phi) = (s[k].as_slice(), u[k].as_slice(), phi.as_mut_slice());
-                    int.integrate_with_sensitivities_recorded(model, s, u, phi, a, b, record)
-                })?;
+                .enumerate();
+            if records.is_empty() {
+                items
+                    .try_for_each(|(k, (((int, phi), a), b))| integrate(k, int, phi, a, b, None))?;
+            } else {
+                items.zip(records.par_iter_mut()).try_for_each(
+                    |((k, (((int, phi), a), b)), r)| integrate(k, int, phi, a, b, Some(r)),
+                )?;
+            }
         }
         for k in 0..n {
             if self.settings.parallel_intervals && !exact && self.lq.is_none() {
@@ -97,7 +116,7 @@ impl<D: Dynamics> SqpSolver<D> {
                 self.lin.hq[k].copy_from(&self.hdyn.view((0, 0), (nx, nx)));
                 self.lin.hr[k].copy_from(&self.hdyn.view((nx, nx), (self.nu, self.nu)));
                 self.lin.hs[k].copy_from(&self.hdyn.view((nx, 0), (self.nu, nx)));
-            } else {
+            } else if let Some(record) = self.records.get_mut(k) {
                 self.integrators[0].integrate_with_sensitivities_recorded(
                     &self.model,
                     self.s[k].as_slice(),
@@ -105,7 +124,16 @@ impl<D: Dynamics> SqpSolver<D> {
                     self.phi[k].as_mut_slice(),
                     &mut self.lin.a[k],
                     &mut self.lin.b[k],
-                    &mut self.records[k],
+                    record,
+                )?;
+            } else {
+                self.integrators[0].integrate_with_sensitivities(
+                    &self.model,
+                    self.s[k].as_slice(),
+                    self.u[k].as_slice(),
+                    self.phi[k].as_mut_slice(),
+                    &mut self.lin.a[k],
+                    &mut self.lin.b[k],
                 )?;
             }
         }

@@ -50,11 +50,15 @@ fn a_warm_started_trial_agrees_with_newton_from_scratch_and_costs_less() {
             // the trial moved the end state by far more than the tolerance
             assert!(max_rel(&cold, &xe) > 1e-6, "n = {n}, t = {t}");
             assert_eq!(w.1, 0, "n = {n}, t = {t}: warm (rhs, jacobians) {w:?}, cold {c:?}");
-            assert!(w.0 < c.0, "n = {n}, t = {t}: warm {w:?}, cold {c:?}");
+            assert!(
+                w.0 <= c.0 && w.0 + w.1 < c.0 + c.1,
+                "n = {n}, t = {t}: warm {w:?}, cold {c:?}"
+            );
             cold_rhs += c.0;
             warm_rhs += w.0;
         }
-        eprintln!("n = {n}: right-hand sides cold {cold_rhs}, warm {warm_rhs}");
+        // over the four step lengths
+        assert!(warm_rhs < cold_rhs, "n = {n}: right-hand sides cold {cold_rhs}, warm {warm_rhs}");
     }
 }
 
