@@ -99,6 +99,7 @@ pub struct Integrator {
     newton_tolerance: f64,
     newton_max_iterations: usize,
     simplified_newton: bool,
+    refresh_after_first_step: bool,
     /// `lu` holds a factorised Newton matrix for the current `h`, evaluated in this interval
     /// integration (reset at the start of each, so that an integration is a function of its
     /// arguments alone: same bits whichever interval the workspace integrated before).
@@ -221,6 +222,7 @@ impl Integrator {
             newton_tolerance: settings.newton_tolerance,
             newton_max_iterations: settings.newton_max_iterations,
             simplified_newton: settings.simplified_newton,
+            refresh_after_first_step: settings.refresh_after_first_step,
             newton_factored: false,
             m_prev: zv(),
             r_prev: zv(),

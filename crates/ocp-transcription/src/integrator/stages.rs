@@ -233,9 +233,31 @@ impl Integrator {
         let mut previous = f64::INFINITY;
         let mut stale = false;
         let mut it = 0;
+        // whether `fx`, `fu` hold the Jacobians at the current iterate, and the residual the
+        // last contraction predicts for it
+        let mut jacobians_here = false;
+        let mut predicted = f64::INFINITY;
         while it <= self.newton_max_iterations {
             if !known_slope {
-                model.rhs(&self.xs, u, &mut self.k[0]);
+                // the Jacobians are evaluated with the residual (one model evaluation,
+                // `rhs_and_jacobians`) and refresh the factor at the iterate after the first
+                // step (`IntegratorSettings::refresh_after_first_step`), and, with
+                // sensitivities, where the last contraction repeated passes the test (they
+                // are needed at the converged midpoint; when the test fails they refresh)
+                jacobians_here = self.simplified_newton
+                    && (self.refresh_after_first_step && it == 1
+                        || sens && predicted <= self.newton_tolerance * (1.0 + norm_inf(&self.xs)));
+                if jacobians_here {
+                    model.rhs_and_jacobians(
+                        &self.xs,
+                        u,
+                        &mut self.k[0],
+                        &mut self.fx,
+                        &mut self.fu,
+                    );
+                } else {
+                    model.rhs(&self.xs, u, &mut self.k[0]);
+                }
                 if !all_finite(&self.k[0]) {
                     return Err(OcpError::NonFiniteDynamics { stage: "rhs" });
                 }
@@ -259,15 +281,19 @@ impl Integrator {
             // the full Newton step from its start (far from the solution the iteration then
             // follows full Newton's path)
             let slow = residual > SIMPLIFIED_NEWTON_MAX_RATE * previous;
+            predicted =
+                if previous.is_finite() { residual * (residual / previous) } else { f64::INFINITY };
             let refresh = if !self.simplified_newton || !self.newton_factored {
                 true
             } else if stale && residual > SIMPLIFIED_NEWTON_UNDO_RATE * previous {
                 self.xs.copy_from_slice(&self.m_prev);
                 self.t.copy_from_slice(&self.r_prev);
                 residual = previous;
+                jacobians_here = false;
+                predicted = f64::INFINITY;
                 true
             } else {
-                slow
+                slow || jacobians_here
             };
             if self.simplified_newton {
                 self.m_prev.copy_from_slice(&self.xs);
@@ -276,7 +302,9 @@ impl Integrator {
                 stale = !refresh;
             }
             if refresh {
-                model.jacobians(&self.xs, u, &mut self.fx, &mut self.fu);
+                if !jacobians_here {
+                    model.jacobians(&self.xs, u, &mut self.fx, &mut self.fu);
+                }
                 if !all_finite(self.fx.as_slice()) {
                     return Err(OcpError::NonFiniteDynamics { stage: "jacobian" });
                 }
@@ -295,7 +323,9 @@ impl Integrator {
             return Err(OcpError::NewtonFailed { iterations: it, residual });
         }
         if sens {
-            model.jacobians(&self.xs, u, &mut self.fx, &mut self.fu);
+            if !jacobians_here {
+                model.jacobians(&self.xs, u, &mut self.fx, &mut self.fu);
+            }
             if !all_finite(self.fx.as_slice()) || !all_finite(self.fu.as_slice()) {
                 return Err(OcpError::NonFiniteDynamics { stage: "jacobian" });
             }
