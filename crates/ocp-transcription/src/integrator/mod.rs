@@ -9,11 +9,14 @@
 //!
 //! * **RK4**: the classical method.
 //! * **Implicit midpoint** (Gauss–Legendre, one stage): `m = x + h/2 f(m, u)`,
-//!   `x⁺ = 2m − x`, solved by simplified Newton: the iterations reuse the interval's last
-//!   factorised Newton matrix `I − h/2 ∂f/∂x` (the previous substep's) and re-evaluate it
-//!   only when the residual contracts slower than [`SIMPLIFIED_NEWTON_MAX_RATE`], so an
-//!   integration without sensitivities costs one Jacobian per interval when the iteration
-//!   contracts (full Newton with [`IntegratorSettings::simplified_newton`] off); the
+//!   `x⁺ = 2m − x`, solved by simplified Newton: the first step of a substep uses the
+//!   interval's last factorised Newton matrix `I − h/2 ∂f/∂x` (the previous substep's, or a
+//!   recorded one near a linearisation: [`Integrator::integrate_near`]), the iterate after it
+//!   evaluates the Jacobian with its residual and refactorises
+//!   ([`IntegratorSettings::refresh_after_first_step`]; without it, one Jacobian per interval
+//!   when the iteration contracts), and later ones re-evaluate it only when the residual
+//!   contracts slower than [`SIMPLIFIED_NEWTON_MAX_RATE`] (full Newton with
+//!   [`IntegratorSettings::simplified_newton`] off); the
 //!   sensitivities follow from the implicit function theorem with the Newton matrix
 //!   re-factorised at the converged point (exact, whichever iteration found it).
 //!   Symplectic and quadratic-invariant preserving (keeps `½xᵀx` when `xᵀf(x) = 0`).

@@ -53,7 +53,8 @@ pub struct IntegratorSettings {
     /// Simplified Newton for the implicit midpoint rule: the iterations reuse the last
     /// factorised Newton matrix `I − h/2 ∂f/∂x` of the interval (the previous substep's, at its
     /// converged midpoint) and evaluate the Jacobian and refactorise only when the residual
-    /// contracts slower than [`SIMPLIFIED_NEWTON_MAX_RATE`] per iteration. The convergence test
+    /// contracts slower than [`SIMPLIFIED_NEWTON_MAX_RATE`] per iteration (and after the first
+    /// step with [`IntegratorSettings::refresh_after_first_step`]). The convergence test
     /// is the same as full Newton's, and the sensitivities stay exact (Jacobian and factor at
     /// the converged midpoint). `false`: full Newton (a Jacobian and a factorisation per
     /// iteration). Default `true`.
