@@ -82,7 +82,7 @@ pub use dynamics::Dynamics;
 pub use error::{OcpError, Result};
 pub use integrator::{
     interval_error, AdaptiveSubsteps, Integrator, IntegratorKind, IntegratorSettings, LinearPart,
-    SIMPLIFIED_NEWTON_MAX_RATE,
+    MidpointRecord, SIMPLIFIED_NEWTON_MAX_RATE,
 };
 pub use ocp::Ocp;
 pub use qp::QpForm;

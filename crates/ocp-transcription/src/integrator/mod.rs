@@ -9,11 +9,14 @@
 //!
 //! * **RK4**: the classical method.
 //! * **Implicit midpoint** (Gauss–Legendre, one stage): `m = x + h/2 f(m, u)`,
-//!   `x⁺ = 2m − x`, solved by simplified Newton: the iterations reuse the interval's last
-//!   factorised Newton matrix `I − h/2 ∂f/∂x` (the previous substep's) and re-evaluate it
-//!   only when the residual contracts slower than [`SIMPLIFIED_NEWTON_MAX_RATE`], so an
-//!   integration without sensitivities costs one Jacobian per interval when the iteration
-//!   contracts (full Newton with [`IntegratorSettings::simplified_newton`] off); the
+//!   `x⁺ = 2m − x`, solved by simplified Newton: the first step of a substep uses the
+//!   interval's last factorised Newton matrix `I − h/2 ∂f/∂x` (the previous substep's, or a
+//!   recorded one near a linearisation: [`Integrator::integrate_near`]), the iterate after it
+//!   evaluates the Jacobian with its residual and refactorises
+//!   ([`IntegratorSettings::refresh_after_first_step`]; without it, one Jacobian per interval
+//!   when the iteration contracts), and later ones re-evaluate it only when the residual
+//!   contracts slower than [`SIMPLIFIED_NEWTON_MAX_RATE`] (full Newton with
+//!   [`IntegratorSettings::simplified_newton`] off); the
 //!   sensitivities follow from the implicit function theorem with the Newton matrix
 //!   re-factorised at the converged point (exact, whichever iteration found it).
 //!   Symplectic and quadratic-invariant preserving (keeps `½xᵀx` when `xᵀf(x) = 0`).
@@ -35,11 +38,14 @@
 mod adjoint;
 mod settings;
 mod stages;
+mod warm_start;
 
 pub use settings::{
     interval_error, AdaptiveSubsteps, IntegratorKind, IntegratorSettings, LinearPart,
     SIMPLIFIED_NEWTON_MAX_RATE,
 };
+pub use warm_start::MidpointRecord;
+use warm_start::Warm;
 
 use crate::dynamics::Dynamics;
 use crate::error::{check_dim, invalid, OcpError, Result};
@@ -96,6 +102,7 @@ pub struct Integrator {
     newton_tolerance: f64,
     newton_max_iterations: usize,
     simplified_newton: bool,
+    refresh_after_first_step: bool,
     /// `lu` holds a factorised Newton matrix for the current `h`, evaluated in this interval
     /// integration (reset at the start of each, so that an integration is a function of its
     /// arguments alone: same bits whichever interval the workspace integrated before).
@@ -218,6 +225,7 @@ impl Integrator {
             newton_tolerance: settings.newton_tolerance,
             newton_max_iterations: settings.newton_max_iterations,
             simplified_newton: settings.simplified_newton,
+            refresh_after_first_step: settings.refresh_after_first_step,
             newton_factored: false,
             m_prev: zv(),
             r_prev: zv(),
@@ -487,6 +495,20 @@ impl Integrator {
         sens: bool,
         tape: bool,
     ) -> Result<()> {
+        self.run_warm(model, x0, u, sens, tape, Warm::Cold)
+    }
+
+    /// One interval integration; `warm` records the implicit midpoint substeps or starts
+    /// their Newton iterations from a record (`warm_start`).
+    fn run_warm<D: Dynamics + ?Sized>(
+        &mut self,
+        model: &D,
+        x0: &[f64],
+        u: &[f64],
+        sens: bool,
+        tape: bool,
+        mut warm: Warm<'_>,
+    ) -> Result<()> {
         self.calls += 1;
         self.newton_factored = false;
         self.x.copy_from_slice(x0);
@@ -499,7 +521,7 @@ impl Integrator {
         for n in 0..self.substeps {
             match self.kind {
                 IntegratorKind::ImplicitMidpoint => {
-                    self.midpoint_substep(model, u, sens, n == 0)?
+                    self.midpoint_substep(model, u, sens, n, &mut warm)?
                 }
                 _ => {
                     self.explicit_substep(model, u, sens, if tape { Some(4 * n) } else { None })?
@@ -511,6 +533,9 @@ impl Integrator {
         }
         if sens && !all_finite(self.s.as_slice()) {
             return Err(OcpError::NonFiniteDynamics { stage: "sensitivity" });
+        }
+        if let Warm::Record(record) = warm {
+            self.finish_record(record, u);
         }
         Ok(())
     }

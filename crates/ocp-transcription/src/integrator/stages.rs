@@ -1,7 +1,7 @@
 //! Stage evaluations and substeps of the explicit (RK4, Lawson RK4) and implicit midpoint
 //! methods, forward sensitivities alongside.
 
-use super::{Integrator, Pow, SIMPLIFIED_NEWTON_MAX_RATE};
+use super::{Integrator, Pow, Warm, SIMPLIFIED_NEWTON_MAX_RATE};
 use crate::dynamics::Dynamics;
 use crate::error::{OcpError, Result};
 use crate::la::{all_finite, axpy, lincomb, lincomb3, norm_inf};
@@ -196,24 +196,35 @@ impl Integrator {
         model: &D,
         u: &[f64],
         sens: bool,
-        first: bool,
+        j: usize,
+        warm: &mut Warm<'_>,
     ) -> Result<()> {
         let h = self.h;
         let nx = self.nx;
-        // initial guess. Simplified Newton: the previous substep's slope `k = f(m)` (left in
-        // `k[0]` by its converged residual), `m = x + h/2 k`, and the start `x` itself in the
-        // first substep (its residual `−h/2 f(x)` is the only evaluation; the first Newton step
-        // from it is the linearly implicit Euler half step, stable for the stiff modes). Full
-        // Newton: the explicit half step `m = x + h/2 f(x)` (one more evaluation)
-        self.xs.copy_from_slice(&self.x);
-        if !self.simplified_newton {
+        let first = j == 0;
+        // initial guess. Simplified Newton: the previous substep's midpoint `m_{j−1}`, whose
+        // residual for this substep, `m_{j−1} − x − h/2 f(m_{j−1})`, is known without an
+        // evaluation (`xs` and its slope `k[0]` are left by the previous substep's converged
+        // residual), so the first step is the previous factor's linearly implicit step
+        // `m_{j−1} + M⁻¹ (x − x_{j−1})`, exact for linear dynamics; in the first substep the
+        // start `x` itself (its residual `−h/2 f(x)` is the only evaluation; the first Newton
+        // step from it is the linearly implicit Euler half step, stable for the stiff modes).
+        // Full Newton: the explicit half step `m = x + h/2 f(x)` (one more evaluation). From a
+        // record: its first-order predictor and Newton matrix (`warm_start`)
+        let mut known_slope = false;
+        if let Warm::Start(record) = warm {
+            self.predict_midpoint(record, j, u);
+        } else if !self.simplified_newton {
+            self.xs.copy_from_slice(&self.x);
             model.rhs(&self.x, u, &mut self.k[0]);
             if !all_finite(&self.k[0]) {
                 return Err(OcpError::NonFiniteDynamics { stage: "rhs" });
             }
             axpy(&mut self.xs, 0.5 * h, &self.k[0]);
-        } else if !first {
-            axpy(&mut self.xs, 0.5 * h, &self.k[0]);
+        } else if first {
+            self.xs.copy_from_slice(&self.x);
+        } else {
+            known_slope = true;
         }
         let mut converged = false;
         let mut residual = f64::INFINITY;
@@ -222,11 +233,36 @@ impl Integrator {
         let mut previous = f64::INFINITY;
         let mut stale = false;
         let mut it = 0;
+        // whether `fx`, `fu` hold the Jacobians at the current iterate, and the residual the
+        // last contraction predicts for it
+        let mut jacobians_here = false;
+        let mut predicted = f64::INFINITY;
         while it <= self.newton_max_iterations {
-            model.rhs(&self.xs, u, &mut self.k[0]);
-            if !all_finite(&self.k[0]) {
-                return Err(OcpError::NonFiniteDynamics { stage: "rhs" });
+            if !known_slope {
+                // the Jacobians are evaluated with the residual (one model evaluation,
+                // `rhs_and_jacobians`) and refresh the factor at the iterate after the first
+                // step (`IntegratorSettings::refresh_after_first_step`), and, with
+                // sensitivities, where the last contraction repeated passes the test (they
+                // are needed at the converged midpoint; when the test fails they refresh)
+                jacobians_here = self.simplified_newton
+                    && (self.refresh_after_first_step && it == 1
+                        || sens && predicted <= self.newton_tolerance * (1.0 + norm_inf(&self.xs)));
+                if jacobians_here {
+                    model.rhs_and_jacobians(
+                        &self.xs,
+                        u,
+                        &mut self.k[0],
+                        &mut self.fx,
+                        &mut self.fu,
+                    );
+                } else {
+                    model.rhs(&self.xs, u, &mut self.k[0]);
+                }
+                if !all_finite(&self.k[0]) {
+                    return Err(OcpError::NonFiniteDynamics { stage: "rhs" });
+                }
             }
+            known_slope = false;
             for i in 0..nx {
                 self.t[i] = self.xs[i] - self.x[i] - 0.5 * h * self.k[0][i];
             }
@@ -245,15 +281,19 @@ impl Integrator {
             // the full Newton step from its start (far from the solution the iteration then
             // follows full Newton's path)
             let slow = residual > SIMPLIFIED_NEWTON_MAX_RATE * previous;
+            predicted =
+                if previous.is_finite() { residual * (residual / previous) } else { f64::INFINITY };
             let refresh = if !self.simplified_newton || !self.newton_factored {
                 true
             } else if stale && residual > SIMPLIFIED_NEWTON_UNDO_RATE * previous {
                 self.xs.copy_from_slice(&self.m_prev);
                 self.t.copy_from_slice(&self.r_prev);
                 residual = previous;
+                jacobians_here = false;
+                predicted = f64::INFINITY;
                 true
             } else {
-                slow
+                slow || jacobians_here
             };
             if self.simplified_newton {
                 self.m_prev.copy_from_slice(&self.xs);
@@ -262,7 +302,9 @@ impl Integrator {
                 stale = !refresh;
             }
             if refresh {
-                model.jacobians(&self.xs, u, &mut self.fx, &mut self.fu);
+                if !jacobians_here {
+                    model.jacobians(&self.xs, u, &mut self.fx, &mut self.fu);
+                }
                 if !all_finite(self.fx.as_slice()) {
                     return Err(OcpError::NonFiniteDynamics { stage: "jacobian" });
                 }
@@ -281,7 +323,9 @@ impl Integrator {
             return Err(OcpError::NewtonFailed { iterations: it, residual });
         }
         if sens {
-            model.jacobians(&self.xs, u, &mut self.fx, &mut self.fu);
+            if !jacobians_here {
+                model.jacobians(&self.xs, u, &mut self.fx, &mut self.fu);
+            }
             if !all_finite(self.fx.as_slice()) || !all_finite(self.fu.as_slice()) {
                 return Err(OcpError::NonFiniteDynamics { stage: "jacobian" });
             }
@@ -309,6 +353,9 @@ impl Integrator {
             }
             self.s *= -1.0;
             axpy(self.s.as_mut_slice(), 2.0, self.tm.as_slice());
+            if let Warm::Record(record) = warm {
+                self.record_substep(record, j);
+            }
         }
         for i in 0..nx {
             self.x[i] = 2.0 * self.xs[i] - self.x[i];

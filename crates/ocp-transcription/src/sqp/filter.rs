@@ -117,7 +117,7 @@ impl<D: Dynamics> SqpSolver<D> {
         let p = Point { j, theta, m };
         let mut t = 1.0;
         loop {
-            if let Some((jt, tht)) = self.trial_at(t) {
+            if let Some((jt, tht)) = self.trial_at(t, None) {
                 if p.accepts(&self.filter, t, jt, tht) {
                     self.augment(&p, t);
                     return Some(t);
@@ -127,7 +127,7 @@ impl<D: Dynamics> SqpSolver<D> {
                     && tht >= theta
                     && self.second_order_correction()
                 {
-                    if let Some((js, ths)) = self.trial_at(1.0) {
+                    if let Some((js, ths)) = self.trial_at(1.0, None) {
                         if p.accepts(&self.filter, 1.0, js, ths) {
                             self.stats.second_order_corrections += 1;
                             self.augment(&p, 1.0);

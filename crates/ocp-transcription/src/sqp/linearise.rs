@@ -49,23 +49,38 @@ impl<D: Dynamics> SqpSolver<D> {
         if self.settings.parallel_intervals && !exact && self.lq.is_none() {
             use rayon::prelude::*;
             let (model, s, u, counts) = (&self.model, &self.s, &self.u, &self.counts);
-            self.integrators
+            let records = &mut self.records;
+            let integrate =
+                |k: usize,
+                 int: &mut crate::Integrator,
+                 phi: &mut nalgebra::DVector<f64>,
+                 a: &mut nalgebra::DMatrix<f64>,
+                 b: &mut nalgebra::DMatrix<f64>,
+                 record: Option<&mut crate::MidpointRecord>| {
+                    int.set_substeps(counts[k])?;
+                    let (s, u, phi) = (s[k].as_slice(), u[k].as_slice(), phi.as_mut_slice());
+                    match record {
+                        Some(r) => {
+                            int.integrate_with_sensitivities_recorded(model, s, u, phi, a, b, r)
+                        }
+                        None => int.integrate_with_sensitivities(model, s, u, phi, a, b),
+                    }
+                };
+            let items = self
+                .integrators
                 .par_iter_mut()
                 .zip(self.phi.par_iter_mut())
                 .zip(self.lin.a.par_iter_mut())
                 .zip(self.lin.b.par_iter_mut())
-                .enumerate()
-                .try_for_each(|(k, (((int, phi), a), b))| {
-                    int.set_substeps(counts[k])?;
-                    int.integrate_with_sensitivities(
-                        model,
-                        s[k].as_slice(),
-                        u[k].as_slice(),
-                        phi.as_mut_slice(),
-                        a,
-                        b,
-                    )
-                })?;
+                .enumerate();
+            if records.is_empty() {
+                items
+                    .try_for_each(|(k, (((int, phi), a), b))| integrate(k, int, phi, a, b, None))?;
+            } else {
+                items.zip(records.par_iter_mut()).try_for_each(
+                    |((k, (((int, phi), a), b)), r)| integrate(k, int, phi, a, b, Some(r)),
+                )?;
+            }
         }
         for k in 0..n {
             if self.settings.parallel_intervals && !exact && self.lq.is_none() {
@@ -101,6 +116,16 @@ impl<D: Dynamics> SqpSolver<D> {
                 self.lin.hq[k].copy_from(&self.hdyn.view((0, 0), (nx, nx)));
                 self.lin.hr[k].copy_from(&self.hdyn.view((nx, nx), (self.nu, self.nu)));
                 self.lin.hs[k].copy_from(&self.hdyn.view((nx, 0), (self.nu, nx)));
+            } else if let Some(record) = self.records.get_mut(k) {
+                self.integrators[0].integrate_with_sensitivities_recorded(
+                    &self.model,
+                    self.s[k].as_slice(),
+                    self.u[k].as_slice(),
+                    self.phi[k].as_mut_slice(),
+                    &mut self.lin.a[k],
+                    &mut self.lin.b[k],
+                    record,
+                )?;
             } else {
                 self.integrators[0].integrate_with_sensitivities(
                     &self.model,

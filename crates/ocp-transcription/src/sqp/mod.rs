@@ -17,7 +17,7 @@ pub use status::{IterationLog, SqpStats, SqpStatus};
 
 use crate::dynamics::Dynamics;
 use crate::error::{check_dim, invalid, OcpError, Result};
-use crate::integrator::Integrator;
+use crate::integrator::{Integrator, MidpointRecord};
 use crate::la::all_finite;
 use crate::ocp::Ocp;
 use crate::qp::{BoxQp, Condenser, Linearisation, QpForm, Step};
@@ -51,6 +51,14 @@ pub struct SqpSolver<D: Dynamics> {
     integrators: Vec<Integrator>,
     /// Substep count of each interval, fixed during one SQP iteration.
     counts: Vec<usize>,
+    /// Each interval's converged implicit midpoint substeps at the last linearisation: the
+    /// warm start of the line-search trials' Newton iterations, in the real-time iteration
+    /// (none otherwise). A converged solve keeps the trials' iterations from scratch: near a
+    /// solution its merit comparisons are at the level of the Newton tolerance, where the
+    /// warm start's equally converged but different trial states change the iterates' path
+    /// (measured on the quasi-Newton cart-pole solve of tests/it/quasi_newton.rs: stalled at
+    /// KKT 1.6e-6 instead of converged).
+    records: Vec<MidpointRecord>,
     s: Vec<DVector<f64>>,
     u: Vec<DVector<f64>>,
     lam: Vec<DVector<f64>>,
@@ -157,7 +165,15 @@ impl<D: Dynamics> SqpSolver<D> {
             u0[i] = u0[i].clamp(ocp.u_min[i], ocp.u_max[i]);
         }
         let counts = vec![settings.integrator.substeps; n];
+        let records = if settings.mode == SqpMode::RealTimeIteration
+            && settings.integrator.kind == crate::IntegratorKind::ImplicitMidpoint
+        {
+            (0..n).map(|_| integrators[0].new_record()).collect()
+        } else {
+            Vec::new()
+        };
         let mut solver = Self {
+            records,
             n,
             nx,
             nu,

@@ -202,7 +202,10 @@ impl Globalisation {
 pub enum SqpMode {
     /// Iterate to the KKT tolerance or the iteration limit.
     Sqp,
-    /// Real-time iteration: exactly one linearisation, QP and step per call.
+    /// Real-time iteration: exactly one linearisation, QP and step per call. With the
+    /// implicit midpoint rule, the line-search trials warm-start their Newton iterations from
+    /// the linearisation's converged substeps
+    /// ([`Integrator::integrate_near`](crate::Integrator::integrate_near)).
     RealTimeIteration,
     /// Linear–quadratic (linear MPC): the dynamics are linearised once at the reference
     /// `(x_r, u_r)` (`Φ(x, u) ≈ Φ(x_r, u_r) + A(x − x_r) + B(u − u_r)`); each call solves

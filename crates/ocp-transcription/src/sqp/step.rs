@@ -170,9 +170,10 @@ impl<D: Dynamics> SqpSolver<D> {
     }
 
     /// Merit `J + ν (Σ‖d‖₁ + ‖x0 − s_0‖₁ + state-bound violations)` at `(s + tΔs, u + tΔu)`;
-    /// `None` when the dynamics fail there.
-    pub(super) fn merit_at(&mut self, t: f64) -> Option<f64> {
-        let (j, c) = self.trial_at(t)?;
+    /// `None` when the dynamics fail there. With `reject_above`, the trial may stop as soon
+    /// as the merit is known to exceed it and return a value above it (see [`Self::trial_at`]).
+    pub(super) fn merit_at(&mut self, t: f64, reject_above: Option<f64>) -> Option<f64> {
+        let (j, c) = self.trial_at(t, reject_above)?;
         let m = j + self.merit_nu * c;
         if m.is_finite() {
             Some(m)
@@ -184,10 +185,19 @@ impl<D: Dynamics> SqpSolver<D> {
     /// Cost `J` and ℓ1 constraint violation `θ = Σ‖d‖₁ + ‖x0 − s_0‖₁ + state-bound
     /// violations` at the trial point `(s + tΔs, u + tΔu)` (stored in the shift buffers, its
     /// `Φ` in `trial_phi`); `None` when the dynamics fail there. A trial needs only the
-    /// states: the intervals are integrated without sensitivities (in parallel with
-    /// [`crate::SqpSettings::parallel_intervals`]; the sums run in interval order either way,
+    /// states: the intervals are integrated without sensitivities (in the real-time
+    /// iteration, the implicit midpoint rule's Newton iterations warm-started from the
+    /// linearisation's converged substeps,
+    /// [`Integrator::integrate_near`](crate::Integrator::integrate_near)); in parallel with
+    /// [`crate::SqpSettings::parallel_intervals`] (the sums run in interval order either way,
     /// so the result is the same to the bit).
-    pub(super) fn trial_at(&mut self, t: f64) -> Option<(f64, f64)> {
+    ///
+    /// `reject_above = Some(b)` (merit line search): the serial sweep stops after the first
+    /// interval whose partial merit `J + ν θ_partial` exceeds `b` (the later terms of `θ` are
+    /// non-negative and floating-point sums and products are monotone, so the full merit
+    /// exceeds `b` too and the decision `merit ≤ b` is the same), returning that partial `θ`;
+    /// `trial_phi` and the shift buffers then hold the trial only up to that interval.
+    pub(super) fn trial_at(&mut self, t: f64, reject_above: Option<f64>) -> Option<(f64, f64)> {
         let n = self.n;
         for k in 0..=n {
             self.shift_s[k].copy_from(&self.s[k]);
@@ -200,32 +210,56 @@ impl<D: Dynamics> SqpSolver<D> {
                 self.shift_u[k][i] = self.shift_u[k][i].clamp(self.ocp.u_min[i], self.ocp.u_max[i]);
             }
         }
+        let s = std::mem::take(&mut self.shift_s);
+        let u = std::mem::take(&mut self.shift_u);
+        let j = self.cost_of(&s, &u);
+        self.shift_s = s;
+        self.shift_u = u;
+        let mut c = 0.0;
+        for i in 0..self.nx {
+            c += (self.x0[i] - self.shift_s[0][i]).abs();
+        }
         let t0 = Instant::now();
         let ok = if self.integrators.len() == n && n > 1 {
             use rayon::prelude::*;
             let (model, s, u, counts) = (&self.model, &self.shift_s, &self.shift_u, &self.counts);
-            self.integrators.par_iter_mut().zip(self.trial_phi.par_iter_mut()).enumerate().all(
-                |(k, (int, phi))| {
-                    int.set_substeps(counts[k]).is_ok()
-                        && int
-                            .integrate(model, s[k].as_slice(), u[k].as_slice(), phi.as_mut_slice())
+            let records = &self.records;
+            let ok =
+                self.integrators.par_iter_mut().zip(self.trial_phi.par_iter_mut()).enumerate().all(
+                    |(k, (int, phi))| {
+                        let (s, u, phi) = (s[k].as_slice(), u[k].as_slice(), phi.as_mut_slice());
+                        int.set_substeps(counts[k]).is_ok()
+                            && match records.get(k) {
+                                Some(r) => int.integrate_near(model, s, u, phi, r),
+                                None => int.integrate(model, s, u, phi),
+                            }
                             .is_ok()
-                },
-            )
+                    },
+                );
+            if ok {
+                for k in 0..n {
+                    self.add_trial_violation(k, &mut c);
+                }
+            }
+            ok
         } else {
             let mut ok = true;
             for k in 0..n {
-                if self.integrators[0].set_substeps(self.counts[k]).is_err()
-                    || self.integrators[0]
-                        .integrate(
-                            &self.model,
-                            self.shift_s[k].as_slice(),
-                            self.shift_u[k].as_slice(),
-                            self.trial_phi[k].as_mut_slice(),
-                        )
-                        .is_err()
+                let int = &mut self.integrators[0];
+                let (s, u) = (self.shift_s[k].as_slice(), self.shift_u[k].as_slice());
+                let phi = self.trial_phi[k].as_mut_slice();
+                if int.set_substeps(self.counts[k]).is_err()
+                    || match self.records.get(k) {
+                        Some(r) => int.integrate_near(&self.model, s, u, phi, r),
+                        None => int.integrate(&self.model, s, u, phi),
+                    }
+                    .is_err()
                 {
                     ok = false;
+                    break;
+                }
+                self.add_trial_violation(k, &mut c);
+                if reject_above.is_some_and(|b| j + self.merit_nu * c > b) {
                     break;
                 }
             }
@@ -235,23 +269,17 @@ impl<D: Dynamics> SqpSolver<D> {
         if !ok {
             return None;
         }
-        let mut c = 0.0;
-        for i in 0..self.nx {
-            c += (self.x0[i] - self.shift_s[0][i]).abs();
-        }
-        for k in 0..n {
-            for i in 0..self.nx {
-                c += (self.trial_phi[k][i] - self.shift_s[k + 1][i]).abs();
-                c += (self.ocp.x_min[i] - self.shift_s[k + 1][i]).max(0.0)
-                    + (self.shift_s[k + 1][i] - self.ocp.x_max[i]).max(0.0);
-            }
-        }
-        let s = std::mem::take(&mut self.shift_s);
-        let u = std::mem::take(&mut self.shift_u);
-        let j = self.cost_of(&s, &u);
-        self.shift_s = s;
-        self.shift_u = u;
         Some((j, c))
+    }
+
+    /// Adds interval `k`'s terms of the trial's violation `θ` to `c`: `‖Φ_k − s_{k+1}‖₁` and the
+    /// state-bound violations of `s_{k+1}`.
+    fn add_trial_violation(&self, k: usize, c: &mut f64) {
+        for i in 0..self.nx {
+            *c += (self.trial_phi[k][i] - self.shift_s[k + 1][i]).abs();
+            *c += (self.ocp.x_min[i] - self.shift_s[k + 1][i]).max(0.0)
+                + (self.shift_s[k + 1][i] - self.ocp.x_max[i]).max(0.0);
+        }
     }
 
     /// Chooses the step length; `None` when the line search fails.
@@ -306,15 +334,18 @@ impl<D: Dynamics> SqpSolver<D> {
                 self.u = u_ref;
                 let phi0 = j0 + self.merit_nu * c0;
                 let dd = (djdw - self.merit_nu * c0).min(0.0);
-                let accept = |phi: f64, t: f64| phi <= phi0 + armijo * t * dd + 1e-14 * phi0.abs();
+                let bound = |t: f64| phi0 + armijo * t * dd + 1e-14 * phi0.abs();
+                let accept = |phi: f64, t: f64| phi <= bound(t);
                 let mut t = 1.0;
-                let full = self.merit_at(1.0);
+                // the second-order correction needs the whole rejected full-step trial
+                let full = self
+                    .merit_at(1.0, if second_order_correction { None } else { Some(bound(1.0)) });
                 if let Some(phi) = full {
                     if accept(phi, 1.0) {
                         return Some(1.0);
                     }
                     if second_order_correction && self.second_order_correction() {
-                        if let Some(phi) = self.merit_at(1.0) {
+                        if let Some(phi) = self.merit_at(1.0, Some(bound(1.0))) {
                             if accept(phi, 1.0) {
                                 self.stats.second_order_corrections += 1;
                                 return Some(1.0);
@@ -328,7 +359,7 @@ impl<D: Dynamics> SqpSolver<D> {
                     if t < min_step {
                         return None;
                     }
-                    if let Some(phi) = self.merit_at(t) {
+                    if let Some(phi) = self.merit_at(t, Some(bound(t))) {
                         if accept(phi, t) {
                             return Some(t);
                         }

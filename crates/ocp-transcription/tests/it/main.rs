@@ -8,3 +8,4 @@ mod quasi_newton;
 mod reference;
 mod simplified_newton;
 mod sqp;
+mod warm_start;
