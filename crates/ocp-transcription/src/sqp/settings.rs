@@ -244,8 +244,10 @@ pub struct SqpSettings {
     /// [`SqpStatus::QpFailed`](crate::SqpStatus::QpFailed) only when every attempt fails
     /// (default false).
     pub qp_recovery: bool,
-    /// Integrate the shooting intervals of a linearisation on the rayon thread pool
-    /// (Gauss–Newton path; exact-Hessian sweeps and line-search trials stay sequential) (default false).
+    /// Integrate the shooting intervals of a linearisation and of the line-search trials on
+    /// the rayon thread pool (Gauss–Newton path; exact-Hessian sweeps stay sequential); every
+    /// sum runs in interval order, so the iterates are the same to the bit for any thread
+    /// count (default false).
     pub parallel_intervals: bool,
 }
 
