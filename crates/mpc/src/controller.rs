@@ -59,6 +59,13 @@ pub struct ControllerSettings {
     pub real_time_iteration: bool,
     /// SQP iteration limit of the NMPC per sample \[10\].
     pub max_iterations: usize,
+    /// SQP iteration limit of the first sample's NMPC solve (full SQP only), whose initial
+    /// guess is the linear MPC plan rather than a shifted converged plan; the first sample's
+    /// solve time counts these iterations. When the dynamics are not finite along that guess
+    /// (no iteration possible), the first solve starts from the guess's controls rolled out
+    /// from the measured state instead ([`SqpSolver::solve_with_fallback_starts`]). `None`: the
+    /// first sample is solved like the others, from the linear MPC plan as given \[None\].
+    pub first_sample_iterations: Option<usize>,
     /// KKT tolerance of the NMPC (max-norm natural residual; the inputs are O(0.1–5), so
     /// 1e-4 resolves them to far below what the plant feels within `τs`) [1e-4].
     pub kkt_tolerance: f64,
@@ -141,6 +148,7 @@ impl ControllerSettings {
             integrator: IntegratorSettings::new(IntegratorKind::LawsonRk4, 16),
             real_time_iteration: false,
             max_iterations: 10,
+            first_sample_iterations: None,
             kkt_tolerance: 1e-4,
             accept_violation: 1e-2,
             levenberg_marquardt: 0.0,
@@ -224,6 +232,18 @@ impl ControllerSettings {
         })?;
         if self.max_iterations == 0 {
             return Err(invalid("max_iterations", 0, "must be at least 1"));
+        }
+        if let Some(n) = self.first_sample_iterations {
+            if n == 0 {
+                return Err(invalid("first_sample_iterations", 0, "must be at least 1"));
+            }
+            if self.real_time_iteration {
+                return Err(invalid(
+                    "first_sample_iterations",
+                    n,
+                    "needs the full SQP (real_time_iteration = false)",
+                ));
+            }
         }
         if !(self.kkt_tolerance > 0.0 && self.kkt_tolerance.is_finite()) {
             return Err(invalid("kkt_tolerance", self.kkt_tolerance, "must be finite and > 0"));
@@ -332,6 +352,8 @@ pub struct Controller<D: Dynamics + Clone = RomDynamics> {
     settings: ControllerSettings,
     mpc: MpcSettings,
     nmpc: Option<SqpSolver<D>>,
+    /// The first sample's solver ([`ControllerSettings::first_sample_iterations`]).
+    initial: Option<SqpSolver<D>>,
     relaxed: Option<SqpSolver<D>>,
     lmpc: SqpSolver<D>,
     samples: usize,
@@ -389,8 +411,8 @@ impl<D: Dynamics + Clone> Controller<D> {
         };
         let lmpc = SqpSolver::new(model.clone(), ocp.clone(), lq)?;
         let predictor = model.clone();
-        let (nmpc, relaxed) = match settings.kind {
-            ControllerKind::Lmpc => (None, None),
+        let (nmpc, initial, relaxed) = match settings.kind {
+            ControllerKind::Lmpc => (None, None, None),
             ControllerKind::Nmpc => {
                 let s = SqpSettings {
                     mode: if settings.real_time_iteration {
@@ -417,13 +439,21 @@ impl<D: Dynamics + Clone> Controller<D> {
                     }
                     None => None,
                 };
-                (Some(SqpSolver::new(model, ocp, s)?), relaxed)
+                let initial = match settings.first_sample_iterations {
+                    Some(n) => {
+                        let i = SqpSettings { max_iterations: n, ..s.clone() };
+                        Some(SqpSolver::new(model.clone(), ocp.clone(), i)?)
+                    }
+                    None => None,
+                };
+                (Some(SqpSolver::new(model, ocp, s)?), initial, relaxed)
             }
         };
         Ok(Self {
             settings: settings.clone(),
             mpc: mpc.clone(),
             nmpc,
+            initial,
             relaxed,
             lmpc,
             samples: 0,
@@ -465,7 +495,9 @@ impl<D: Dynamics + Clone> Controller<D> {
         let nodes = s.nodes(start, self.interval(), self.mpc.timing.intervals);
         let u_ref = vec![0.0; self.predictor.nu()];
         for solver in
-            [Some(&mut self.lmpc), self.nmpc.as_mut(), self.relaxed.as_mut()].into_iter().flatten()
+            [Some(&mut self.lmpc), self.nmpc.as_mut(), self.initial.as_mut(), self.relaxed.as_mut()]
+                .into_iter()
+                .flatten()
         {
             solver.set_references(&x_ref, &u_ref)?;
             solver.set_node_references(&nodes)?;
@@ -602,11 +634,21 @@ impl<D: Dynamics + Clone> Controller<D> {
             return Ok(self.lmpc_report(t, start, st, "Held".into(), Strategy::Held));
         }
         let mut lmpc_done = false;
+        let mut initial_iterations = 0;
         if self.samples == 0 {
             // first sample: initial guess from the linear MPC plan
             self.solve_lmpc(x0, shift)?;
             lmpc_done = true;
             self.nmpc_from_lmpc();
+            if let (Some(i), Some(n)) = (self.initial.as_mut(), self.nmpc.as_mut()) {
+                // more iterations from that guess; the NMPC goes on from where they ended
+                copy_plan(&self.lmpc, i);
+                let (st, _) = i.solve_with_fallback_starts(x0)?;
+                initial_iterations = st.iterations;
+                if st.status.has_iterate() && plan_finite(i) {
+                    copy_plan(i, n);
+                }
+            }
         } else if let Some(n) = self.nmpc.as_mut() {
             n.shift_time(shift)?;
         }
@@ -614,7 +656,7 @@ impl<D: Dynamics + Clone> Controller<D> {
             Some(n) => n.solve(x0)?,
             None => return Err(invalid("controller", "lmpc", "no NMPC solver")),
         };
-        let mut iterations = first.iterations;
+        let mut iterations = initial_iterations + first.iterations;
         let mut rejections = 0;
         let accept = self.settings.accept_violation;
         if accepted(&first, accept) {
@@ -757,6 +799,11 @@ fn accepted(st: &ocp_transcription::SqpStats, accept: f64) -> bool {
         SqpStatus::MaxIterations => st.constraint_violation <= accept,
         _ => false,
     }
+}
+
+/// Whether every node and control of `solver`'s iterate is finite.
+fn plan_finite<D: Dynamics>(solver: &SqpSolver<D>) -> bool {
+    solver.states().iter().chain(solver.controls()).all(|v| v.iter().all(|x| x.is_finite()))
 }
 
 /// Copies nodes and controls of `from` into `to` (same problem dimensions).

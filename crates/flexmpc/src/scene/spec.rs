@@ -259,6 +259,12 @@ pub struct ControllerSpec {
     pub line_search: Option<bool>,
     /// SQP iteration limit per sample (≥ 1).
     pub max_iterations: Option<usize>,
+    /// SQP iteration limit of the first sample (≥ 1; full SQP only), which starts from the
+    /// linear MPC plan (or its controls rolled out when the dynamics are not finite there).
+    pub first_sample_iterations: Option<usize>,
+    /// With `line_search = true`: the second-order-corrected merit line search (adaptive
+    /// penalty, corrections of the shooting defects) instead of the plain merit line search.
+    pub second_order_correction: Option<bool>,
     /// KKT tolerance of the SQP (> 0).
     pub kkt_tolerance: Option<f64>,
     /// An iteration-limit plan is accepted when its shooting defects are at most this
