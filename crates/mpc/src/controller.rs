@@ -35,6 +35,23 @@ impl ControllerKind {
     }
 }
 
+/// Initial guess of the first sample's NMPC solve ([`ControllerSettings::first_sample_guess`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum InitialGuess {
+    /// The linear MPC plan (its QP on the model linearised at the reference): a trajectory
+    /// of the linearised model, consistent with the measured state.
+    #[default]
+    LinearMpc,
+    /// Shooting nodes on the line from the measured state to the reference, reached at the
+    /// end of the horizon, `s_k = x_r,k + (1 − k/Nc)(x0 − x_r,k)`, and the reference controls
+    /// (Bock's principle: multiple shooting may start from nodes near the wanted trajectory,
+    /// not on a rollout; the SQP closes the defects). The plan's nodes stay near the
+    /// reference, where the model is mildly nonlinear, instead of following a prediction of
+    /// the uncontrolled motion away from it.
+    Decay,
+}
+
 /// Default of [`ControllerSettings::plan_joint_limit_deg`] (deg).
 pub const DEFAULT_PLAN_JOINT_LIMIT: Option<f64> = Some(20.0);
 
@@ -66,6 +83,8 @@ pub struct ControllerSettings {
     /// from the measured state instead ([`SqpSolver::solve_with_fallback_starts`]). `None`: the
     /// first sample is solved like the others, from the linear MPC plan as given \[None\].
     pub first_sample_iterations: Option<usize>,
+    /// Initial guess of the first sample's NMPC solve \[the linear MPC plan\].
+    pub first_sample_guess: InitialGuess,
     /// KKT tolerance of the NMPC (max-norm natural residual; the inputs are O(0.1–5), so
     /// 1e-4 resolves them to far below what the plant feels within `τs`) [1e-4].
     pub kkt_tolerance: f64,
@@ -149,6 +168,7 @@ impl ControllerSettings {
             real_time_iteration: false,
             max_iterations: 10,
             first_sample_iterations: None,
+            first_sample_guess: InitialGuess::LinearMpc,
             kkt_tolerance: 1e-4,
             accept_violation: 1e-2,
             levenberg_marquardt: 0.0,
@@ -640,9 +660,19 @@ impl<D: Dynamics + Clone> Controller<D> {
             self.solve_lmpc(x0, shift)?;
             lmpc_done = true;
             self.nmpc_from_lmpc();
+            if self.settings.first_sample_guess == InitialGuess::Decay {
+                let target = match self.initial.as_mut() {
+                    Some(i) => Some(i),
+                    None => self.nmpc.as_mut(),
+                };
+                if let Some(solver) = target {
+                    decay_guess(solver, x0);
+                }
+            } else if let Some(i) = self.initial.as_mut() {
+                copy_plan(&self.lmpc, i);
+            }
             if let (Some(i), Some(n)) = (self.initial.as_mut(), self.nmpc.as_mut()) {
                 // more iterations from that guess; the NMPC goes on from where they ended
-                copy_plan(&self.lmpc, i);
                 let (st, _) = i.solve_with_fallback_starts(x0)?;
                 initial_iterations = st.iterations;
                 if st.status.has_iterate() && plan_finite(i) {
@@ -798,6 +828,25 @@ fn accepted(st: &ocp_transcription::SqpStats, accept: f64) -> bool {
         SqpStatus::Solved | SqpStatus::RealTimeIteration => true,
         SqpStatus::MaxIterations => st.constraint_violation <= accept,
         _ => false,
+    }
+}
+
+/// Sets `solver`'s iterate to the [`InitialGuess::Decay`] guess from `x0`.
+fn decay_guess<D: Dynamics>(solver: &mut SqpSolver<D>, x0: &[f64]) {
+    let n = solver.controls().len();
+    let ocp = solver.ocp();
+    let refs: Vec<DVector<f64>> = (0..=n)
+        .map(|k| ocp.x_ref_nodes.get(k).cloned().unwrap_or_else(|| ocp.x_ref.clone()))
+        .collect();
+    let u_ref = ocp.u_ref.clone();
+    for (k, (s, r)) in solver.states_mut().iter_mut().zip(&refs).enumerate() {
+        let w = 1.0 - k as f64 / n as f64;
+        for (i, v) in s.iter_mut().enumerate() {
+            *v = r[i] + w * (x0[i] - r[i]);
+        }
+    }
+    for u in solver.controls_mut() {
+        u.copy_from(&u_ref);
     }
 }
 

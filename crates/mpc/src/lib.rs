@@ -196,7 +196,7 @@ pub use closed_loop::{
     ENERGY_RATIO_LIMIT,
 };
 pub use controller::{
-    Controller, ControllerKind, ControllerSettings, SampleReport, Strategy,
+    Controller, ControllerKind, ControllerSettings, InitialGuess, SampleReport, Strategy,
     DEFAULT_PLAN_JOINT_LIMIT,
 };
 pub use dynamics::RomDynamics;

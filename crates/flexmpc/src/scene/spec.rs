@@ -262,6 +262,10 @@ pub struct ControllerSpec {
     /// SQP iteration limit of the first sample (≥ 1; full SQP only), which starts from the
     /// linear MPC plan (or its controls rolled out when the dynamics are not finite there).
     pub first_sample_iterations: Option<usize>,
+    /// Initial guess of the first sample's NMPC solve: `linear-mpc` (the linear MPC plan) or
+    /// `decay` (shooting nodes on the line from the measured state to the reference,
+    /// reference controls).
+    pub first_sample_guess: Option<mpc::InitialGuess>,
     /// With `line_search = true`: the second-order-corrected merit line search (adaptive
     /// penalty, corrections of the shooting defects) instead of the plain merit line search.
     pub second_order_correction: Option<bool>,
