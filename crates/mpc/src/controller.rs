@@ -832,7 +832,7 @@ fn accepted(st: &ocp_transcription::SqpStats, accept: f64) -> bool {
 }
 
 /// Sets `solver`'s iterate to the [`InitialGuess::Decay`] guess from `x0`.
-fn decay_guess<D: Dynamics>(solver: &mut SqpSolver<D>, x0: &[f64]) {
+pub(crate) fn decay_guess<D: Dynamics>(solver: &mut SqpSolver<D>, x0: &[f64]) {
     let n = solver.controls().len();
     let ocp = solver.ocp();
     let refs: Vec<DVector<f64>> = (0..=n)
