@@ -339,6 +339,36 @@ controllers = ["nmpc"]
     check("ku = 0.1", "ku = 0.1\nkq = 1.0", "kq = 1.0", "kq", "unknown field");
     check("ku = 0.1", "ku = \"high\"", "ku = \"high\"", "controller.weights.ku", "invalid type");
     check("selection = \"paper-2d\"", "lowest = 0", "lowest = 0", "modes.lowest", "at least 1");
+    // the first sample's settings and the corrected line search
+    let keys = "substeps = 16\nreal_time_iteration = false\nfirst_sample_iterations = 30\n\
+                first_sample_guess = \"decay\"\nsecond_order_correction = true";
+    let text = base.replacen("substeps = 16", keys, 1);
+    let c = load_str(Path::new("ok.toml"), &text).unwrap_or_else(|e| panic!("{e}"));
+    let c = c.control.expect("[scenario]").controller;
+    assert_eq!(c.first_sample_iterations, Some(30));
+    assert_eq!(c.first_sample_guess, mpc::InitialGuess::Decay);
+    assert_eq!(c.globalisation, ocp_transcription::Globalisation::merit_soc());
+    check(
+        "substeps = 16",
+        "substeps = 16\nreal_time_iteration = false\nfirst_sample_iterations = 0",
+        "first_sample_iterations = 0",
+        "controller.first_sample_iterations",
+        "at least 1",
+    );
+    check(
+        "substeps = 16",
+        "substeps = 16\nline_search = false\nsecond_order_correction = true",
+        "second_order_correction = true",
+        "controller.second_order_correction",
+        "line_search = true",
+    );
+    check(
+        "substeps = 16",
+        "substeps = 16\nfirst_sample_guess = \"zero\"",
+        "first_sample_guess = \"zero\"",
+        "first_sample_guess",
+        "linear-mpc",
+    );
 }
 
 /// Every shipped scene builds and takes a few steps (the full runs are in CI via the CLI).
