@@ -76,12 +76,14 @@ pub struct ControllerSettings {
     pub real_time_iteration: bool,
     /// SQP iteration limit of the NMPC per sample \[10\].
     pub max_iterations: usize,
-    /// SQP iteration limit of the first sample's NMPC solve (full SQP only), whose initial
-    /// guess is the linear MPC plan rather than a shifted converged plan; the first sample's
-    /// solve time counts these iterations. When the dynamics are not finite along that guess
-    /// (no iteration possible), the first solve starts from the guess's controls rolled out
-    /// from the measured state instead ([`SqpSolver::solve_with_fallback_starts`]). `None`: the
-    /// first sample is solved like the others, from the linear MPC plan as given \[None\].
+    /// Full SQP only: the first sample first runs up to this many SQP iterations from its
+    /// initial guess ([`Self::first_sample_guess`]; there is no shifted converged plan yet),
+    /// then its ordinary solve (up to [`Self::max_iterations`] more) from where they ended.
+    /// Both count in the first sample's iterations and solve time. When the dynamics are not
+    /// finite along the guess (no iteration possible), these iterations start from the
+    /// guess's controls rolled out from the measured state instead
+    /// ([`SqpSolver::solve_with_fallback_starts`]). `None`: the first sample is solved like
+    /// the others \[None\].
     pub first_sample_iterations: Option<usize>,
     /// Initial guess of the first sample's NMPC solve \[the linear MPC plan\].
     pub first_sample_guess: InitialGuess,

@@ -259,8 +259,8 @@ pub struct ControllerSpec {
     pub line_search: Option<bool>,
     /// SQP iteration limit per sample (≥ 1).
     pub max_iterations: Option<usize>,
-    /// SQP iteration limit of the first sample (≥ 1; full SQP only), which starts from the
-    /// linear MPC plan (or its controls rolled out when the dynamics are not finite there).
+    /// Full SQP only: SQP iterations (≥ 1) the first sample runs from its initial guess
+    /// before its ordinary solve of up to `max_iterations` more.
     pub first_sample_iterations: Option<usize>,
     /// Initial guess of the first sample's NMPC solve: `linear-mpc` (the linear MPC plan) or
     /// `decay` (shooting nodes on the line from the measured state to the reference,
