@@ -434,8 +434,8 @@ fn shipped_mpc_scenes_match_the_mpc_presets() {
         );
         assert_eq!(sc.plant.dt, preset.plant.dt);
         if file == "paper-3d-mpc-full-range.toml" {
-            // a 4 s horizon of 16 intervals (docs/mpc.md, "Toward ω0 = 1.5"), the rest the paper's
-            let timing = mpc::Timing { horizon: 4.0, intervals: 16, ..preset.mpc.timing };
+            // a 5 s horizon of 20 intervals (docs/mpc.md, "Toward ω0 = 1.5"), the rest the paper's
+            let timing = mpc::Timing { horizon: 5.0, intervals: 20, ..preset.mpc.timing };
             assert_eq!(sc.mpc, mpc::MpcSettings { timing, ..preset.mpc.clone() });
         } else {
             assert_eq!(sc.mpc, preset.mpc);
