@@ -35,6 +35,23 @@ impl ControllerKind {
     }
 }
 
+/// Initial guess of the first sample's NMPC solve ([`ControllerSettings::first_sample_guess`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum InitialGuess {
+    /// The linear MPC plan (its QP on the model linearised at the reference): a trajectory
+    /// of the linearised model, consistent with the measured state.
+    #[default]
+    LinearMpc,
+    /// Shooting nodes on the line from the measured state to the reference, reached at the
+    /// end of the horizon, `s_k = x_r,k + (1 − k/Nc)(x0 − x_r,k)`, and the reference controls
+    /// (Bock's principle: multiple shooting may start from nodes near the wanted trajectory,
+    /// not on a rollout; the SQP closes the defects). The plan's nodes stay near the
+    /// reference, where the model is mildly nonlinear, instead of following a prediction of
+    /// the uncontrolled motion away from it.
+    Decay,
+}
+
 /// Default of [`ControllerSettings::plan_joint_limit_deg`] (deg).
 pub const DEFAULT_PLAN_JOINT_LIMIT: Option<f64> = Some(20.0);
 
@@ -59,6 +76,17 @@ pub struct ControllerSettings {
     pub real_time_iteration: bool,
     /// SQP iteration limit of the NMPC per sample \[10\].
     pub max_iterations: usize,
+    /// Full SQP only: the first sample first runs up to this many SQP iterations from its
+    /// initial guess ([`Self::first_sample_guess`]; there is no shifted converged plan yet),
+    /// then its ordinary solve (up to [`Self::max_iterations`] more) from where they ended.
+    /// Both count in the first sample's iterations and solve time. When the dynamics are not
+    /// finite along the guess (no iteration possible), these iterations start from the
+    /// guess's controls rolled out from the measured state instead
+    /// ([`SqpSolver::solve_with_fallback_starts`]). `None`: the first sample is solved like
+    /// the others \[None\].
+    pub first_sample_iterations: Option<usize>,
+    /// Initial guess of the first sample's NMPC solve \[the linear MPC plan\].
+    pub first_sample_guess: InitialGuess,
     /// KKT tolerance of the NMPC (max-norm natural residual; the inputs are O(0.1–5), so
     /// 1e-4 resolves them to far below what the plant feels within `τs`) [1e-4].
     pub kkt_tolerance: f64,
@@ -151,6 +179,8 @@ impl ControllerSettings {
             integrator: IntegratorSettings::new(IntegratorKind::LawsonRk4, 16),
             real_time_iteration: false,
             max_iterations: 10,
+            first_sample_iterations: None,
+            first_sample_guess: InitialGuess::LinearMpc,
             kkt_tolerance: 1e-4,
             accept_violation: 1e-2,
             levenberg_marquardt: 0.0,
@@ -235,6 +265,18 @@ impl ControllerSettings {
         })?;
         if self.max_iterations == 0 {
             return Err(invalid("max_iterations", 0, "must be at least 1"));
+        }
+        if let Some(n) = self.first_sample_iterations {
+            if n == 0 {
+                return Err(invalid("first_sample_iterations", 0, "must be at least 1"));
+            }
+            if self.real_time_iteration {
+                return Err(invalid(
+                    "first_sample_iterations",
+                    n,
+                    "needs the full SQP (real_time_iteration = false)",
+                ));
+            }
         }
         if !(self.kkt_tolerance > 0.0 && self.kkt_tolerance.is_finite()) {
             return Err(invalid("kkt_tolerance", self.kkt_tolerance, "must be finite and > 0"));
@@ -372,6 +414,8 @@ pub struct Controller<D: Dynamics + Clone = RomDynamics> {
     settings: ControllerSettings,
     mpc: MpcSettings,
     nmpc: Option<SqpSolver<D>>,
+    /// The first sample's solver ([`ControllerSettings::first_sample_iterations`]).
+    initial: Option<SqpSolver<D>>,
     relaxed: Option<SqpSolver<D>>,
     lmpc: SqpSolver<D>,
     samples: usize,
@@ -429,8 +473,8 @@ impl<D: Dynamics + Clone> Controller<D> {
         };
         let lmpc = SqpSolver::new(model.clone(), ocp.clone(), lq)?;
         let predictor = model.clone();
-        let (nmpc, relaxed) = match settings.kind {
-            ControllerKind::Lmpc => (None, None),
+        let (nmpc, initial, relaxed) = match settings.kind {
+            ControllerKind::Lmpc => (None, None, None),
             ControllerKind::Nmpc => {
                 let s = SqpSettings {
                     mode: if settings.real_time_iteration {
@@ -458,13 +502,21 @@ impl<D: Dynamics + Clone> Controller<D> {
                     }
                     None => None,
                 };
-                (Some(SqpSolver::new(model, ocp, s)?), relaxed)
+                let initial = match settings.first_sample_iterations {
+                    Some(n) => {
+                        let i = SqpSettings { max_iterations: n, ..s.clone() };
+                        Some(SqpSolver::new(model.clone(), ocp.clone(), i)?)
+                    }
+                    None => None,
+                };
+                (Some(SqpSolver::new(model, ocp, s)?), initial, relaxed)
             }
         };
         Ok(Self {
             settings: settings.clone(),
             mpc: mpc.clone(),
             nmpc,
+            initial,
             relaxed,
             lmpc,
             samples: 0,
@@ -506,7 +558,9 @@ impl<D: Dynamics + Clone> Controller<D> {
         let nodes = s.nodes(start, self.interval(), self.mpc.timing.intervals);
         let u_ref = vec![0.0; self.predictor.nu()];
         for solver in
-            [Some(&mut self.lmpc), self.nmpc.as_mut(), self.relaxed.as_mut()].into_iter().flatten()
+            [Some(&mut self.lmpc), self.nmpc.as_mut(), self.initial.as_mut(), self.relaxed.as_mut()]
+                .into_iter()
+                .flatten()
         {
             solver.set_references(&x_ref, &u_ref)?;
             solver.set_node_references(&nodes)?;
@@ -676,11 +730,31 @@ impl<D: Dynamics + Clone> Controller<D> {
             return Ok(self.lmpc_report(t, start, st, "Held".into(), Strategy::Held));
         }
         let mut lmpc_done = false;
+        let mut initial_iterations = 0;
         if self.samples == 0 {
             // first sample: initial guess from the linear MPC plan
             self.solve_lmpc(x0, shift)?;
             lmpc_done = true;
             self.nmpc_from_lmpc();
+            if self.settings.first_sample_guess == InitialGuess::Decay {
+                let target = match self.initial.as_mut() {
+                    Some(i) => Some(i),
+                    None => self.nmpc.as_mut(),
+                };
+                if let Some(solver) = target {
+                    decay_guess(solver, x0);
+                }
+            } else if let Some(i) = self.initial.as_mut() {
+                copy_plan(&self.lmpc, i);
+            }
+            if let (Some(i), Some(n)) = (self.initial.as_mut(), self.nmpc.as_mut()) {
+                // more iterations from that guess; the NMPC goes on from where they ended
+                let (st, _) = i.solve_with_fallback_starts(x0)?;
+                initial_iterations = st.iterations;
+                if st.status.has_iterate() && plan_finite(i) {
+                    copy_plan(i, n);
+                }
+            }
         } else if let Some(n) = self.nmpc.as_mut() {
             n.shift_time(shift)?;
         }
@@ -688,7 +762,7 @@ impl<D: Dynamics + Clone> Controller<D> {
             Some(n) => n.solve(x0)?,
             None => return Err(invalid("controller", "lmpc", "no NMPC solver")),
         };
-        let mut iterations = first.iterations;
+        let mut iterations = initial_iterations + first.iterations;
         let mut rejections = 0;
         let accept = self.settings.accept_violation;
         if accepted(&first, accept) {
@@ -834,6 +908,30 @@ fn accepted(st: &ocp_transcription::SqpStats, accept: f64) -> bool {
         SqpStatus::MaxIterations => st.constraint_violation <= accept,
         _ => false,
     }
+}
+
+/// Sets `solver`'s iterate to the [`InitialGuess::Decay`] guess from `x0`.
+pub(crate) fn decay_guess<D: Dynamics>(solver: &mut SqpSolver<D>, x0: &[f64]) {
+    let n = solver.controls().len();
+    let ocp = solver.ocp();
+    let refs: Vec<DVector<f64>> = (0..=n)
+        .map(|k| ocp.x_ref_nodes.get(k).cloned().unwrap_or_else(|| ocp.x_ref.clone()))
+        .collect();
+    let u_ref = ocp.u_ref.clone();
+    for (k, (s, r)) in solver.states_mut().iter_mut().zip(&refs).enumerate() {
+        let w = 1.0 - k as f64 / n as f64;
+        for (i, v) in s.iter_mut().enumerate() {
+            *v = r[i] + w * (x0[i] - r[i]);
+        }
+    }
+    for u in solver.controls_mut() {
+        u.copy_from(&u_ref);
+    }
+}
+
+/// Whether every node and control of `solver`'s iterate is finite.
+fn plan_finite<D: Dynamics>(solver: &SqpSolver<D>) -> bool {
+    solver.states().iter().chain(solver.controls()).all(|v| v.iter().all(|x| x.is_finite()))
 }
 
 /// Copies nodes and controls of `from` into `to` (same problem dimensions).

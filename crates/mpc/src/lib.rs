@@ -196,8 +196,8 @@ pub use closed_loop::{
     ENERGY_RATIO_LIMIT,
 };
 pub use controller::{
-    Controller, ControllerKind, ControllerSettings, SampleReport, SolveTiming, Strategy,
-    DEFAULT_PLAN_JOINT_LIMIT,
+    Controller, ControllerKind, ControllerSettings, InitialGuess, SampleReport, SolveTiming,
+    Strategy, DEFAULT_PLAN_JOINT_LIMIT,
 };
 pub use dynamics::RomDynamics;
 pub use error::{MpcError, Result};

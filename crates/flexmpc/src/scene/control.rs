@@ -140,7 +140,19 @@ fn controller_of(ctx: &Ctx<'_>, spec: &SceneSpec) -> Result<mpc::ControllerSetti
             }
         }),
     );
+    if cs.second_order_correction == Some(true) {
+        if cs.line_search == Some(false) {
+            return ctx.err(
+                span.clone(),
+                "controller.second_order_correction",
+                "needs the merit line search (line_search = true)",
+            );
+        }
+        c.globalisation = ocp_transcription::Globalisation::merit_soc();
+    }
     set(&mut c.max_iterations, cs.max_iterations);
+    set(&mut c.first_sample_iterations, cs.first_sample_iterations.map(Some));
+    set(&mut c.first_sample_guess, cs.first_sample_guess);
     set(&mut c.kkt_tolerance, cs.kkt_tolerance);
     set(&mut c.accept_violation, cs.accept_violation);
     set(&mut c.levenberg_marquardt, cs.levenberg_marquardt);

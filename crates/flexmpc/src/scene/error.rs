@@ -119,6 +119,7 @@ pub(super) enum Owner {
 /// library field, scene key)`. A field not listed is reported against its owner's table.
 const KEYS: &[(&str, &str, &str)] = &[
     ("controller", "max_iterations", "controller.max_iterations"),
+    ("controller", "first_sample_iterations", "controller.first_sample_iterations"),
     ("controller", "kkt_tolerance", "controller.kkt_tolerance"),
     ("controller", "accept_violation", "controller.accept_violation"),
     ("controller", "levenberg_marquardt", "controller.levenberg_marquardt"),

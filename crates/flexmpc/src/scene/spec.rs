@@ -259,6 +259,16 @@ pub struct ControllerSpec {
     pub line_search: Option<bool>,
     /// SQP iteration limit per sample (≥ 1).
     pub max_iterations: Option<usize>,
+    /// Full SQP only: SQP iterations (≥ 1) the first sample runs from its initial guess
+    /// before its ordinary solve of up to `max_iterations` more.
+    pub first_sample_iterations: Option<usize>,
+    /// Initial guess of the first sample's NMPC solve: `linear-mpc` (the linear MPC plan) or
+    /// `decay` (shooting nodes on the line from the measured state to the reference,
+    /// reference controls).
+    pub first_sample_guess: Option<mpc::InitialGuess>,
+    /// With `line_search = true`: the second-order-corrected merit line search (adaptive
+    /// penalty, corrections of the shooting defects) instead of the plain merit line search.
+    pub second_order_correction: Option<bool>,
     /// KKT tolerance of the SQP (> 0).
     pub kkt_tolerance: Option<f64>,
     /// An iteration-limit plan is accepted when its shooting defects are at most this

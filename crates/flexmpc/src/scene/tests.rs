@@ -339,6 +339,36 @@ controllers = ["nmpc"]
     check("ku = 0.1", "ku = 0.1\nkq = 1.0", "kq = 1.0", "kq", "unknown field");
     check("ku = 0.1", "ku = \"high\"", "ku = \"high\"", "controller.weights.ku", "invalid type");
     check("selection = \"paper-2d\"", "lowest = 0", "lowest = 0", "modes.lowest", "at least 1");
+    // the first sample's settings and the corrected line search
+    let keys = "substeps = 16\nreal_time_iteration = false\nfirst_sample_iterations = 30\n\
+                first_sample_guess = \"decay\"\nsecond_order_correction = true";
+    let text = base.replacen("substeps = 16", keys, 1);
+    let c = load_str(Path::new("ok.toml"), &text).unwrap_or_else(|e| panic!("{e}"));
+    let c = c.control.expect("[scenario]").controller;
+    assert_eq!(c.first_sample_iterations, Some(30));
+    assert_eq!(c.first_sample_guess, mpc::InitialGuess::Decay);
+    assert_eq!(c.globalisation, ocp_transcription::Globalisation::merit_soc());
+    check(
+        "substeps = 16",
+        "substeps = 16\nreal_time_iteration = false\nfirst_sample_iterations = 0",
+        "first_sample_iterations = 0",
+        "controller.first_sample_iterations",
+        "at least 1",
+    );
+    check(
+        "substeps = 16",
+        "substeps = 16\nline_search = false\nsecond_order_correction = true",
+        "second_order_correction = true",
+        "controller.second_order_correction",
+        "line_search = true",
+    );
+    check(
+        "substeps = 16",
+        "substeps = 16\nfirst_sample_guess = \"zero\"",
+        "first_sample_guess = \"zero\"",
+        "first_sample_guess",
+        "linear-mpc",
+    );
 }
 
 /// Every shipped scene builds and takes a few steps (the full runs are in CI via the CLI).
@@ -403,7 +433,13 @@ fn shipped_mpc_scenes_match_the_mpc_presets() {
             (preset.duration, preset.output_interval, preset.snapshot_interval, 16)
         );
         assert_eq!(sc.plant.dt, preset.plant.dt);
-        assert_eq!(sc.mpc, preset.mpc);
+        if file == "paper-3d-mpc-full-range.toml" {
+            // a 5 s horizon of 20 intervals (docs/mpc.md, "Toward ω0 = 1.5"), the rest the paper's
+            let timing = mpc::Timing { horizon: 5.0, intervals: 20, ..preset.mpc.timing };
+            assert_eq!(sc.mpc, mpc::MpcSettings { timing, ..preset.mpc.clone() });
+        } else {
+            assert_eq!(sc.mpc, preset.mpc);
+        }
         // the paper-model 3D scene defaults to the largest ω0 its model stabilises
         let omega0 = if file == "paper-3d-mpc-paper-model.toml" { 0.75 } else { 1.0 };
         assert_eq!((c.plant, c.omega0), (mpc::PlantKind::Fe, omega0));
@@ -414,12 +450,18 @@ fn shipped_mpc_scenes_match_the_mpc_presets() {
             assert_eq!(c.controller, mpc::ControllerSettings::exact_joints());
         }
         if file == "paper-3d-mpc-full-range.toml" {
-            // the full SQP on 24 elastic modes per link (docs/mpc.md, "Beyond ω0 = 1")
+            // the full SQP on 24 elastic modes per link, × 8, 40 first-sample iterations
+            // (docs/mpc.md, "Toward ω0 = 1.5")
             let full = mpc::ControllerSettings {
                 real_time_iteration: false,
                 max_iterations: 10,
+                first_sample_iterations: Some(40),
                 levenberg_marquardt: 0.0,
                 link_elastic_modes: Some(24),
+                integrator: ocp_transcription::IntegratorSettings::new(
+                    ocp_transcription::IntegratorKind::ImplicitMidpoint,
+                    8,
+                ),
                 ..mpc::ControllerSettings::exact_joints()
             };
             assert_eq!(c.controller, full);
