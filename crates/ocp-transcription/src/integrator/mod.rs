@@ -422,11 +422,27 @@ impl Integrator {
         b: &mut DMatrix<f64>,
     ) -> Result<()> {
         self.check_args(x0, u, x_end)?;
+        self.sensitivities_warm(model, x0, u, x_end, a, b, Warm::Cold)
+    }
+
+    /// The shared body of the sensitivity integrations (arguments `x0`, `u`, `x_end` checked by
+    /// the caller): checks `a`, `b`, integrates with `warm`, writes `x_end`, `a`, `b`.
+    #[allow(clippy::too_many_arguments)]
+    fn sensitivities_warm<D: Dynamics + ?Sized>(
+        &mut self,
+        model: &D,
+        x0: &[f64],
+        u: &[f64],
+        x_end: &mut [f64],
+        a: &mut DMatrix<f64>,
+        b: &mut DMatrix<f64>,
+        warm: Warm<'_>,
+    ) -> Result<()> {
         check_dim("a rows", self.nx, a.nrows())?;
         check_dim("a columns", self.nx, a.ncols())?;
         check_dim("b rows", self.nx, b.nrows())?;
         check_dim("b columns", self.nu, b.ncols())?;
-        self.run(model, x0, u, true, false)?;
+        self.run_warm(model, x0, u, true, false, warm)?;
         x_end.copy_from_slice(&self.x);
         self.write_ab(a, b);
         Ok(())

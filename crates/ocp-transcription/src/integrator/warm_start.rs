@@ -106,15 +106,8 @@ impl Integrator {
     ) -> Result<()> {
         self.check_args(x0, u, x_end)?;
         self.check_record(record)?;
-        check_dim("a rows", self.nx, a.nrows())?;
-        check_dim("a columns", self.nx, a.ncols())?;
-        check_dim("b rows", self.nx, b.nrows())?;
-        check_dim("b columns", self.nu, b.ncols())?;
         record.clear();
-        self.run_warm(model, x0, u, true, false, Warm::Record(record))?;
-        x_end.copy_from_slice(&self.x);
-        self.write_ab(a, b);
-        Ok(())
+        self.sensitivities_warm(model, x0, u, x_end, a, b, Warm::Record(record))
     }
 
     /// `x_end = Φ(x0, u)` near the integration held by `record` (implicit midpoint): each
