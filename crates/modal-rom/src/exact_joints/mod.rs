@@ -21,6 +21,7 @@ mod eval;
 mod frame;
 mod jacobian;
 mod model;
+mod planar;
 mod rows;
 
 #[cfg(test)]

@@ -19,6 +19,7 @@
 use crate::error::{invalid, shape, ModalError, Result};
 use crate::exact_joints::ambient::{AmbientOps, LinkBasis};
 use crate::exact_joints::eval::with_workspace;
+use crate::exact_joints::planar::Planar;
 use crate::exact_joints::rows::{relative_quaternion, Constraints};
 use crate::rom::Input;
 use faer::linalg::solvers::DenseSolveCore;
@@ -94,6 +95,8 @@ pub struct ExactJointsRom {
     pub(super) rate_comps: Vec<(usize, usize)>,
     /// First row of each joint in `A`.
     pub(super) row_offsets: Vec<usize>,
+    /// The planar evaluation's constants when the model is planar.
+    pub(super) planar: Option<Box<Planar>>,
 }
 
 /// Column-major copies of the constant matrices.
@@ -216,7 +219,7 @@ impl ExactJointsRom {
         let layout = &basis.layout;
         let comps = layout.components;
         let k = comps.k();
-        let rate_comps = (0..k)
+        let rate_comps: Vec<(usize, usize)> = (0..k)
             .filter_map(|c| {
                 let s = comps.spatial_index(c);
                 (s >= 3).then_some((c, s - 3))
@@ -239,6 +242,7 @@ impl ExactJointsRom {
             })
             .collect();
         let ss = flat(&(&cons.support * cons.support.transpose()));
+        let planar = Planar::new(&basis, &cons, &rate_comps, damping, inputs).map(Box::new);
         Ok(ExactJointsRom {
             ops,
             z0: Mat::zeros(basis.n1(), 0),
@@ -258,6 +262,7 @@ impl ExactJointsRom {
             cons,
             rate_comps,
             row_offsets,
+            planar,
         })
     }
 
@@ -271,6 +276,9 @@ impl ExactJointsRom {
         let (nb, m2) = (self.z2.nrows(), self.z2.ncols());
         self.z2_identity = nb == m2
             && (0..nb).all(|i| (0..m2).all(|j| self.z2[(i, j)] == if i == j { 1.0 } else { 0.0 }));
+        if let Some(pl) = &mut self.planar {
+            pl.set_coordinates(&self.z0, &self.z2, self.z2_identity);
+        }
     }
 
     /// The model-wide sizes the evaluation buffers depend on (the per-constraint ones follow).
@@ -465,6 +473,9 @@ impl ExactJointsRom {
             return Err(shape("output", (self.n_state(), 1), (out.len(), 1)));
         }
         self.check(x, u)?;
+        if let Some(done) = self.planar_eval(x, u, out, None) {
+            return done;
+        }
         with_workspace(self, |ws| self.eval_into(ws, x, u, out, None))
     }
 
@@ -490,6 +501,9 @@ impl ExactJointsRom {
             return Err(shape("Jacobian ∂f/∂u", (n, nu), (ju.len(), 1)));
         }
         self.check(x, u)?;
+        if let Some(done) = self.planar_eval(x, u, f, Some((&mut *jx, &mut *ju))) {
+            return done;
+        }
         with_workspace(self, |ws| self.eval_into(ws, x, u, f, Some((jx, ju))))
     }
 

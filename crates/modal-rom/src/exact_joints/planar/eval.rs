@@ -1,0 +1,411 @@
+//! Right-hand side and exact Jacobian of the planar evaluation (module docs of
+//! [`super`]; theory.md §10.4–10.5, §10.9), on the reduced fields `q̂1 = NᵀZ p` with the joint
+//! rows only: `A` (`r × n`), `G = (AAᵀ)⁻¹`, `C0 = AẐ0`, `S = I − C0ᵀGC0 = LLᵀ` (generator form),
+//! `H = GC0`, `W = HL⁻ᵀ`, `Ẑ = (Ẑ0 − AᵀH)L⁻ᵀ`.
+
+use super::Planar;
+use crate::error::{ModalError, Result};
+use crate::exact_joints::frame::{
+    gemm, gemv, gemv_t, lowrank_cholesky, lowrank_right_solve_lt, skew_apply, view, view_mut,
+};
+use crate::exact_joints::model::{u_left, u_right};
+use nalgebra::{Matrix4, Vector3, Vector4};
+use std::cell::RefCell;
+
+/// Reused buffers of one planar evaluation.
+#[derive(Debug, Default)]
+pub(crate) struct PlanarWs {
+    key: Vec<usize>,
+    pub(super) a: Vec<f64>,
+    pub(super) gram: Vec<f64>,
+    pub(super) linv: Vec<f64>,
+    pub(super) g: Vec<f64>,
+    pub(super) c0: Vec<f64>,
+    pub(super) y: Vec<f64>,
+    pub(super) h: Vec<f64>,
+    pub(super) ld: Vec<f64>,
+    pub(super) lh: Vec<f64>,
+    pub(super) lmm: Vec<f64>,
+    pub(super) lacc: Vec<f64>,
+    pub(super) w: Vec<f64>,
+    pub(super) z: Vec<f64>,
+    pub(super) zt: Vec<f64>,
+    pub(super) q1: Vec<f64>,
+    pub(super) q2: Vec<f64>,
+    pub(super) f1: Vec<f64>,
+    pub(super) f2: Vec<f64>,
+    pub(super) jf: Vec<f64>,
+    pub(super) amb: Vec<f64>,
+    pub(super) ztf: Vec<f64>,
+    pub(super) kp: Vec<f64>,
+    /// `A_α Z` (`r × m`), `α = 1, 2, 3`; `V_θ = A_θ Z` and `V = ȦZ` (`r × m`).
+    pub(super) az: [Vec<f64>; 3],
+    pub(super) vth: Vec<f64>,
+    pub(super) v: Vec<f64>,
+    /// Per joint: `(c, s, ρ)`, `(a, b)`, `Δω`, `ξ̇_j`, `U(ω_b) − Ū(ω_a)`.
+    pub(super) csr: Vec<[f64; 3]>,
+    pub(super) ab: Vec<[f64; 2]>,
+    pub(super) dw: Vec<f64>,
+    pub(super) xid: Vec<Vector4<f64>>,
+    pub(super) mj: Vec<Matrix4<f64>>,
+    pub(super) rtmp: Vec<f64>,
+    pub(super) t11: Vec<f64>,
+    pub(super) t12: Vec<f64>,
+    pub(super) u21: Vec<f64>,
+    pub(super) mm: Vec<f64>,
+    pub(super) dz: Vec<f64>,
+    pub(super) kap: Vec<f64>,
+    pub(super) af1: Vec<f64>,
+    pub(super) gaf: Vec<f64>,
+    pub(super) pf1: Vec<f64>,
+    pub(super) wp: Vec<f64>,
+    pub(super) adot: Vec<f64>,
+    pub(super) adat: Vec<f64>,
+    pub(super) adag: Vec<f64>,
+    pub(super) dc: Vec<f64>,
+    pub(super) vc: Vec<f64>,
+    pub(super) v2c: Vec<f64>,
+    pub(super) lam: Vec<f64>,
+    pub(super) lp: Vec<f64>,
+    pub(super) aac: Vec<f64>,
+    pub(super) dd: Vec<f64>,
+    pub(super) gd: Vec<f64>,
+    pub(super) zcp: Vec<f64>,
+    pub(super) colp: Vec<f64>,
+    pub(super) dcp: Vec<f64>,
+    pub(super) dv: Vec<f64>,
+    pub(super) dwm: Vec<f64>,
+    pub(super) x1: Vec<f64>,
+    pub(super) gaac: Vec<f64>,
+    pub(super) dkp: Vec<f64>,
+    pub(super) u2: Vec<f64>,
+    pub(super) ddw: Vec<f64>,
+    pub(super) big: Vec<f64>,
+    /// State length of the current call.
+    pub(super) ns: usize,
+}
+
+thread_local! {
+    static WS: RefCell<PlanarWs> = RefCell::new(PlanarWs::default());
+}
+
+/// Runs `f` with this thread's planar workspace sized for `pl`.
+pub(crate) fn with_planar_workspace<T>(pl: &Planar, f: impl FnOnce(&mut PlanarWs) -> T) -> T {
+    WS.with(|ws| {
+        let mut ws = ws.borrow_mut();
+        let key = pl.key();
+        if ws.key != key {
+            *ws = PlanarWs::new(pl, key);
+        }
+        f(&mut ws)
+    })
+}
+
+fn z(n: usize) -> Vec<f64> {
+    vec![0.0; n.max(1)]
+}
+
+impl PlanarWs {
+    fn new(pl: &Planar, key: Vec<usize>) -> Self {
+        let (n, m, m2, r) = (pl.n, pl.m, pl.m2, pl.r);
+        let nb = pl.ops.w.ncols();
+        let nj = pl.joints.len();
+        let rx = pl.joints.iter().map(|j| j.rows).max().unwrap_or(0);
+        PlanarWs {
+            key,
+            a: z(r * n),
+            gram: z(r * r),
+            linv: z(r * r),
+            g: z(r * r),
+            c0: z(r * m),
+            y: z(r * m),
+            h: z(r * m),
+            ld: z(m),
+            lh: z(r * m),
+            lmm: z(r * r),
+            lacc: z(n.max(r) * r),
+            w: z(r * m),
+            z: z(n * m),
+            zt: z(n * m),
+            q1: z(n),
+            q2: z(nb),
+            f1: z(n),
+            f2: z(nb),
+            jf: z((n + nb) * (n + nb)),
+            amb: z(pl.ops.scratch_len()),
+            ztf: z(m),
+            kp: z(m),
+            az: std::array::from_fn(|_| z(r * m)),
+            vth: z(r * m),
+            v: z(r * m),
+            csr: vec![[0.0; 3]; nj],
+            ab: vec![[0.0; 2]; nj],
+            dw: z(nj),
+            xid: vec![Vector4::zeros(); nj],
+            mj: vec![Matrix4::zeros(); nj],
+            rtmp: z(r),
+            t11: z(m * n),
+            t12: z(m * nb),
+            u21: z(m2.max(nb) * n),
+            mm: z(m * m),
+            dz: z(nj * m),
+            kap: z(m),
+            af1: z(r),
+            gaf: z(r),
+            pf1: z(n),
+            wp: z(r),
+            adot: z(r * n),
+            adat: z(r * r),
+            adag: z(r * r),
+            dc: z(rx * n),
+            vc: z(rx * m),
+            v2c: z(rx * m),
+            lam: z(m * m),
+            lp: z(m),
+            aac: z(r * rx),
+            dd: z(r),
+            gd: z(r),
+            zcp: z(n),
+            colp: z(m),
+            dcp: z(rx),
+            dv: z(r * m),
+            dwm: z(r * m),
+            x1: z(r * rx),
+            gaac: z(r * rx),
+            dkp: z(m),
+            u2: z(m2),
+            ddw: z(nj),
+            big: z(nb * m2.max(m)),
+            ns: 0,
+        }
+    }
+}
+
+/// `y = a x` (`a`: `rows × x.len()`, column-major).
+fn mv(y: &mut [f64], a: &[f64], rows: usize, x: &[f64]) {
+    gemv(y, false, a, rows, x, 1.0);
+}
+
+/// `y = aᵀ x` (`a`: `x.len() × y.len()`, column-major).
+fn mtv(y: &mut [f64], a: &[f64], x: &[f64]) {
+    gemv_t(y, false, a, x.len(), x, 1.0);
+}
+
+fn numerical(stage: &str, reason: &str) -> ModalError {
+    ModalError::Numerical { stage: stage.to_string(), reason: reason.to_string() }
+}
+
+impl Planar {
+    fn key(&self) -> Vec<usize> {
+        let mut k =
+            vec![self.n, self.m, self.m2, self.r, self.ops.w.ncols(), self.ops.scratch_len()];
+        k.extend(self.joints.iter().map(|j| j.rows));
+        k.extend(self.ops.layout_key());
+        k
+    }
+
+    /// `U(ω n)` with `ω` about the normal.
+    pub(super) fn u_n(&self, w: f64, left: bool) -> Matrix4<f64> {
+        let mut v = Vector3::zeros();
+        v[self.nu - 1] = w;
+        if left {
+            u_left(&v)
+        } else {
+            u_right(&v)
+        }
+    }
+
+    /// The frame `Ẑ(ξ)` and its factors into `ws` for the joint quaternions at `offsets`.
+    fn frame(&self, ws: &mut PlanarWs, x: &[f64], offsets: &[usize]) -> Result<()> {
+        let (n, m, r) = (self.n, self.m, self.r);
+        ws.a[..r * n].fill(0.0);
+        ws.c0[..r * m].fill(0.0);
+        for (j, jr) in self.joints.iter().enumerate() {
+            let (a, b) = (x[offsets[j]], x[offsets[j] + self.nu]);
+            let w = [1.0, a * a - b * b, 2.0 * a * b, a * a + b * b];
+            ws.csr[j] = [w[1], w[2], w[3]];
+            ws.ab[j] = [a, b];
+            let (rj, o) = (jr.rows, jr.offset);
+            for (al, &wa) in w.iter().enumerate() {
+                if al == 3 && jr.a3_zero {
+                    continue;
+                }
+                for c in 0..n {
+                    let src = &jr.a[al][c * rj..(c + 1) * rj];
+                    let dst = &mut ws.a[c * r + o..c * r + o + rj];
+                    dst.iter_mut().zip(src).for_each(|(d, s)| *d += wa * s);
+                }
+                for c in 0..m {
+                    let src = &jr.az0[al][c * rj..(c + 1) * rj];
+                    let dst = &mut ws.c0[c * r + o..c * r + o + rj];
+                    dst.iter_mut().zip(src).for_each(|(d, s)| *d += wa * s);
+                }
+            }
+        }
+        // AAᵀ, its Cholesky factor and inverse, G
+        let a = &ws.a;
+        for i in 0..r {
+            for l in 0..=i {
+                let s: f64 = (0..n).map(|c| a[c * r + i] * a[c * r + l]).sum();
+                ws.gram[l * r + i] = s;
+            }
+        }
+        let scale = (0..r).fold(0.0f64, |mx, i| mx.max(ws.gram[i * r + i]));
+        let li = &mut ws.linv;
+        li[..r * r].fill(0.0);
+        {
+            let g = &mut ws.gram;
+            for j in 0..r {
+                let mut d = g[j * r + j];
+                for k in 0..j {
+                    d -= g[k * r + j] * g[k * r + j];
+                }
+                if d.is_nan() || d <= 1e-14 * scale {
+                    return Err(numerical(
+                        "Gram matrix of the joint rows AAᵀ",
+                        "matrix is not positive definite (dependent rows)",
+                    ));
+                }
+                let d = d.sqrt();
+                g[j * r + j] = d;
+                for i in j + 1..r {
+                    let mut s = g[j * r + i];
+                    for k in 0..j {
+                        s -= g[k * r + i] * g[k * r + j];
+                    }
+                    g[j * r + i] = s / d;
+                }
+            }
+            // L⁻¹ column by column
+            for c in 0..r {
+                li[c * r + c] = 1.0 / g[c * r + c];
+                for i in c + 1..r {
+                    let mut s = 0.0;
+                    for k in c..i {
+                        s -= g[k * r + i] * li[c * r + k];
+                    }
+                    li[c * r + i] = s / g[i * r + i];
+                }
+            }
+        }
+        for c in 0..r {
+            for i in 0..r {
+                let lo = i.max(c);
+                ws.g[c * r + i] = (lo..r).map(|k| li[i * r + k] * li[c * r + k]).sum();
+            }
+        }
+        // Y = L_g⁻¹ C0, S = I − YᵀY = LLᵀ, H = G C0, W = H L⁻ᵀ, Ẑ = (Ẑ0 − AᵀH) L⁻ᵀ
+        gemm(view_mut(&mut ws.y, r, m), false, view(&ws.linv, r, r), view(&ws.c0, r, m), 1.0);
+        lowrank_cholesky(
+            &ws.y,
+            r,
+            m,
+            &mut ws.ld,
+            &mut ws.lh,
+            &mut ws.lmm,
+            &mut ws.lacc,
+            1e-10,
+            "null-space basis Z(ξ)",
+            "the joint rotation is outside the range of the fields (ZᵀP Z0 singular)",
+        )?;
+        gemm(view_mut(&mut ws.h, r, m), false, view(&ws.g, r, r), view(&ws.c0, r, m), 1.0);
+        ws.w[..r * m].copy_from_slice(&ws.h[..r * m]);
+        lowrank_right_solve_lt(&ws.y, &ws.lh, &ws.ld, r, &mut ws.w, r, &mut ws.lacc);
+        ws.z[..n * m].copy_from_slice(&self.z0);
+        gemm(
+            view_mut(&mut ws.z, n, m),
+            true,
+            view(&ws.a, r, n).transpose(),
+            view(&ws.h, r, m),
+            -1.0,
+        );
+        lowrank_right_solve_lt(&ws.y, &ws.lh, &ws.ld, r, &mut ws.z, n, &mut ws.lacc);
+        for c in 0..m {
+            for i in 0..n {
+                ws.zt[i * m + c] = ws.z[c * n + i];
+            }
+        }
+        Ok(())
+    }
+
+    /// Right-hand side into `f` and, with `jac`, the exact Jacobians, at a planar state
+    /// ([`Planar::accepts`]); `offsets`: the joint quaternions' offsets, `root`: the root
+    /// quaternion's offset when carried.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn eval(
+        &self,
+        ws: &mut PlanarWs,
+        x: &[f64],
+        u: &[f64],
+        offsets: &[usize],
+        root: Option<usize>,
+        f: &mut [f64],
+        jac: Option<(&mut [f64], &mut [f64])>,
+    ) -> Result<()> {
+        let (n, m, m2, r) = (self.n, self.m, self.m2, self.r);
+        let nb = self.ops.w.ncols();
+        ws.ns = f.len();
+        self.frame(ws, x, offsets)?;
+        let (p, p2) = (&x[..m], &x[m..m + m2]);
+        mv(&mut ws.q1, &ws.z, n, p);
+        if self.z2_identity {
+            ws.q2.copy_from_slice(p2);
+        } else {
+            mv(&mut ws.q2, &self.z2, nb, p2);
+        }
+        let want = jac.is_some();
+        let jf = if want { Some(&mut ws.jf[..]) } else { None };
+        self.ops.eval(&ws.q1, &ws.q2, u, &mut ws.f1, &mut ws.f2, jf, &mut ws.amb);
+        mtv(&mut ws.ztf, &ws.z[..n * m], &ws.f1);
+        // joint rates, ξ̇_j, V = ȦZ = Δω A_θ Z
+        for (al, az) in ws.az.iter_mut().enumerate() {
+            if al == 2 && (!want || self.joints.iter().all(|j| j.a3_zero)) {
+                continue;
+            }
+            az[..r * m].fill(0.0);
+            for jr in &self.joints {
+                let mut sub = view_mut(az, r, m).subrows_mut(jr.offset, jr.rows);
+                gemm(sub.as_mut(), false, view(&jr.a[al + 1], jr.rows, n), view(&ws.z, n, m), 1.0);
+            }
+        }
+        for (j, jr) in self.joints.iter().enumerate() {
+            let dot = |row: &[f64]| row.iter().zip(&ws.q1).map(|(a, b)| a * b).sum::<f64>();
+            let (wa, wb) = (dot(&jr.wa), dot(&jr.wb));
+            ws.dw[j] = wb - wa;
+            ws.mj[j] = self.u_n(wb, false) - self.u_n(wa, true);
+            let o = offsets[j];
+            ws.xid[j] = ws.mj[j] * Vector4::from_column_slice(&x[o..o + 4]);
+            let [c, s, _] = ws.csr[j];
+            let dw = ws.dw[j];
+            for col in 0..m {
+                for i in jr.offset..jr.offset + jr.rows {
+                    let vt = -s * ws.az[0][col * r + i] + c * ws.az[1][col * r + i];
+                    ws.vth[col * r + i] = vt;
+                    ws.v[col * r + i] = dw * vt;
+                }
+            }
+        }
+        ws.kp.fill(0.0);
+        skew_apply(&ws.v, &ws.w, r, p, &mut ws.kp, &mut ws.rtmp);
+        for i in 0..m {
+            f[i] = ws.ztf[i] - ws.kp[i];
+        }
+        if self.z2_identity {
+            f[m..m + m2].copy_from_slice(&ws.f2);
+        } else {
+            mtv(&mut f[m..m + m2], &self.z2, &ws.f2);
+        }
+        let root_w = self.root.as_ref().map(|t| t.iter().zip(&ws.q1).map(|(a, b)| a * b).sum());
+        if let (Some(o), Some(w)) = (root, root_w) {
+            let d = self.u_n(w, false) * Vector4::from_column_slice(&x[o..o + 4]);
+            f[o..o + 4].copy_from_slice(d.as_slice());
+        }
+        for (j, &o) in offsets.iter().enumerate() {
+            f[o..o + 4].copy_from_slice(ws.xid[j].as_slice());
+        }
+        if let Some((jx, ju)) = jac {
+            self.jacobian(ws, x, u.len(), offsets, root.zip(root_w), jx, ju);
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,291 @@
+//! The planar evaluation of the exact-joints model (theory.md §10.9): the same right-hand side
+//! and exact Jacobian as the general evaluation ([`super::eval`], [`super::jacobian`]), for a
+//! planar model at a planar state, with the structure the plane gives.
+//!
+//! A model is planar when its layout has the three in-plane components (two velocities, the
+//! rate about the plane's normal `n`) and every joint's rows depend on `R(ξ_j)` only through
+//! its in-plane block and `R_nn` (no mixed `R_pn`). A state is planar when every joint
+//! quaternion is `ξ_j = (a_j, b_j n)` (its out-of-plane components exactly zero); the state is
+//! not normalised, so `R(ξ_j) = c I_plane + s ñ + ρ n nᵀ` with `c = a² − b²`, `s = 2ab`,
+//! `ρ = a² + b²` (eq. 9 in its homogeneous form). Then:
+//!
+//! * the support rows are constant and each supported on one link: the fields are reduced
+//!   once to `N = blockdiag(null S_link)` (orthonormal), where every support row vanishes, so
+//!   only the joint rows remain and the link fields shrink (`q1 = N q̂`, `Ẑ = NᵀZ`, the
+//!   Galerkin operators on `Φ1 N` are `NᵀΣN`, `Nᵀ W`, …);
+//! * each joint's rows are `A_j = A_j0 + c A_j1 + s A_j2 + ρ A_j3` with four constant
+//!   matrices on the reduced fields, `Ȧ_j = Δω_j A_jθ` (`A_jθ = −s A_j1 + c A_j2`,
+//!   `Δω_j = ω_b − ω_a`), and `ξ̇_j = ½Δω_j (−b, a n)`;
+//! * the Jacobian's `ξ_j` columns move only along `a` and `b`: the out-of-plane columns hold
+//!   `ξ̇_j`'s own dependence on `ξ_j` (`∂A/∂ξ_jc = 0`, `∂²A/∂ξ_jc∂ξ_jd = 0` for the in-plane
+//!   `d`), and the `−κΞ` term of the `p` columns is one rank-one term per joint,
+//!   `(δ_j Z)ᵀ ⊗ K(A_jθ Z, W_j) p` (`δ_j` the rows of `Δω_j`).
+
+mod eval;
+mod jacobian;
+#[cfg(test)]
+mod tests;
+
+pub(crate) use eval::with_planar_workspace;
+
+use crate::exact_joints::ambient::{AmbientOps, LinkBasis};
+use crate::exact_joints::rows::Constraints;
+use crate::rom::Input;
+use faer::{Mat, Side};
+use intrinsic_beam::operators::tilde;
+use nalgebra::Vector3;
+
+/// One joint's constant pieces on the reduced fields.
+#[derive(Clone, Debug)]
+pub(crate) struct PlanarJoint {
+    /// Rows `r_j`, first row in `A`.
+    rows: usize,
+    offset: usize,
+    /// `A_jα` (`r_j × n`, column-major), `α = 0…3` (module docs).
+    a: [Vec<f64>; 4],
+    /// `A_jα Ẑ0` (`r_j × m`), set with the coordinates.
+    az0: [Vec<f64>; 4],
+    /// Whether `A_j3 = 0`.
+    a3_zero: bool,
+    /// Rows of `ω_a`, `ω_b` (`n` each).
+    wa: Vec<f64>,
+    wb: Vec<f64>,
+    /// `δ_j = ω_b − ω_a` rows (`n`).
+    delta: Vec<f64>,
+}
+
+/// The planar evaluation's constants (module docs).
+#[derive(Clone, Debug)]
+pub(crate) struct Planar {
+    /// Quaternion index of the normal's component (`1 + axis`).
+    nu: usize,
+    /// Reduced fields `n` and the reduction `N` (`na × n`, column-major).
+    n: usize,
+    reduce: Mat<f64>,
+    ops: AmbientOps,
+    joints: Vec<PlanarJoint>,
+    /// Total joint rows.
+    r: usize,
+    /// Root node's rate row (`n`) when the root is carried.
+    root: Option<Vec<f64>>,
+    /// `Ẑ0 = NᵀZ0` (`n × m`), `Z2` (`nb × m2`), column-major.
+    z0: Vec<f64>,
+    z2: Vec<f64>,
+    z2_identity: bool,
+    m: usize,
+    m2: usize,
+}
+
+/// Column-major entries of `m`.
+fn flat(m: &Mat<f64>) -> Vec<f64> {
+    (0..m.ncols()).flat_map(|j| (0..m.nrows()).map(move |i| m[(i, j)])).collect()
+}
+
+impl Planar {
+    /// The planar constants of a model on link fields `basis` with rows `cons` and rotational
+    /// components `rate_comps`, or `None` when the model is not planar (module docs).
+    pub(crate) fn new(
+        basis: &LinkBasis,
+        cons: &Constraints,
+        rate_comps: &[(usize, usize)],
+        damping: Option<&Mat<f64>>,
+        inputs: &[Input],
+    ) -> Option<Self> {
+        let layout = &basis.layout;
+        let k = layout.k();
+        if k != 3 || rate_comps.len() != 1 {
+            return None;
+        }
+        let (rate_c, axis) = rate_comps[0];
+        let na = basis.n1();
+        // rows of joints: no mixed R_pn coefficient
+        for j in &cons.joints {
+            for p in 0..3 {
+                for q in 0..3 {
+                    if (p == axis) != (q == axis) && j.c_pq[3 * p + q].iter().any(|&v| v != 0.0) {
+                        return None;
+                    }
+                }
+            }
+        }
+        // support rows each on one link; N = blockdiag(null S_link)
+        let links = &basis.cols1;
+        let link_of = |c: usize| links.iter().position(|r| c >= r.0 && c < r.1);
+        let s = &cons.support;
+        for i in 0..s.nrows() {
+            let mut touched = (0..na).filter(|&c| s[(i, c)] != 0.0).map(link_of);
+            if let Some(first) = touched.next() {
+                if touched.any(|l| l != first) {
+                    return None;
+                }
+            }
+        }
+        let mut blocks: Vec<Mat<f64>> = Vec::new();
+        for &(c0, c1) in links {
+            let kl = c1 - c0;
+            let mut p = Mat::<f64>::identity(kl, kl);
+            for i in 0..s.nrows() {
+                for a in 0..kl {
+                    for b in 0..kl {
+                        p[(a, b)] -= s[(i, c0 + a)] * s[(i, c0 + b)];
+                    }
+                }
+            }
+            let eig = p.self_adjoint_eigen(Side::Lower).ok()?;
+            let ev = eig.S().column_vector();
+            let keep: Vec<usize> = (0..kl).filter(|&e| ev[e] > 0.5).collect();
+            blocks.push(Mat::from_fn(kl, keep.len(), |a, b| eig.U()[(a, keep[b])]));
+        }
+        let n: usize = blocks.iter().map(|b| b.ncols()).sum();
+        let mut reduce = Mat::<f64>::zeros(na, n);
+        let mut cols1 = Vec::new();
+        let mut o = 0;
+        for (&(c0, _), b) in links.iter().zip(&blocks) {
+            for j in 0..b.ncols() {
+                for i in 0..b.nrows() {
+                    reduce[(c0 + i, o + j)] = b[(i, j)];
+                }
+            }
+            cols1.push((o, o + b.ncols()));
+            o += b.ncols();
+        }
+        let reduced = LinkBasis {
+            layout: basis.layout.clone(),
+            phi1: &basis.phi1 * &reduce,
+            phi2: basis.phi2.clone(),
+            cols1,
+            cols2: basis.cols2.clone(),
+            b1: basis.b1.clone(),
+            b2: basis.b2.clone(),
+            d: basis.d.clone(),
+        };
+        let ops = AmbientOps::new(&reduced, damping, inputs).ok()?;
+        let nt = tilde(&Vector3::ith(axis, 1.0));
+        let mut joints = Vec::new();
+        let mut r = 0;
+        for j in &cons.joints {
+            let en = &j.e * &reduce;
+            let (rj, kk) = (j.rows, j.e.nrows());
+            let cm = |c: &[f64]| Mat::from_fn(rj, kk, |i, col| c[col * rj + i]);
+            let mut c1 = vec![0.0; rj * kk];
+            let mut c2 = vec![0.0; rj * kk];
+            for p in (0..3).filter(|&p| p != axis) {
+                for q in (0..3).filter(|&q| q != axis) {
+                    let cpq = &j.c_pq[3 * p + q];
+                    if p == q {
+                        c1.iter_mut().zip(cpq).for_each(|(x, y)| *x += y);
+                    }
+                    let w = nt[(p, q)];
+                    c2.iter_mut().zip(cpq).for_each(|(x, y)| *x += w * y);
+                }
+            }
+            let c3 = &j.c_pq[4 * axis];
+            let a = [&j.c_c[..], &c1[..], &c2[..], &c3[..]].map(|c| flat(&(cm(c) * &en)));
+            let a3_zero = a[3].iter().all(|&v| v == 0.0);
+            let row = |i: usize| -> Vec<f64> { (0..n).map(|c| en[(i, c)]).collect() };
+            let (wa, wb) = (row(rate_c), row(k + rate_c));
+            let delta = wb.iter().zip(&wa).map(|(b, a)| b - a).collect();
+            joints.push(PlanarJoint {
+                rows: rj,
+                offset: r,
+                a,
+                az0: Default::default(),
+                a3_zero,
+                wa,
+                wb,
+                delta,
+            });
+            r += rj;
+        }
+        let root = cons.root.map(|(b, nd, _)| {
+            let i = layout.x1_index(b, nd, rate_c);
+            (0..n).map(|c| (0..na).map(|a| basis.phi1[(i, a)] * reduce[(a, c)]).sum()).collect()
+        });
+        Some(Planar {
+            nu: 1 + axis,
+            n,
+            reduce,
+            ops,
+            joints,
+            r,
+            root,
+            z0: Vec::new(),
+            z2: Vec::new(),
+            z2_identity: false,
+            m: 0,
+            m2: 0,
+        })
+    }
+
+    /// Sets the reduced coordinates `Z0` (`na × m`, `S Z0 = 0`) and `Z2`.
+    pub(crate) fn set_coordinates(&mut self, z0: &Mat<f64>, z2: &Mat<f64>, z2_identity: bool) {
+        let z0r = self.reduce.transpose() * z0;
+        self.m = z0.ncols();
+        self.m2 = z2.ncols();
+        self.z0 = flat(&z0r);
+        self.z2 = flat(z2);
+        self.z2_identity = z2_identity;
+        let n = self.n;
+        for j in &mut self.joints {
+            let rj = j.rows;
+            for (az, a) in j.az0.iter_mut().zip(&j.a) {
+                let am = Mat::from_fn(rj, n, |i, c| a[c * rj + i]);
+                *az = flat(&(am * &z0r));
+            }
+        }
+    }
+
+    /// Whether the joint quaternions of `x` (at `offsets`) are planar (module docs).
+    pub(crate) fn accepts(&self, x: &[f64], offsets: impl Iterator<Item = usize>) -> bool {
+        let nu = self.nu;
+        offsets.into_iter().all(|o| (1..4).all(|c| c == nu || x[o + c] == 0.0))
+    }
+}
+
+impl crate::exact_joints::ExactJointsRom {
+    /// The planar evaluation of `(x, u)` into `f` (and the Jacobians), or `None` when the model
+    /// or the state is not planar (module docs); the state and input are checked by the caller.
+    pub(crate) fn planar_eval(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        f: &mut [f64],
+        jac: Option<(&mut [f64], &mut [f64])>,
+    ) -> Option<crate::error::Result<()>> {
+        let pl = self.planar.as_deref()?;
+        let nj = self.n_joints();
+        let mut offsets = [0usize; 8];
+        let offsets: Vec<usize> = if nj <= 8 {
+            for (j, o) in offsets.iter_mut().enumerate().take(nj) {
+                *o = self.joint_offset(j);
+            }
+            offsets[..nj].to_vec()
+        } else {
+            (0..nj).map(|j| self.joint_offset(j)).collect()
+        };
+        if !pl.accepts(x, offsets.iter().copied()) {
+            return None;
+        }
+        let root = self.has_root().then(|| self.root_offset());
+        Some(with_planar_workspace(pl, |ws| pl.eval(ws, x, u, &offsets, root, f, jac)))
+    }
+
+    /// The general evaluation (also for planar models): right-hand side and, with `jac`, the
+    /// exact Jacobians.
+    #[cfg(test)]
+    pub(crate) fn eval_general(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        f: &mut [f64],
+        jac: Option<(&mut [f64], &mut [f64])>,
+    ) -> crate::error::Result<()> {
+        crate::exact_joints::eval::with_workspace(self, |ws| self.eval_into(ws, x, u, f, jac))
+    }
+
+    /// Whether the planar evaluation is available for this model.
+    #[cfg(test)]
+    pub(crate) fn is_planar(&self) -> bool {
+        self.planar.is_some()
+    }
+}
