@@ -21,6 +21,7 @@
 //!   `d`), and the `−κΞ` term of the `p` columns is one rank-one term per joint,
 //!   `(δ_j Z)ᵀ ⊗ K(A_jθ Z, W_j) p` (`δ_j` the rows of `Δω_j`).
 
+mod columns;
 mod eval;
 mod jacobian;
 #[cfg(test)]
