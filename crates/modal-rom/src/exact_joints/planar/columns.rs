@@ -1,0 +1,261 @@
+//! The in-plane joint-quaternion columns of the planar Jacobian (formulas in
+//! [`super::jacobian`]): per joint, the pieces linear in `A_α` (`A A_αᵀ`, `Ȧ A_αᵀ`, `A_α P f1`,
+//! `A_αᵀ (W p)_j`) once, each column `c` combining them with `∂w_α/∂ξ_c` (`w = (1, c, s, ρ)`);
+//! `Λ_c` formed explicitly (`m × m`, rank `2r_j`), and `∂(Kp) = K(∂V, W)p + K(V, ∂W)p` as one
+//! skew application on the stacked `[∂V; V]`, `[W; ∂W]` (`K` is bilinear in its row sums).
+
+use super::eval::PlanarWs;
+use super::Planar;
+use crate::exact_joints::frame::{gemv, gemv_t, skew_apply};
+use nalgebra::Vector4;
+
+impl Planar {
+    /// The in-plane joint-quaternion columns into `jx` (module docs).
+    pub(super) fn joint_columns(
+        &self,
+        ws: &mut PlanarWs,
+        x: &[f64],
+        offsets: &[usize],
+        root: Option<usize>,
+        jx: &mut [f64],
+    ) {
+        // one revolute joint (two rows): row counts known at compile time
+        if self.r == 2 && self.joints.len() == 1 {
+            self.joint_columns_imp::<2>(ws, x, offsets, root, jx)
+        } else {
+            self.joint_columns_imp::<0>(ws, x, offsets, root, jx)
+        }
+    }
+
+    /// [`Planar::joint_columns`]; `R > 0`: one joint of `R` rows.
+    #[inline(always)]
+    fn joint_columns_imp<const R: usize>(
+        &self,
+        ws: &mut PlanarWs,
+        x: &[f64],
+        offsets: &[usize],
+        root: Option<usize>,
+        jx: &mut [f64],
+    ) {
+        let (n, m, m2) = (self.n, self.m, self.m2);
+        let r = if R > 0 { R } else { self.r };
+        let nb = self.ops.w.ncols();
+        let nf = n + nb;
+        let ns = ws.ns;
+        let r2 = 2 * r;
+        let p = &x[..m];
+        // A f1, G A f1, P f1, W p, Ȧ, ȦAᵀ, ȦAᵀG
+        gemv(&mut ws.af1, false, &ws.a, r, &ws.f1, 1.0);
+        gemv(&mut ws.gaf, false, &ws.g, r, &ws.af1, 1.0);
+        ws.pf1.copy_from_slice(&ws.f1);
+        gemv_t(&mut ws.pf1, true, &ws.a, r, &ws.gaf, -1.0);
+        gemv(&mut ws.wp, false, &ws.w, r, p, 1.0);
+        for (j, jr) in self.joints.iter().enumerate() {
+            let [c, s, _] = ws.csr[j];
+            let dw = ws.dw[j];
+            let rj = jr.rows;
+            for col in 0..n {
+                for t in 0..rj {
+                    ws.adot[col * r + jr.offset + t] =
+                        dw * (-s * jr.a[1][col * rj + t] + c * jr.a[2][col * rj + t]);
+                }
+            }
+        }
+        // ȦAᵀ (rows of each joint: only its own Ȧ rows are non-zero), ȦAᵀG
+        ws.adat[..r * r].fill(0.0);
+        for jr in &self.joints {
+            for col in 0..r {
+                for t in jr.offset..jr.offset + jr.rows {
+                    ws.adat[col * r + t] =
+                        (0..n).map(|k| ws.adot[k * r + t] * ws.a[k * r + col]).sum();
+                }
+            }
+        }
+        for col in 0..r {
+            for i in 0..r {
+                ws.adag[col * r + i] = (0..r).map(|k| ws.adat[k * r + i] * ws.g[col * r + k]).sum();
+            }
+        }
+        // the stacked halves that do not change with the column: V (rows r..2r of sa), W
+        // (rows 0..r of sb)
+        for i in 0..m {
+            ws.sa[i * r2 + r..(i + 1) * r2].copy_from_slice(&ws.v[i * r..(i + 1) * r]);
+            ws.sb[i * r2..i * r2 + r].copy_from_slice(&ws.w[i * r..(i + 1) * r]);
+        }
+        for (j, jr) in self.joints.iter().enumerate() {
+            let (rj, o) = if R > 0 { (R, 0) } else { (jr.rows, jr.offset) };
+            let [a, b] = ws.ab[j];
+            let alphas = if jr.a3_zero { 2 } else { 3 };
+            // per α: A A_αᵀ, Ȧ A_αᵀ (r × r_j), A_α P f1 (r_j), A_αᵀ (W p)_j (n)
+            for al in 0..alphas {
+                let aal = &jr.a[al + 1];
+                for t in 0..rj {
+                    for i in 0..r {
+                        let (mut s1, mut s2) = (0.0, 0.0);
+                        for k in 0..n {
+                            let y = aal[k * rj + t];
+                            s1 += ws.a[k * r + i] * y;
+                            s2 += ws.adot[k * r + i] * y;
+                        }
+                        ws.aa[(al * rj + t) * r + i] = s1;
+                        ws.ada[(al * rj + t) * r + i] = s2;
+                    }
+                }
+                gemv(&mut ws.apf[al * rj..(al + 1) * rj], false, aal, rj, &ws.pf1, 1.0);
+                gemv_t(&mut ws.atw[al * n..(al + 1) * n], false, aal, rj, &ws.wp[o..o + rj], 1.0);
+            }
+            for ci in [0, self.nu] {
+                let (dwc, d2) = if ci == 0 {
+                    ([2.0 * a, 2.0 * b, 2.0 * a], [-2.0 * b, 2.0 * a])
+                } else {
+                    ([-2.0 * b, 2.0 * a, 2.0 * b], [-2.0 * a, -2.0 * b])
+                };
+                let comb = |v: &[f64], len: usize, out: &mut [f64]| {
+                    for (e, y) in out[..len].iter_mut().enumerate() {
+                        *y = (0..alphas).map(|al| dwc[al] * v[al * len + e]).sum();
+                    }
+                };
+                // A A_cᵀ, Ȧ A_cᵀ (r × r_j), A_c P f1 (r_j)
+                comb(&ws.aa, r * rj, &mut ws.aac);
+                comb(&ws.ada, r * rj, &mut ws.x1);
+                comb(&ws.apf, rj, &mut ws.dcp);
+                // V_c = A_c Z, ∂A_θ/∂ξ_c Z (r_j × m)
+                for col in 0..m {
+                    for t in 0..rj {
+                        let i = col * r + o + t;
+                        let mut vc = dwc[0] * ws.az[0][i] + dwc[1] * ws.az[1][i];
+                        if alphas == 3 {
+                            vc += dwc[2] * ws.az[2][i];
+                        }
+                        ws.vc[col * rj + t] = vc;
+                        ws.v2c[col * rj + t] = d2[0] * ws.az[0][i] + d2[1] * ws.az[1][i];
+                    }
+                }
+                // Λ = Φ(−(W_jᵀV_c + V_cᵀW_j)) (lower triangle, column-major)
+                let wv = |i: usize, l: usize| -> f64 {
+                    (0..rj).map(|t| ws.w[i * r + o + t] * ws.vc[l * rj + t]).sum()
+                };
+                for l in 0..m {
+                    ws.lam[l * m + l] = -wv(l, l);
+                    for i in l + 1..m {
+                        ws.lam[l * m + i] = -(wv(i, l) + wv(l, i));
+                    }
+                }
+                for l in 0..m {
+                    ws.lp[l] = (l..m).map(|i| ws.lam[l * m + i] * p[i]).sum();
+                }
+                // d = V_c p − A A_cᵀ (W p)_j, G d
+                let wpj = &ws.wp[o..o + rj];
+                gemv(&mut ws.dd, false, &ws.aac, r, wpj, -1.0);
+                gemv(&mut ws.dd[o..o + rj], true, &ws.vc, rj, p, 1.0);
+                gemv(&mut ws.gd, false, &ws.g, r, &ws.dd, 1.0);
+                // Z_c p = −AᵀG d − A_cᵀ (W p)_j − Z Λᵀ p
+                gemv_t(&mut ws.zcp, false, &ws.a, r, &ws.gd, -1.0);
+                for al in 0..alphas {
+                    let wgt = dwc[al];
+                    let src = &ws.atw[al * n..(al + 1) * n];
+                    ws.zcp.iter_mut().zip(src).for_each(|(z, s)| *z -= wgt * s);
+                }
+                gemv(&mut ws.zcp, true, &ws.z, n, &ws.lp, -1.0);
+                // Z_cᵀ f1 + ZᵀJ11 Z_c p = ZᵀJ11 Z_c p − V_cᵀ(GAf1)_j − W_jᵀ A_c P f1 − Λ Zᵀf1
+                gemv(&mut ws.colp, false, &ws.t11, m, &ws.zcp, 1.0);
+                for (i, c) in ws.colp.iter_mut().enumerate() {
+                    let mut s = 0.0;
+                    for t in 0..rj {
+                        s += ws.vc[i * rj + t] * ws.gaf[o + t] + ws.w[i * r + o + t] * ws.dcp[t];
+                    }
+                    for l in 0..=i {
+                        s += ws.lam[l * m + i] * ws.ztf[l];
+                    }
+                    *c -= s;
+                }
+                // p2 rows (Z2ᵀJ21 Z_c p), ξ̇ rows, root rows
+                let col = offsets[j] + ci;
+                let jc = &mut jx[col * ns..(col + 1) * ns];
+                if self.z2_identity {
+                    let u2 = &mut jc[m..m + m2];
+                    u2.fill(0.0);
+                    for (k, &zk) in ws.zcp.iter().enumerate() {
+                        let src = &ws.jf[k * nf + n..k * nf + n + m2];
+                        u2.iter_mut().zip(src).for_each(|(u, s)| *u += zk * s);
+                    }
+                } else {
+                    gemv(&mut jc[m..m + m2], false, &ws.u21, m2, &ws.zcp, 1.0);
+                }
+                for (i, ir) in self.joints.iter().enumerate() {
+                    let d: f64 = ir.delta.iter().zip(&ws.zcp).map(|(a, b)| a * b).sum();
+                    ws.ddw[i] = d;
+                    let [ai, bi] = ws.ab[i];
+                    let mut v = Vector4::zeros();
+                    v[0] = -0.5 * bi * d;
+                    v[self.nu] = 0.5 * ai * d;
+                    if i == j {
+                        v += ws.mj[j].column(ci);
+                    }
+                    let oi = offsets[i];
+                    jc[oi..oi + 4].copy_from_slice(v.as_slice());
+                }
+                if let (Some(or), Some(t)) = (root, self.root.as_ref()) {
+                    let d: f64 = t.iter().zip(&ws.zcp).map(|(a, b)| a * b).sum();
+                    let v = self.u_n(d, false) * Vector4::from_column_slice(&x[or..or + 4]);
+                    jc[or..or + 4].copy_from_slice(v.as_slice());
+                }
+                // X1 = ȦA_cᵀ − ȦAᵀG A A_cᵀ, G A A_cᵀ (r × r_j)
+                for t in 0..rj {
+                    for i in 0..r {
+                        let (mut s1, mut s2) = (0.0, 0.0);
+                        for k in 0..r {
+                            let y = ws.aac[t * r + k];
+                            s1 += ws.adag[k * r + i] * y;
+                            s2 += ws.g[k * r + i] * y;
+                        }
+                        ws.x1[t * r + i] -= s1;
+                        ws.gaac[t * r + i] = s2;
+                    }
+                }
+                // ∂V = ∂ȦZ − ȦAᵀG V_c − X1 W_j − VΛᵀ into rows 0..r of sa,
+                // ∂W = G V_c − G A A_cᵀ W_j − WΛᵀ into rows r..2r of sb
+                let dw = ws.dw[j];
+                for c in 0..m {
+                    let (dv, dwm) =
+                        (&mut ws.sa[c * r2..c * r2 + r], &mut ws.sb[c * r2 + r..(c + 1) * r2]);
+                    dv.fill(0.0);
+                    for (i, ir) in self.joints.iter().enumerate() {
+                        let d = ws.ddw[i];
+                        let (ro, rr) = if R > 0 { (0, R) } else { (ir.offset, ir.rows) };
+                        for t in ro..ro + rr {
+                            dv[t] = d * ws.vth[c * r + t];
+                        }
+                    }
+                    for t in 0..rj {
+                        dv[o + t] += dw * ws.v2c[c * rj + t];
+                    }
+                    dwm.fill(0.0);
+                    for t in 0..rj {
+                        let (vct, wct) = (ws.vc[c * rj + t], ws.w[c * r + o + t]);
+                        let (ag, g) = (
+                            &ws.adag[(o + t) * r..(o + t + 1) * r],
+                            &ws.g[(o + t) * r..(o + t + 1) * r],
+                        );
+                        let (x1, ga) = (&ws.x1[t * r..(t + 1) * r], &ws.gaac[t * r..(t + 1) * r]);
+                        for i in 0..r {
+                            dv[i] -= ag[i] * vct + x1[i] * wct;
+                            dwm[i] += g[i] * vct - ga[i] * wct;
+                        }
+                    }
+                    for l in 0..=c {
+                        let lam = ws.lam[l * m + c];
+                        for i in 0..r {
+                            dv[i] -= lam * ws.v[l * r + i];
+                            dwm[i] -= lam * ws.w[l * r + i];
+                        }
+                    }
+                }
+                ws.dkp.fill(0.0);
+                skew_apply(&ws.sa, &ws.sb, r2, p, &mut ws.dkp, &mut ws.rtmp);
+                let jc = &mut jx[col * ns..col * ns + m];
+                jc.iter_mut().zip(ws.colp.iter().zip(&ws.dkp)).for_each(|(j, (c, k))| *j = c - k);
+            }
+        }
+    }
+}
