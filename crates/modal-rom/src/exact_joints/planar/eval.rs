@@ -6,7 +6,7 @@
 use super::Planar;
 use crate::error::{ModalError, Result};
 use crate::exact_joints::frame::{
-    gemm, gemv, gemv_t, lowrank_cholesky, lowrank_right_solve_lt, skew_apply, view, view_mut,
+    gemv, gemv_t, lowrank_cholesky, lowrank_right_solve_lt, skew_apply,
 };
 use crate::exact_joints::model::{u_left, u_right};
 use nalgebra::{Matrix4, Vector3, Vector4};
@@ -222,8 +222,10 @@ impl Planar {
     }
 
     /// The frame `Ẑ(ξ)` and its factors into `ws` for the joint quaternions at `offsets`.
-    fn frame(&self, ws: &mut PlanarWs, x: &[f64], offsets: &[usize]) -> Result<()> {
-        let (n, m, r) = (self.n, self.m, self.r);
+    #[inline(always)]
+    fn frame<const R: usize>(&self, ws: &mut PlanarWs, x: &[f64], offsets: &[usize]) -> Result<()> {
+        let (n, m) = (self.n, self.m);
+        let r = if R > 0 { R } else { self.r };
         ws.a[..r * n].fill(0.0);
         ws.c0[..r * m].fill(0.0);
         for (j, jr) in self.joints.iter().enumerate() {
@@ -231,7 +233,7 @@ impl Planar {
             let w = [1.0, a * a - b * b, 2.0 * a * b, a * a + b * b];
             ws.csr[j] = [w[1], w[2], w[3]];
             ws.ab[j] = [a, b];
-            let (rj, o) = (jr.rows, jr.offset);
+            let (rj, o) = if R > 0 { (R, 0) } else { (jr.rows, jr.offset) };
             for (al, &wa) in w.iter().enumerate() {
                 if al == 3 && jr.a3_zero {
                     continue;
@@ -301,7 +303,18 @@ impl Planar {
             }
         }
         // Y = L_g⁻¹ C0, S = I − YᵀY = LLᵀ, H = G C0, W = H L⁻ᵀ, Ẑ = (Ẑ0 − AᵀH) L⁻ᵀ
-        gemm(view_mut(&mut ws.y, r, m), false, view(&ws.linv, r, r), view(&ws.c0, r, m), 1.0);
+        for c in 0..m {
+            for i in 0..r {
+                let (mut y, mut h) = (0.0, 0.0);
+                for k in 0..r {
+                    let c0 = ws.c0[c * r + k];
+                    y += ws.linv[k * r + i] * c0;
+                    h += ws.g[k * r + i] * c0;
+                }
+                ws.y[c * r + i] = y;
+                ws.h[c * r + i] = h;
+            }
+        }
         lowrank_cholesky(
             &ws.y,
             r,
@@ -314,17 +327,17 @@ impl Planar {
             "null-space basis Z(ξ)",
             "the joint rotation is outside the range of the fields (ZᵀP Z0 singular)",
         )?;
-        gemm(view_mut(&mut ws.h, r, m), false, view(&ws.g, r, r), view(&ws.c0, r, m), 1.0);
         ws.w[..r * m].copy_from_slice(&ws.h[..r * m]);
         lowrank_right_solve_lt(&ws.y, &ws.lh, &ws.ld, r, &mut ws.w, r, &mut ws.lacc);
         ws.z[..n * m].copy_from_slice(&self.z0);
-        gemm(
-            view_mut(&mut ws.z, n, m),
-            true,
-            view(&ws.a, r, n).transpose(),
-            view(&ws.h, r, m),
-            -1.0,
-        );
+        for c in 0..m {
+            let h = &ws.h[c * r..(c + 1) * r];
+            let zc = &mut ws.z[c * n..(c + 1) * n];
+            for (k, z) in zc.iter_mut().enumerate() {
+                let a = &ws.a[k * r..(k + 1) * r];
+                *z -= (0..r).map(|t| a[t] * h[t]).sum::<f64>();
+            }
+        }
         lowrank_right_solve_lt(&ws.y, &ws.lh, &ws.ld, r, &mut ws.z, n, &mut ws.lacc);
         for c in 0..m {
             for i in 0..n {
@@ -348,10 +361,32 @@ impl Planar {
         f: &mut [f64],
         jac: Option<(&mut [f64], &mut [f64])>,
     ) -> Result<()> {
-        let (n, m, m2, r) = (self.n, self.m, self.m2, self.r);
+        // one revolute joint (two rows): row counts known at compile time
+        if self.r == 2 && self.joints.len() == 1 {
+            self.eval_imp::<2>(ws, x, u, offsets, root, f, jac)
+        } else {
+            self.eval_imp::<0>(ws, x, u, offsets, root, f, jac)
+        }
+    }
+
+    /// [`Planar::eval`]; `R > 0`: one joint of `R` rows.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn eval_imp<const R: usize>(
+        &self,
+        ws: &mut PlanarWs,
+        x: &[f64],
+        u: &[f64],
+        offsets: &[usize],
+        root: Option<usize>,
+        f: &mut [f64],
+        jac: Option<(&mut [f64], &mut [f64])>,
+    ) -> Result<()> {
+        let (n, m, m2) = (self.n, self.m, self.m2);
+        let r = if R > 0 { R } else { self.r };
         let nb = self.ops.w.ncols();
         ws.ns = f.len();
-        self.frame(ws, x, offsets)?;
+        self.frame::<R>(ws, x, offsets)?;
         let (p, p2) = (&x[..m], &x[m..m + m2]);
         mv(&mut ws.q1, &ws.z, n, p);
         if self.z2_identity {
@@ -368,10 +403,15 @@ impl Planar {
             if al == 2 && (!want || self.joints.iter().all(|j| j.a3_zero)) {
                 continue;
             }
-            az[..r * m].fill(0.0);
             for jr in &self.joints {
-                let mut sub = view_mut(az, r, m).subrows_mut(jr.offset, jr.rows);
-                gemm(sub.as_mut(), false, view(&jr.a[al + 1], jr.rows, n), view(&ws.z, n, m), 1.0);
+                let (rj, o) = if R > 0 { (R, 0) } else { (jr.rows, jr.offset) };
+                let aj = &jr.a[al + 1];
+                for c in 0..m {
+                    let zc = &ws.z[c * n..(c + 1) * n];
+                    for t in 0..rj {
+                        az[c * r + o + t] = (0..n).map(|k| aj[k * rj + t] * zc[k]).sum();
+                    }
+                }
             }
         }
         for (j, jr) in self.joints.iter().enumerate() {
@@ -383,8 +423,9 @@ impl Planar {
             ws.xid[j] = ws.mj[j] * Vector4::from_column_slice(&x[o..o + 4]);
             let [c, s, _] = ws.csr[j];
             let dw = ws.dw[j];
+            let (rj, o) = if R > 0 { (R, 0) } else { (jr.rows, jr.offset) };
             for col in 0..m {
-                for i in jr.offset..jr.offset + jr.rows {
+                for i in o..o + rj {
                     let vt = -s * ws.az[0][col * r + i] + c * ws.az[1][col * r + i];
                     ws.vth[col * r + i] = vt;
                     ws.v[col * r + i] = dw * vt;
