@@ -54,20 +54,21 @@ impl Planar {
             let [c, s, _] = ws.csr[j];
             let dw = ws.dw[j];
             let rj = jr.rows;
-            for col in 0..n {
-                for t in 0..rj {
-                    ws.adot[col * r + jr.offset + t] =
-                        dw * (-s * jr.a[1][col * rj + t] + c * jr.a[2][col * rj + t]);
+            for t in 0..rj {
+                let (a1, a2) = (&jr.at[1][t * n..(t + 1) * n], &jr.at[2][t * n..(t + 1) * n]);
+                let row = &mut ws.adt[(jr.offset + t) * n..(jr.offset + t + 1) * n];
+                for ((d, x), y) in row.iter_mut().zip(a1).zip(a2) {
+                    *d = dw * (-s * x + c * y);
                 }
             }
         }
         // ȦAᵀ (rows of each joint: only its own Ȧ rows are non-zero), ȦAᵀG
-        ws.adat[..r * r].fill(0.0);
         for jr in &self.joints {
-            for col in 0..r {
-                for t in jr.offset..jr.offset + jr.rows {
-                    ws.adat[col * r + t] =
-                        (0..n).map(|k| ws.adot[k * r + t] * ws.a[k * r + col]).sum();
+            for t in jr.offset..jr.offset + jr.rows {
+                let ad = &ws.adt[t * n..(t + 1) * n];
+                for col in 0..r {
+                    let ac = &ws.at[col * n..(col + 1) * n];
+                    ws.adat[col * r + t] = ad.iter().zip(ac).map(|(x, y)| x * y).sum();
                 }
             }
         }
@@ -90,12 +91,13 @@ impl Planar {
             for al in 0..alphas {
                 let aal = &jr.a[al + 1];
                 for t in 0..rj {
+                    let y = &jr.at[al + 1][t * n..(t + 1) * n];
                     for i in 0..r {
+                        let (ai, di) = (&ws.at[i * n..(i + 1) * n], &ws.adt[i * n..(i + 1) * n]);
                         let (mut s1, mut s2) = (0.0, 0.0);
                         for k in 0..n {
-                            let y = aal[k * rj + t];
-                            s1 += ws.a[k * r + i] * y;
-                            s2 += ws.adot[k * r + i] * y;
+                            s1 += ai[k] * y[k];
+                            s2 += di[k] * y[k];
                         }
                         ws.aa[(al * rj + t) * r + i] = s1;
                         ws.ada[(al * rj + t) * r + i] = s2;
@@ -132,17 +134,19 @@ impl Planar {
                     }
                 }
                 // Λ = Φ(−(W_jᵀV_c + V_cᵀW_j)) (lower triangle, column-major)
-                let wv = |i: usize, l: usize| -> f64 {
-                    (0..rj).map(|t| ws.w[i * r + o + t] * ws.vc[l * rj + t]).sum()
-                };
                 for l in 0..m {
-                    ws.lam[l * m + l] = -wv(l, l);
+                    let (wl, vl) = (&ws.w[l * r + o..l * r + o + rj], &ws.vc[l * rj..(l + 1) * rj]);
+                    let lam = &mut ws.lam[l * m..(l + 1) * m];
+                    lam[l] = -(0..rj).map(|t| wl[t] * vl[t]).sum::<f64>();
                     for i in l + 1..m {
-                        ws.lam[l * m + i] = -(wv(i, l) + wv(l, i));
+                        let (wi, vi) =
+                            (&ws.w[i * r + o..i * r + o + rj], &ws.vc[i * rj..(i + 1) * rj]);
+                        lam[i] = -(0..rj).map(|t| wi[t] * vl[t] + wl[t] * vi[t]).sum::<f64>();
                     }
                 }
                 for l in 0..m {
-                    ws.lp[l] = (l..m).map(|i| ws.lam[l * m + i] * p[i]).sum();
+                    let lam = &ws.lam[l * m + l..(l + 1) * m];
+                    ws.lp[l] = lam.iter().zip(&p[l..]).map(|(a, b)| a * b).sum();
                 }
                 // d = V_c p − A A_cᵀ (W p)_j, G d
                 let wpj = &ws.wp[o..o + rj];
@@ -159,15 +163,15 @@ impl Planar {
                 gemv(&mut ws.zcp, true, &ws.z, n, &ws.lp, -1.0);
                 // Z_cᵀ f1 + ZᵀJ11 Z_c p = ZᵀJ11 Z_c p − V_cᵀ(GAf1)_j − W_jᵀ A_c P f1 − Λ Zᵀf1
                 gemv(&mut ws.colp, false, &ws.t11, m, &ws.zcp, 1.0);
+                // (Λ Zᵀf1 by columns of Λ)
+                for (l, &y) in ws.ztf.iter().enumerate() {
+                    let lam = &ws.lam[l * m + l..(l + 1) * m];
+                    ws.colp[l..].iter_mut().zip(lam).for_each(|(c, a)| *c -= a * y);
+                }
+                let (gaf, dcp) = (&ws.gaf[o..o + rj], &ws.dcp[..rj]);
                 for (i, c) in ws.colp.iter_mut().enumerate() {
-                    let mut s = 0.0;
-                    for t in 0..rj {
-                        s += ws.vc[i * rj + t] * ws.gaf[o + t] + ws.w[i * r + o + t] * ws.dcp[t];
-                    }
-                    for l in 0..=i {
-                        s += ws.lam[l * m + i] * ws.ztf[l];
-                    }
-                    *c -= s;
+                    let (vi, wi) = (&ws.vc[i * rj..(i + 1) * rj], &ws.w[i * r + o..i * r + o + rj]);
+                    *c -= (0..rj).map(|t| vi[t] * gaf[t] + wi[t] * dcp[t]).sum::<f64>();
                 }
                 // p2 rows (Z2ᵀJ21 Z_c p), ξ̇ rows, root rows
                 let col = offsets[j] + ci;
@@ -243,12 +247,15 @@ impl Planar {
                             dwm[i] += g[i] * vct - ga[i] * wct;
                         }
                     }
-                    for l in 0..=c {
-                        let lam = ws.lam[l * m + c];
-                        for i in 0..r {
-                            dv[i] -= lam * ws.v[l * r + i];
-                            dwm[i] -= lam * ws.w[l * r + i];
+                    for i in 0..r {
+                        let (mut sv, mut sw) = (0.0, 0.0);
+                        for l in 0..=c {
+                            let lam = ws.lam[l * m + c];
+                            sv += lam * ws.v[l * r + i];
+                            sw += lam * ws.w[l * r + i];
                         }
+                        dv[i] -= sv;
+                        dwm[i] -= sw;
                     }
                 }
                 ws.dkp.fill(0.0);

@@ -17,6 +17,9 @@ use std::cell::RefCell;
 pub(crate) struct PlanarWs {
     key: Vec<usize>,
     pub(super) a: Vec<f64>,
+    /// `A` and `Ȧ` row by row (`r` rows of `n`, each contiguous).
+    pub(super) at: Vec<f64>,
+    pub(super) adt: Vec<f64>,
     pub(super) gram: Vec<f64>,
     pub(super) linv: Vec<f64>,
     pub(super) g: Vec<f64>,
@@ -59,7 +62,6 @@ pub(crate) struct PlanarWs {
     pub(super) gaf: Vec<f64>,
     pub(super) pf1: Vec<f64>,
     pub(super) wp: Vec<f64>,
-    pub(super) adot: Vec<f64>,
     pub(super) adat: Vec<f64>,
     pub(super) adag: Vec<f64>,
     pub(super) vc: Vec<f64>,
@@ -118,6 +120,8 @@ impl PlanarWs {
         PlanarWs {
             key,
             a: z(r * n),
+            at: z(r * n),
+            adt: z(r * n),
             gram: z(r * r),
             linv: z(r * r),
             g: z(r * r),
@@ -158,7 +162,6 @@ impl PlanarWs {
             gaf: z(r),
             pf1: z(n),
             wp: z(r),
-            adot: z(r * n),
             adat: z(r * r),
             adag: z(r * r),
             vc: z(rx * m),
@@ -251,11 +254,16 @@ impl Planar {
             }
         }
         // AAᵀ, its Cholesky factor and inverse, G
-        let a = &ws.a;
+        for c in 0..n {
+            for i in 0..r {
+                ws.at[i * n + c] = ws.a[c * r + i];
+            }
+        }
         for i in 0..r {
+            let ai = &ws.at[i * n..(i + 1) * n];
             for l in 0..=i {
-                let s: f64 = (0..n).map(|c| a[c * r + i] * a[c * r + l]).sum();
-                ws.gram[l * r + i] = s;
+                let al = &ws.at[l * n..(l + 1) * n];
+                ws.gram[l * r + i] = ai.iter().zip(al).map(|(x, y)| x * y).sum();
             }
         }
         let scale = (0..r).fold(0.0f64, |mx, i| mx.max(ws.gram[i * r + i]));
@@ -405,11 +413,12 @@ impl Planar {
             }
             for jr in &self.joints {
                 let (rj, o) = if R > 0 { (R, 0) } else { (jr.rows, jr.offset) };
-                let aj = &jr.a[al + 1];
+                let aj = &jr.at[al + 1];
                 for c in 0..m {
                     let zc = &ws.z[c * n..(c + 1) * n];
                     for t in 0..rj {
-                        az[c * r + o + t] = (0..n).map(|k| aj[k * rj + t] * zc[k]).sum();
+                        let at = &aj[t * n..(t + 1) * n];
+                        az[c * r + o + t] = at.iter().zip(zc).map(|(x, y)| x * y).sum();
                     }
                 }
             }

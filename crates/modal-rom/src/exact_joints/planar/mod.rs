@@ -44,6 +44,8 @@ pub(crate) struct PlanarJoint {
     offset: usize,
     /// `A_jα` (`r_j × n`, column-major), `α = 0…3` (module docs).
     a: [Vec<f64>; 4],
+    /// The same row by row (`r_j` rows of `n`, each contiguous).
+    at: [Vec<f64>; 4],
     /// `A_jα Ẑ0` (`r_j × m`), set with the coordinates.
     az0: [Vec<f64>; 4],
     /// Whether `A_j3 = 0`.
@@ -183,6 +185,12 @@ impl Planar {
             let c3 = &j.c_pq[4 * axis];
             let a = [&j.c_c[..], &c1[..], &c2[..], &c3[..]].map(|c| flat(&(cm(c) * &en)));
             let a3_zero = a[3].iter().all(|&v| v == 0.0);
+            let at = std::array::from_fn(|al| {
+                (0..rj)
+                    .flat_map(|t| (0..n).map(move |c| (t, c)))
+                    .map(|(t, c)| a[al][c * rj + t])
+                    .collect()
+            });
             let row = |i: usize| -> Vec<f64> { (0..n).map(|c| en[(i, c)]).collect() };
             let (wa, wb) = (row(rate_c), row(k + rate_c));
             let delta = wb.iter().zip(&wa).map(|(b, a)| b - a).collect();
@@ -190,6 +198,7 @@ impl Planar {
                 rows: rj,
                 offset: r,
                 a,
+                at,
                 az0: Default::default(),
                 a3_zero,
                 wa,
