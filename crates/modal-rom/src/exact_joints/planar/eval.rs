@@ -99,9 +99,8 @@ thread_local! {
 pub(crate) fn with_planar_workspace<T>(pl: &Planar, f: impl FnOnce(&mut PlanarWs) -> T) -> T {
     WS.with(|ws| {
         let mut ws = ws.borrow_mut();
-        let key = pl.key();
-        if ws.key != key {
-            *ws = PlanarWs::new(pl, key);
+        if ws.key != pl.key {
+            *ws = PlanarWs::new(pl, pl.key.clone());
         }
         f(&mut ws)
     })
@@ -205,7 +204,8 @@ fn numerical(stage: &str, reason: &str) -> ModalError {
 }
 
 impl Planar {
-    fn key(&self) -> Vec<usize> {
+    /// The sizes the workspace depends on.
+    pub(super) fn dims_key(&self) -> Vec<usize> {
         let mut k =
             vec![self.n, self.m, self.m2, self.r, self.ops.w.ncols(), self.ops.scratch_len()];
         k.extend(self.joints.iter().map(|j| j.rows));

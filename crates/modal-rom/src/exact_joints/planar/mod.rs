@@ -77,6 +77,11 @@ pub(crate) struct Planar {
     z2_identity: bool,
     m: usize,
     m2: usize,
+    /// The workspace sizes ([`Planar::dims_key`]), the joint quaternions' offsets in the state
+    /// and the root quaternion's.
+    key: Vec<usize>,
+    offsets: Vec<usize>,
+    root_offset: Option<usize>,
 }
 
 /// Column-major entries of `m`.
@@ -224,6 +229,9 @@ impl Planar {
             z2_identity: false,
             m: 0,
             m2: 0,
+            key: Vec::new(),
+            offsets: Vec::new(),
+            root_offset: None,
         })
     }
 
@@ -235,6 +243,9 @@ impl Planar {
         self.z0 = flat(&z0r);
         self.z2 = flat(z2);
         self.z2_identity = z2_identity;
+        let root = usize::from(self.root.is_some());
+        self.root_offset = self.root.is_some().then_some(self.m + self.m2);
+        self.offsets = (0..self.joints.len()).map(|j| self.m + self.m2 + 4 * (root + j)).collect();
         let n = self.n;
         for j in &mut self.joints {
             let rj = j.rows;
@@ -243,6 +254,7 @@ impl Planar {
                 *az = flat(&(am * &z0r));
             }
         }
+        self.key = self.dims_key();
     }
 
     /// Whether the joint quaternions of `x` (at `offsets`) are planar (module docs).
@@ -263,21 +275,13 @@ impl crate::exact_joints::ExactJointsRom {
         jac: Option<(&mut [f64], &mut [f64])>,
     ) -> Option<crate::error::Result<()>> {
         let pl = self.planar.as_deref()?;
-        let nj = self.n_joints();
-        let mut offsets = [0usize; 8];
-        let offsets: Vec<usize> = if nj <= 8 {
-            for (j, o) in offsets.iter_mut().enumerate().take(nj) {
-                *o = self.joint_offset(j);
-            }
-            offsets[..nj].to_vec()
-        } else {
-            (0..nj).map(|j| self.joint_offset(j)).collect()
-        };
-        if !pl.accepts(x, offsets.iter().copied()) {
+        if !pl.accepts(x, pl.offsets.iter().copied()) {
             return None;
         }
-        let root = self.has_root().then(|| self.root_offset());
-        Some(with_planar_workspace(pl, |ws| pl.eval(ws, x, u, &offsets, root, f, jac)))
+        let (offsets, root) = (&pl.offsets[..], pl.root_offset);
+        debug_assert!(offsets.iter().enumerate().all(|(j, &o)| o == self.joint_offset(j)));
+        debug_assert_eq!(root, self.has_root().then(|| self.root_offset()));
+        Some(with_planar_workspace(pl, |ws| pl.eval(ws, x, u, offsets, root, f, jac)))
     }
 
     /// The general evaluation (also for planar models): right-hand side and, with `jac`, the
