@@ -11,9 +11,9 @@
 //! processor's vector instructions by pulp's run-time dispatch (as faer's kernels). Module docs
 //! of [`super::jacobian`] for the formulas.
 
-use crate::exact_joints::eval::{joint_rate_matrix, rates, Workspace};
+use crate::exact_joints::eval::{RateMap, Workspace};
 use crate::exact_joints::frame::{gemm, gemv, gemv_t, view, view_mut};
-use crate::exact_joints::model::{u_right, ExactJointsRom};
+use crate::exact_joints::model::ExactJointsRom;
 use faer::traits::pulp::{Arch, Simd, WithSimd};
 use nalgebra::Vector4;
 
@@ -30,6 +30,8 @@ pub(crate) struct Batch {
     u2: Vec<f64>,
     eqc: Vec<Vec<f64>>,
     dxd: Vec<Vector4<f64>>,
+    /// `ξ̇_i` as linear maps of the tracked values, per joint.
+    maps: Vec<RateMap>,
     lm: Vec<f64>,
     cd: Vec<f64>,
     dct: Vec<f64>,
@@ -72,6 +74,7 @@ impl Batch {
             u2: z(4 * m2),
             eqc: rom.tracked.iter().map(|t| z(4 * t.rows.nrows())).collect(),
             dxd: vec![Vector4::zeros(); 4 * joints.len()],
+            maps: joints.iter().map(|_| RateMap::default()).collect(),
             lm: z(LANES * 2 * rj * kx),
             cd: z(rx * kx),
             dct: z(4 * kx * rx),
@@ -509,12 +512,16 @@ impl ExactJointsRom {
             );
         }
         // ∂ξ̇ (all joints, root)
+        for (i, map) in bt.maps.iter_mut().enumerate() {
+            *map = RateMap::new(self, &ws.xi[i], true);
+        }
+        let root_map = root_xi.map(|xr| RateMap::new(self, &xr, false));
         for (b, &c) in cs.iter().enumerate() {
             let col = self.joint_offset(j) + c;
             jx[col * n + m..col * n + m + m2].copy_from_slice(&bt.u2[b * m2..(b + 1) * m2]);
             for (i, tr) in self.tracked.iter().take(nj).enumerate() {
                 let nt = tr.rows.nrows();
-                let mut d = joint_rate_matrix(self, &bt.eqc[i][b * nt..(b + 1) * nt]) * ws.xi[i];
+                let mut d = bt.maps[i].apply(&bt.eqc[i][b * nt..(b + 1) * nt]);
                 if i == j {
                     d += ws.mjs[j].column(c);
                 }
@@ -522,10 +529,9 @@ impl ExactJointsRom {
                 let oi = self.joint_offset(i);
                 jx[col * n + oi..col * n + oi + 4].copy_from_slice(d.as_slice());
             }
-            if let Some(xr) = root_xi {
+            if let Some(map) = &root_map {
                 let kr = self.tracked[nj].rows.nrows();
-                let e = &bt.eqc[nj][b * kr..(b + 1) * kr];
-                let d = u_right(&rates(self, e, 0)) * xr;
+                let d = map.apply(&bt.eqc[nj][b * kr..(b + 1) * kr]);
                 let oi = self.root_offset();
                 jx[col * n + oi..col * n + oi + 4].copy_from_slice(d.as_slice());
             }

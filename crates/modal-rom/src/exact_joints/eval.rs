@@ -206,6 +206,42 @@ pub(super) fn rates(rom: &ExactJointsRom, e: &[f64], end: usize) -> Vector3<f64>
     w
 }
 
+/// `ξ̇ = (U(ω_b) − Ū(ω_a)) ξ` of a joint (or `U(ω) ξ` of the root) as a linear map of the
+/// tracked values `e`: `ξ̇ = Σ_k e[i_k] v_k` over the rate components (theory.md §10.4), with
+/// `v_k = U(e_axis) ξ` (end `b`, root) or `−Ū(e_axis) ξ` (end `a`).
+#[derive(Debug, Default)]
+pub(crate) struct RateMap {
+    terms: [(usize, Vector4<f64>); 6],
+    len: usize,
+}
+
+impl RateMap {
+    /// The map of a joint (`joint`, ends `a` then `b` in `e`) or of the root node at `xi`.
+    pub(super) fn new(rom: &ExactJointsRom, xi: &Vector4<f64>, joint: bool) -> Self {
+        let k = rom.basis.layout.k();
+        let mut terms = [(0, Vector4::zeros()); 6];
+        let mut len = 0;
+        for &(c, axis) in &rom.rate_comps {
+            let w = Vector3::ith(axis, 1.0);
+            if joint {
+                terms[len] = (c, -(u_left(&w) * xi));
+                terms[len + 1] = (k + c, u_right(&w) * xi);
+                len += 2;
+            } else {
+                terms[len] = (c, u_right(&w) * xi);
+                len += 1;
+            }
+        }
+        RateMap { terms, len }
+    }
+
+    /// `ξ̇` for the tracked values `e`.
+    #[inline]
+    pub(super) fn apply(&self, e: &[f64]) -> Vector4<f64> {
+        self.terms[..self.len].iter().fold(Vector4::zeros(), |acc, (i, v)| acc + v * e[*i])
+    }
+}
+
 /// `U(ω_b) − Ū(ω_a)` of joint block `e`.
 pub(super) fn joint_rate_matrix(rom: &ExactJointsRom, e: &[f64]) -> Matrix4<f64> {
     u_right(&rates(rom, e, 1)) - u_left(&rates(rom, e, 0))

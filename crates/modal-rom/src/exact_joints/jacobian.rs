@@ -18,7 +18,7 @@
 //! components at an in-plane rotation) `Z_c = 0`, `∂W = 0`, and the column is `ξ̇_j`'s own
 //! term and `−K(∂Ȧ Z, W) p`.
 
-use crate::exact_joints::eval::{joint_rate_matrix, rates, Workspace};
+use crate::exact_joints::eval::{joint_rate_matrix, rates, RateMap, Workspace};
 use crate::exact_joints::frame::{gemm, gemv, skew_apply, view, view_mut};
 use crate::exact_joints::model::{u_right, ExactJointsRom};
 use nalgebra::Vector4;
@@ -146,8 +146,9 @@ impl ExactJointsRom {
         for (j, jr) in self.cons.joints.iter().enumerate() {
             let kk = jr.e.nrows();
             let o = self.joint_offset(j);
+            let map = RateMap::new(self, &ws.xi[j], true);
             for k in 0..m {
-                let d = joint_rate_matrix(self, &ws.tz[j][k * kk..(k + 1) * kk]) * ws.xi[j];
+                let d = map.apply(&ws.tz[j][k * kk..(k + 1) * kk]);
                 for i in 0..4 {
                     jx[k * n + o + i] = d[i];
                     ws.xi_p[j][k * 4 + i] = d[i];
@@ -157,8 +158,9 @@ impl ExactJointsRom {
         if let Some(xr) = root_xi {
             let kr = self.tracked[nj].rows.nrows();
             let o = self.root_offset();
+            let map = RateMap::new(self, &xr, false);
             for k in 0..m {
-                let d = u_right(&rates(self, &ws.tz[nj][k * kr..(k + 1) * kr], 0)) * xr;
+                let d = map.apply(&ws.tz[nj][k * kr..(k + 1) * kr]);
                 for i in 0..4 {
                     jx[k * n + o + i] = d[i];
                 }
