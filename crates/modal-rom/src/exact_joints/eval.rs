@@ -235,6 +235,14 @@ impl RateMap {
         RateMap { terms, len }
     }
 
+    /// The map as a `4 × t` matrix (column-major) into `d` (`t` tracked values).
+    pub(super) fn matrix(&self, d: &mut [f64]) {
+        d.fill(0.0);
+        for (i, v) in &self.terms[..self.len] {
+            d[4 * i..4 * i + 4].copy_from_slice(v.as_slice());
+        }
+    }
+
     /// `ξ̇` for the tracked values `e`.
     #[inline]
     pub(super) fn apply(&self, e: &[f64]) -> Vector4<f64> {

@@ -142,29 +142,35 @@ impl ExactJointsRom {
                 .zip(&ws.mm[l * m + l + 1..(l + 1) * m])
                 .for_each(|(v, w)| *v += w);
         }
-        // Ξ = ∂ξ̇/∂p (joint and root rows)
+        // Ξ = ∂ξ̇/∂p (joint and root rows): D (T Z) with ξ̇ = D e (`RateMap`) on the tracked values
         for (j, jr) in self.cons.joints.iter().enumerate() {
             let kk = jr.e.nrows();
             let o = self.joint_offset(j);
-            let map = RateMap::new(self, &ws.xi[j], true);
+            let d = &mut ws.rtmp[..4 * kk];
+            RateMap::new(self, &ws.xi[j], true).matrix(d);
+            gemm(
+                view_mut(jx, n, n).submatrix_mut(o, 0, 4, m),
+                false,
+                view(d, 4, kk),
+                view(&ws.tz[j], kk, m),
+                1.0,
+            );
             for k in 0..m {
-                let d = map.apply(&ws.tz[j][k * kk..(k + 1) * kk]);
-                for i in 0..4 {
-                    jx[k * n + o + i] = d[i];
-                    ws.xi_p[j][k * 4 + i] = d[i];
-                }
+                ws.xi_p[j][k * 4..(k + 1) * 4].copy_from_slice(&jx[k * n + o..k * n + o + 4]);
             }
         }
         if let Some(xr) = root_xi {
             let kr = self.tracked[nj].rows.nrows();
             let o = self.root_offset();
-            let map = RateMap::new(self, &xr, false);
-            for k in 0..m {
-                let d = map.apply(&ws.tz[nj][k * kr..(k + 1) * kr]);
-                for i in 0..4 {
-                    jx[k * n + o + i] = d[i];
-                }
-            }
+            let d = &mut ws.rtmp[..4 * kr];
+            RateMap::new(self, &xr, false).matrix(d);
+            gemm(
+                view_mut(jx, n, n).submatrix_mut(o, 0, 4, m),
+                false,
+                view(d, 4, kr),
+                view(&ws.tz[nj], kr, m),
+                1.0,
+            );
             let ur = u_right(&rates(self, &ws.eq[nj], 0));
             for c in 0..4 {
                 for i in 0..4 {
