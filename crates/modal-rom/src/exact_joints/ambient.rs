@@ -17,12 +17,11 @@
 //! forces (theory.md §10.3). `q1ᵀf1 + q2ᵀf2 = q1ᵀΣq1 + q1ᵀB_u u` for every `(q1, q2)`.
 
 use crate::error::{invalid, shape, ModalError, Result};
-use crate::exact_joints::frame::{gemv, gemv_t};
+use crate::exact_joints::frame::{gemv, gemv_t, matvec};
 use crate::layout::Layout;
 use crate::rom::Input;
 use crate::structure::StructureModel;
 use faer::linalg::solvers::Solve;
-use faer::traits::pulp::{Arch, Simd, WithSimd};
 use faer::{Mat, MatRef, Side};
 use intrinsic_beam::operators::{l1_times, l2_times};
 use intrinsic_beam::rotation::rotation;
@@ -547,7 +546,7 @@ impl AmbientOps {
             f1.iter_mut().zip(c).for_each(|(f, a)| *f += uk * a);
         }
         let mv = |out: &mut [f64], g: &[f64], rows: usize, x: &[f64]| {
-            Arch::new().dispatch(RowBlockMatvec { out: &mut out[..rows], g, x });
+            matvec(&mut out[..rows], false, g, x, 1.0);
         };
         for lt in &self.links {
             let ((o1, m), (o2, m2)) = (lt.c1, lt.c2);
@@ -649,52 +648,4 @@ impl AmbientOps {
             .max()
             .unwrap_or(0)
     }
-}
-
-/// `out = g x` for column-major `g` (`out.len() × x.len()`), by blocks of rows held in vector
-/// registers across all columns (each entry of `g` loaded once, `out` stored once; eight
-/// independent accumulators per block cover the latency of the fused multiply–adds), compiled
-/// for the processor's vector instructions by pulp's run-time dispatch.
-struct RowBlockMatvec<'a> {
-    out: &'a mut [f64],
-    g: &'a [f64],
-    x: &'a [f64],
-}
-
-impl WithSimd for RowBlockMatvec<'_> {
-    type Output = ();
-
-    #[inline(always)]
-    fn with_simd<S: Simd>(self, _simd: S) {
-        let RowBlockMatvec { out, g, x } = self;
-        let rows = out.len();
-        let mut r0 = 0;
-        r0 = row_blocks::<32>(out, g, x, rows, r0);
-        r0 = row_blocks::<4>(out, g, x, rows, r0);
-        row_blocks::<1>(out, g, x, rows, r0);
-    }
-}
-
-/// Rows `r0..` of [`RowBlockMatvec`] in blocks of `B` while a whole block fits; returns the
-/// first row not done.
-#[inline(always)]
-fn row_blocks<const B: usize>(
-    out: &mut [f64],
-    g: &[f64],
-    x: &[f64],
-    rows: usize,
-    mut r0: usize,
-) -> usize {
-    while r0 + B <= rows {
-        let mut acc = [0.0; B];
-        for (l, &xl) in x.iter().enumerate() {
-            let c: &[f64; B] = g[l * rows + r0..l * rows + r0 + B].try_into().expect("block");
-            for e in 0..B {
-                acc[e] = xl.mul_add(c[e], acc[e]);
-            }
-        }
-        out[r0..r0 + B].copy_from_slice(&acc);
-        r0 += B;
-    }
-    r0
 }

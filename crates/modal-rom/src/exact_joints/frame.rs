@@ -47,6 +47,10 @@ pub(crate) fn gemm(
 
 /// `y (+)= alpha · a x` for column-major `a` (`r × c`).
 pub(crate) fn gemv(y: &mut [f64], add: bool, a: &[f64], r: usize, x: &[f64], alpha: f64) {
+    if r * x.len() >= 512 {
+        matvec(&mut y[..r], add, &a[..r * x.len()], x, alpha);
+        return;
+    }
     if !add {
         y[..r].fill(0.0);
     }
@@ -306,4 +310,67 @@ fn lowrank_sweep(
         t[i] = ti;
         a.iter_mut().zip(ei).for_each(|(a, e)| *a += e * ti);
     }
+}
+
+/// `out (+)= alpha · g x` for column-major `g` (`out.len() × x.len()`), by blocks of rows held
+/// in vector registers across all columns (each entry of `g` loaded once, `out` stored once;
+/// eight independent accumulators per block cover the latency of the fused multiply–adds),
+/// compiled for the processor's vector instructions by pulp's run-time dispatch.
+pub(crate) fn matvec(out: &mut [f64], add: bool, g: &[f64], x: &[f64], alpha: f64) {
+    Arch::new().dispatch(RowBlockMatvec { out, add, g, x, alpha });
+}
+
+struct RowBlockMatvec<'a> {
+    out: &'a mut [f64],
+    add: bool,
+    g: &'a [f64],
+    x: &'a [f64],
+    alpha: f64,
+}
+
+impl WithSimd for RowBlockMatvec<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) {
+        let RowBlockMatvec { out, add, g, x, alpha } = self;
+        let rows = out.len();
+        let mut r0 = 0;
+        r0 = row_blocks::<32>(out, add, g, x, alpha, rows, r0);
+        r0 = row_blocks::<4>(out, add, g, x, alpha, rows, r0);
+        row_blocks::<1>(out, add, g, x, alpha, rows, r0);
+    }
+}
+
+/// Rows `r0..` of [`RowBlockMatvec`] in blocks of `B` while a whole block fits; returns the
+/// first row not done.
+#[inline(always)]
+fn row_blocks<const B: usize>(
+    out: &mut [f64],
+    add: bool,
+    g: &[f64],
+    x: &[f64],
+    alpha: f64,
+    rows: usize,
+    mut r0: usize,
+) -> usize {
+    while r0 + B <= rows {
+        let mut acc = [0.0; B];
+        for (l, &xl) in x.iter().enumerate() {
+            let c: &[f64; B] = g[l * rows + r0..l * rows + r0 + B].try_into().expect("block");
+            for e in 0..B {
+                acc[e] = xl.mul_add(c[e], acc[e]);
+            }
+        }
+        let o = &mut out[r0..r0 + B];
+        if add {
+            o.iter_mut().zip(&acc).for_each(|(o, a)| *o = alpha.mul_add(*a, *o));
+        } else if alpha == 1.0 {
+            o.copy_from_slice(&acc);
+        } else {
+            o.iter_mut().zip(&acc).for_each(|(o, a)| *o = alpha * a);
+        }
+        r0 += B;
+    }
+    r0
 }

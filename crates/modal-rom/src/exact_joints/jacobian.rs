@@ -196,7 +196,9 @@ impl ExactJointsRom {
             }
         }
         // inputs: ZᵀB_u
-        gemm(view_mut(ju, n, nu).submatrix_mut(0, 0, m, nu), false, zt, self.ops.b_u.as_ref(), 1.0);
+        for c in 0..nu {
+            gemv(&mut ju[c * n..c * n + m], false, &ws.zt, m, self.ops.b_u.col_as_slice(c), 1.0);
+        }
         if nj == 0 {
             return;
         }
