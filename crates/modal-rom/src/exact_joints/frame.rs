@@ -64,6 +64,10 @@ pub(crate) fn gemv(y: &mut [f64], add: bool, a: &[f64], r: usize, x: &[f64], alp
 
 /// `y (+)= alpha · aᵀ x` for column-major `a` (`r × c`, `x` of length `r`).
 pub(crate) fn gemv_t(y: &mut [f64], add: bool, a: &[f64], r: usize, x: &[f64], alpha: f64) {
+    if r * y.len() >= 512 {
+        Arch::new().dispatch(ColumnDots { y, add, a, r, x: &x[..r], alpha });
+        return;
+    }
     for (j, y) in y.iter_mut().enumerate() {
         let d: f64 = a[j * r..(j + 1) * r].iter().zip(x).map(|(a, x)| a * x).sum();
         *y = if add { *y + alpha * d } else { alpha * d };
@@ -373,4 +377,62 @@ fn row_blocks<const B: usize>(
         r0 += B;
     }
     r0
+}
+
+/// `y (+)= alpha · aᵀ x` ([`gemv_t`]) four columns at a time: the dot products run along the
+/// rows in vector lanes (`x` loaded once per four columns), reduced across lanes at the end.
+struct ColumnDots<'a> {
+    y: &'a mut [f64],
+    add: bool,
+    a: &'a [f64],
+    r: usize,
+    x: &'a [f64],
+    alpha: f64,
+}
+
+impl WithSimd for ColumnDots<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) {
+        let ColumnDots { y, add, a, r, x, alpha } = self;
+        let full = r / 4 * 4;
+        let put = |y: &mut f64, d: f64| *y = if add { alpha.mul_add(d, *y) } else { alpha * d };
+        let lane_sum = |v: [f64; 4]| (v[0] + v[1]) + (v[2] + v[3]);
+        let c4 = y.len() / 4 * 4;
+        for j in (0..c4).step_by(4) {
+            let cols: [&[f64]; 4] = std::array::from_fn(|b| &a[(j + b) * r..(j + b + 1) * r]);
+            let mut acc = [[0.0f64; 4]; 4];
+            for i in (0..full).step_by(4) {
+                let xv: &[f64; 4] = x[i..i + 4].try_into().expect("chunk");
+                for b in 0..4 {
+                    let cv: &[f64; 4] = cols[b][i..i + 4].try_into().expect("chunk");
+                    for e in 0..4 {
+                        acc[b][e] = cv[e].mul_add(xv[e], acc[b][e]);
+                    }
+                }
+            }
+            for b in 0..4 {
+                let mut d = lane_sum(acc[b]);
+                for i in full..r {
+                    d = cols[b][i].mul_add(x[i], d);
+                }
+                put(&mut y[j + b], d);
+            }
+        }
+        for j in c4..y.len() {
+            let col = &a[j * r..(j + 1) * r];
+            let mut acc = [0.0f64; 4];
+            for i in (0..full).step_by(4) {
+                for e in 0..4 {
+                    acc[e] = col[i + e].mul_add(x[i + e], acc[e]);
+                }
+            }
+            let mut d = lane_sum(acc);
+            for i in full..r {
+                d = col[i].mul_add(x[i], d);
+            }
+            put(&mut y[j], d);
+        }
+    }
 }
