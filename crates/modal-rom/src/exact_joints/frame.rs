@@ -47,7 +47,7 @@ pub(crate) fn gemm(
 
 /// `y (+)= alpha · a x` for column-major `a` (`r × c`).
 pub(crate) fn gemv(y: &mut [f64], add: bool, a: &[f64], r: usize, x: &[f64], alpha: f64) {
-    if r * x.len() >= 512 {
+    if r * x.len() >= 64 {
         matvec(&mut y[..r], add, &a[..r * x.len()], x, alpha);
         return;
     }
@@ -64,7 +64,7 @@ pub(crate) fn gemv(y: &mut [f64], add: bool, a: &[f64], r: usize, x: &[f64], alp
 
 /// `y (+)= alpha · aᵀ x` for column-major `a` (`r × c`, `x` of length `r`).
 pub(crate) fn gemv_t(y: &mut [f64], add: bool, a: &[f64], r: usize, x: &[f64], alpha: f64) {
-    if r * y.len() >= 512 {
+    if r * y.len() >= 64 {
         Arch::new().dispatch(ColumnDots { y, add, a, r, x: &x[..r], alpha });
         return;
     }
