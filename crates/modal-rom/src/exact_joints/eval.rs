@@ -151,7 +151,10 @@ impl Workspace {
             lh: zeros(rj * m),
             ld: zeros(m),
             lmm: zeros(rj * rj),
-            lacc: zeros(na.max(r).max(kk).max(rs).max(1) * rj.max(1)),
+            lacc: zeros(
+                (na + r + rom.tracked.iter().map(|t| t.rows.nrows()).sum::<usize>()).max(1)
+                    * rj.max(1),
+            ),
             z: zeros(na * m),
             zt: zeros(na * m),
             ct: per(&|rj, kk| rj * kk),
@@ -396,7 +399,6 @@ impl ExactJointsRom {
         }
         let rj = r - rs;
         ws.w.copy_from_slice(&ws.h);
-        lowrank_right_solve_lt(&ws.ly, &ws.lh, &ws.ld, rj, &mut ws.w, r, &mut ws.lacc);
         // T Z = (T Z0 − T Aᵀ H) L⁻ᵀ
         for (t, tr) in self.tracked.iter().enumerate() {
             let nt = tr.rows.nrows();
@@ -408,7 +410,6 @@ impl ExactJointsRom {
                 view(&ws.h, r, m),
                 -1.0,
             );
-            lowrank_right_solve_lt(&ws.ly, &ws.lh, &ws.ld, rj, &mut ws.tz[t], nt, &mut ws.lacc);
         }
         // Z = (Z0 − AᵀH) L⁻ᵀ, AᵀH = SᵀH_s + Σ E_jᵀ C_jᵀ H_j
         if with_z {
@@ -439,7 +440,20 @@ impl ExactJointsRom {
                     -1.0,
                 );
             }
-            lowrank_right_solve_lt(&ws.ly, &ws.lh, &ws.ld, rj, &mut ws.z, na, &mut ws.lacc);
+        }
+        // W = H L⁻ᵀ, T Z, Z: the right solves in one pass
+        {
+            let mut xs: Vec<(&mut [f64], usize)> = Vec::with_capacity(self.tracked.len() + 2);
+            xs.push((&mut ws.w[..], r));
+            for (tz, tr) in ws.tz.iter_mut().zip(&self.tracked) {
+                xs.push((&mut tz[..], tr.rows.nrows()));
+            }
+            if with_z {
+                xs.push((&mut ws.z[..], na));
+            }
+            lowrank_right_solve_lt(&ws.ly, &ws.lh, &ws.ld, rj, &mut xs, &mut ws.lacc);
+        }
+        if with_z {
             for c in 0..m {
                 for (i, v) in ws.z[c * na..(c + 1) * na].iter().enumerate() {
                     ws.zt[i * m + c] = *v;

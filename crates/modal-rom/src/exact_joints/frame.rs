@@ -180,76 +180,83 @@ pub(crate) fn lowrank_cholesky(
     Ok(())
 }
 
-/// `X ← X L⁻ᵀ` for `X` (`rows × m`, column-major) and `L` of [`lowrank_cholesky`]: column
-/// `i` of `X Lᵀ` is `d_i X_i − (Σ_{j<i} X_j h_jᵀ) y_i`, so `X_i = (M_i + A y_i) / d_i` with the
-/// running sum `A = Σ_{j<i} X_j h_jᵀ` (`rows × q`, scratch `acc`): `O(rows m q)`.
+/// `X ← X L⁻ᵀ` for each `X` of `xs` (`rows × m`, column-major) and `L` of
+/// [`lowrank_cholesky`]: column `i` of `X Lᵀ` is `d_i X_i − (Σ_{j<i} X_j h_jᵀ) y_i`, so
+/// `X_i = (M_i + A y_i) / d_i` with the running sum `A = Σ_{j<i} X_j h_jᵀ` (`rows × q`, scratch
+/// `acc` of `Σ rows · q`): `O(rows m q)`. All matrices advance together column by column, so
+/// the latency of one matrix's recurrence is hidden by the others' work.
 #[inline(always)]
 fn lowrank_right_solve_lt_imp(
     y: &[f64],
     h: &[f64],
     d: &[f64],
     q: usize,
-    x: &mut [f64],
-    rows: usize,
+    xs: &mut [(&mut [f64], usize)],
     acc: &mut [f64],
 ) {
-    let acc = &mut acc[..rows * q];
-    acc.fill(0.0);
-    // rows in chunks of four (one vector), each row's value kept while the q terms are added
-    let full = rows / 4 * 4;
+    let total: usize = xs.iter().map(|(_, rows)| rows).sum();
+    acc[..total * q].fill(0.0);
     for (i, &di) in d.iter().enumerate() {
-        let xi = &mut x[i * rows..(i + 1) * rows];
         let (yi, hi) = (&y[i * q..(i + 1) * q], &h[i * q..(i + 1) * q]);
         let inv = 1.0 / di;
-        for c in (0..full).step_by(4) {
-            let mut v = [xi[c], xi[c + 1], xi[c + 2], xi[c + 3]];
-            for k in 0..q {
-                let a = &acc[k * rows + c..k * rows + c + 4];
-                for e in 0..4 {
-                    v[e] = yi[k].mul_add(a[e], v[e]);
+        let mut off = 0;
+        for (x, rows) in xs.iter_mut() {
+            let rows = *rows;
+            let acc = &mut acc[off * q..(off + rows) * q];
+            off += rows;
+            let xi = &mut x[i * rows..(i + 1) * rows];
+            // rows in chunks of four (one vector), each row's value kept while the q terms
+            // are added
+            let full = rows / 4 * 4;
+            for c in (0..full).step_by(4) {
+                let mut v = [xi[c], xi[c + 1], xi[c + 2], xi[c + 3]];
+                for k in 0..q {
+                    let a = &acc[k * rows + c..k * rows + c + 4];
+                    for e in 0..4 {
+                        v[e] = yi[k].mul_add(a[e], v[e]);
+                    }
+                }
+                for e in &mut v {
+                    *e *= inv;
+                }
+                xi[c..c + 4].copy_from_slice(&v);
+                for k in 0..q {
+                    let a = &mut acc[k * rows + c..k * rows + c + 4];
+                    for e in 0..4 {
+                        a[e] = hi[k].mul_add(v[e], a[e]);
+                    }
                 }
             }
-            for e in &mut v {
-                *e *= inv;
-            }
-            xi[c..c + 4].copy_from_slice(&v);
-            for k in 0..q {
-                let a = &mut acc[k * rows + c..k * rows + c + 4];
-                for e in 0..4 {
-                    a[e] = hi[k].mul_add(v[e], a[e]);
+            for c in full..rows {
+                let mut v = xi[c];
+                for k in 0..q {
+                    v = yi[k].mul_add(acc[k * rows + c], v);
                 }
-            }
-        }
-        for c in full..rows {
-            let mut v = xi[c];
-            for k in 0..q {
-                v = yi[k].mul_add(acc[k * rows + c], v);
-            }
-            v *= inv;
-            xi[c] = v;
-            for k in 0..q {
-                acc[k * rows + c] = hi[k].mul_add(v, acc[k * rows + c]);
+                v *= inv;
+                xi[c] = v;
+                for k in 0..q {
+                    acc[k * rows + c] = hi[k].mul_add(v, acc[k * rows + c]);
+                }
             }
         }
     }
 }
 
-struct RightSolve<'a> {
+struct RightSolve<'a, 'b> {
     y: &'a [f64],
     h: &'a [f64],
     d: &'a [f64],
     q: usize,
-    x: &'a mut [f64],
-    rows: usize,
+    xs: &'a mut [(&'b mut [f64], usize)],
     acc: &'a mut [f64],
 }
 
-impl WithSimd for RightSolve<'_> {
+impl WithSimd for RightSolve<'_, '_> {
     type Output = ();
 
     #[inline(always)]
     fn with_simd<S: Simd>(self, _simd: S) {
-        lowrank_right_solve_lt_imp(self.y, self.h, self.d, self.q, self.x, self.rows, self.acc)
+        lowrank_right_solve_lt_imp(self.y, self.h, self.d, self.q, self.xs, self.acc)
     }
 }
 
@@ -259,14 +266,13 @@ pub(crate) fn lowrank_right_solve_lt(
     h: &[f64],
     d: &[f64],
     q: usize,
-    x: &mut [f64],
-    rows: usize,
+    xs: &mut [(&mut [f64], usize)],
     acc: &mut [f64],
 ) {
-    if rows == 0 {
+    if xs.iter().all(|(_, rows)| *rows == 0) {
         return;
     }
-    Arch::new().dispatch(RightSolve { y, h, d, q, x, rows, acc });
+    Arch::new().dispatch(RightSolve { y, h, d, q, xs, acc });
 }
 
 /// `t ← L⁻¹ t` (forward: `t_i = (t_i + y_iᵀ a) / d_i`, `a += h_i t_i`) with `L` of
