@@ -277,23 +277,20 @@ fn right_phi_t_lanes(
             axpy(&mut d, wl[k], &al[k]);
         }
         let ol = &mut out[l * q..(l + 1) * q];
+        // row s of the running sums read once: the term of column l, then the update
         for s in 0..q {
+            let ps = pl[s];
             let mut acc = [0.0; LANES];
-            axpy(&mut acc, pl[s], &d);
-            let (c1, c2) = (&s1[s * ra..(s + 1) * ra], &s2[s * ra..(s + 1) * ra]);
+            axpy(&mut acc, ps, &d);
+            let (c1, c2) = (&mut s1[s * ra..(s + 1) * ra], &mut s2[s * ra..(s + 1) * ra]);
             for k in 0..ra {
                 axpy(&mut acc, wl[k], &c1[k]);
                 axpy(&mut acc, c2[k], &al[k]);
+                axpy(&mut c1[k], ps, &al[k]);
+                c2[k] = ps.mul_add(wl[k], c2[k]);
             }
             for (o, x) in ol[s].iter_mut().zip(&acc) {
                 *o += x;
-            }
-        }
-        for s in 0..q {
-            let ps = pl[s];
-            for k in 0..ra {
-                axpy(&mut s1[s * ra + k], ps, &al[k]);
-                s2[s * ra + k] = ps.mul_add(wl[k], s2[s * ra + k]);
             }
         }
     }

@@ -443,15 +443,25 @@ impl ExactJointsRom {
         }
         // W = H L⁻ᵀ, T Z, Z: the right solves in one pass
         {
-            let mut xs: Vec<(&mut [f64], usize)> = Vec::with_capacity(self.tracked.len() + 2);
-            xs.push((&mut ws.w[..], r));
-            for (tz, tr) in ws.tz.iter_mut().zip(&self.tracked) {
-                xs.push((&mut tz[..], tr.rows.nrows()));
+            // the list on the stack for up to six tracked blocks (no allocation per evaluation)
+            const STACK: usize = 8;
+            let count = self.tracked.len() + 1 + usize::from(with_z);
+            let mut stack: [(&mut [f64], usize); STACK] = std::array::from_fn(|_| (&mut [][..], 0));
+            let mut heap = Vec::new();
+            let xs = if count <= STACK {
+                &mut stack[..count]
+            } else {
+                heap.resize_with(count, || (&mut [][..], 0));
+                &mut heap[..]
+            };
+            xs[0] = (&mut ws.w[..], r);
+            for ((x, tz), tr) in xs[1..].iter_mut().zip(ws.tz.iter_mut()).zip(&self.tracked) {
+                *x = (&mut tz[..], tr.rows.nrows());
             }
             if with_z {
-                xs.push((&mut ws.z[..], na));
+                xs[count - 1] = (&mut ws.z[..], na);
             }
-            lowrank_right_solve_lt(&ws.ly, &ws.lh, &ws.ld, rj, &mut xs, &mut ws.lacc);
+            lowrank_right_solve_lt(&ws.ly, &ws.lh, &ws.ld, rj, xs, &mut ws.lacc);
         }
         if with_z {
             for c in 0..m {

@@ -45,7 +45,8 @@ pub(crate) fn gemm(
     matmul(dst, if add { Accum::Add } else { Accum::Replace }, a, b, alpha, Par::Seq);
 }
 
-/// `y (+)= alpha · a x` for column-major `a` (`r × c`).
+/// `y (+)= alpha · a x` for column-major `a` (`r × c`): from 64 entries by the vector-lane
+/// [`matvec`], below by plain column loops (a few entries do not pay for the dispatch).
 pub(crate) fn gemv(y: &mut [f64], add: bool, a: &[f64], r: usize, x: &[f64], alpha: f64) {
     if r * x.len() >= 64 {
         matvec(&mut y[..r], add, &a[..r * x.len()], x, alpha);
@@ -62,7 +63,8 @@ pub(crate) fn gemv(y: &mut [f64], add: bool, a: &[f64], r: usize, x: &[f64], alp
     }
 }
 
-/// `y (+)= alpha · aᵀ x` for column-major `a` (`r × c`, `x` of length `r`).
+/// `y (+)= alpha · aᵀ x` for column-major `a` (`r × c`, `x` of length `r`): from 64 entries
+/// four columns at a time in vector lanes, below by plain dot products.
 pub(crate) fn gemv_t(y: &mut [f64], add: bool, a: &[f64], r: usize, x: &[f64], alpha: f64) {
     if r * y.len() >= 64 {
         Arch::new().dispatch(ColumnDots { y, add, a, r, x: &x[..r], alpha });
