@@ -133,6 +133,7 @@ enum Kernel<'a> {
         out: &'a mut [L],
         s1: &'a mut [L],
         s2: &'a mut [f64],
+        dl: &'a mut [L],
     },
     Kappa {
         a: &'a [L],
@@ -163,9 +164,16 @@ impl WithSimd for Kernel<'_> {
             Kernel::Phi { a, w, ra, p, upper, alpha, out, sa, sw } => {
                 phi_apply_lanes(a, w, ra, p, upper, alpha, out, sa, sw)
             }
-            Kernel::RightPhi { pm, q, a, w, ra, m, out, s1, s2 } => {
-                right_phi_t_lanes(pm, q, a, w, ra, m, out, s1, s2)
-            }
+            Kernel::RightPhi { pm, q, a, w, ra, m, out, s1, s2, dl } => match ra {
+                // the running sums of one row in registers: `ra` as a constant
+                1 => right_phi_t_rows::<1>(pm, q, a, w, m, out, dl),
+                2 => right_phi_t_rows::<2>(pm, q, a, w, m, out, dl),
+                3 => right_phi_t_rows::<3>(pm, q, a, w, m, out, dl),
+                4 => right_phi_t_rows::<4>(pm, q, a, w, m, out, dl),
+                5 => right_phi_t_rows::<5>(pm, q, a, w, m, out, dl),
+                6 => right_phi_t_rows::<6>(pm, q, a, w, m, out, dl),
+                _ => right_phi_t_lanes(pm, q, a, w, ra, m, out, s1, s2),
+            },
             Kernel::Kappa { a, w, ra, p, out, sa, sw } => kappa_lanes(a, w, ra, p, out, sa, sw),
             Kernel::Skew { dvw, pvw, rj, p, t, sd, sv } => skew_lanes(dvw, pvw, rj, p, t, sd, sv),
         }
@@ -290,6 +298,49 @@ fn right_phi_t_lanes(
                 c2[k] = ps.mul_add(wl[k], c2[k]);
             }
             for (o, x) in ol[s].iter_mut().zip(&acc) {
+                *o += x;
+            }
+        }
+    }
+}
+
+/// [`right_phi_t_lanes`] row by row of `P` (the same sums in the same order for each entry):
+/// the running sums `S1[s, ·]` (lanes) and `S2[s, ·]` of one row `s` stay in registers over
+/// all columns `l` (`RA = ra` a constant); `dl`: `m` lanes of scratch for `a_l·w_l`.
+#[inline(always)]
+fn right_phi_t_rows<const RA: usize>(
+    pm: &[f64],
+    q: usize,
+    a: &[L],
+    w: &[f64],
+    m: usize,
+    out: &mut [L],
+    dl: &mut [L],
+) {
+    let dl = &mut dl[..m];
+    for (l, d) in dl.iter_mut().enumerate() {
+        let (al, wl) = (&a[l * RA..(l + 1) * RA], &w[l * RA..(l + 1) * RA]);
+        *d = [0.0; LANES];
+        for k in 0..RA {
+            axpy(d, wl[k], &al[k]);
+        }
+    }
+    for s in 0..q {
+        let mut c1 = [[0.0; LANES]; RA];
+        let mut c2 = [0.0; RA];
+        for l in 0..m {
+            let al: &[L; RA] = a[l * RA..(l + 1) * RA].try_into().expect("lanes");
+            let wl: &[f64; RA] = w[l * RA..(l + 1) * RA].try_into().expect("row");
+            let ps = pm[l * q + s];
+            let mut acc = [0.0; LANES];
+            axpy(&mut acc, ps, &dl[l]);
+            for k in 0..RA {
+                axpy(&mut acc, wl[k], &c1[k]);
+                axpy(&mut acc, c2[k], &al[k]);
+                axpy(&mut c1[k], ps, &al[k]);
+                c2[k] = ps.mul_add(wl[k], c2[k]);
+            }
+            for (o, x) in out[l * q + s].iter_mut().zip(&acc) {
                 *o += x;
             }
         }
@@ -669,6 +720,7 @@ impl ExactJointsRom {
             out: dvw,
             s1: &mut bt.s1,
             s2: &mut bt.s2,
+            dl: &mut bt.lanes,
         });
         let t = &mut bt.lanes[..m];
         Arch::new().dispatch(Kernel::Skew { dvw, pvw, rj, p, t, sd: &mut bt.sd, sv: &mut bt.sv });
