@@ -161,9 +161,16 @@ impl WithSimd for Kernel<'_> {
     #[inline(always)]
     fn with_simd<S: Simd>(self, _simd: S) {
         match self {
-            Kernel::Phi { a, w, ra, p, upper, alpha, out, sa, sw } => {
-                phi_apply_lanes(a, w, ra, p, upper, alpha, out, sa, sw)
-            }
+            Kernel::Phi { a, w, ra, p, upper, alpha, out, sa, sw } => match ra {
+                // the running sums in registers: `ra` as a constant
+                1 => phi_apply_const::<1>(a, w, p, upper, alpha, out),
+                2 => phi_apply_const::<2>(a, w, p, upper, alpha, out),
+                3 => phi_apply_const::<3>(a, w, p, upper, alpha, out),
+                4 => phi_apply_const::<4>(a, w, p, upper, alpha, out),
+                5 => phi_apply_const::<5>(a, w, p, upper, alpha, out),
+                6 => phi_apply_const::<6>(a, w, p, upper, alpha, out),
+                _ => phi_apply_lanes(a, w, ra, p, upper, alpha, out, sa, sw),
+            },
             Kernel::RightPhi { pm, q, a, w, ra, m, out, s1, s2, dl } => match ra {
                 // the running sums of one row in registers: `ra` as a constant
                 1 => right_phi_t_rows::<1>(pm, q, a, w, m, out, dl),
@@ -174,10 +181,39 @@ impl WithSimd for Kernel<'_> {
                 6 => right_phi_t_rows::<6>(pm, q, a, w, m, out, dl),
                 _ => right_phi_t_lanes(pm, q, a, w, ra, m, out, s1, s2),
             },
-            Kernel::Kappa { a, w, ra, p, out, sa, sw } => kappa_lanes(a, w, ra, p, out, sa, sw),
+            Kernel::Kappa { a, w, ra, p, out, sa, sw } => match ra {
+                1 => kappa_const::<1>(a, w, p, out),
+                2 => kappa_const::<2>(a, w, p, out),
+                3 => kappa_const::<3>(a, w, p, out),
+                4 => kappa_const::<4>(a, w, p, out),
+                5 => kappa_const::<5>(a, w, p, out),
+                6 => kappa_const::<6>(a, w, p, out),
+                _ => kappa_lanes(a, w, ra, p, out, sa, sw),
+            },
             Kernel::Skew { dvw, pvw, rj, p, t, sd, sv } => skew_lanes(dvw, pvw, rj, p, t, sd, sv),
         }
     }
+}
+
+/// [`phi_apply_lanes`] with `ra = RA` and its running sums in local arrays (registers).
+#[inline(always)]
+fn phi_apply_const<const RA: usize>(
+    a: &[L],
+    w: &[f64],
+    p: &[f64],
+    upper: bool,
+    alpha: f64,
+    out: &mut [L],
+) {
+    let (mut sa, mut sw) = ([[0.0; LANES]; RA], [0.0; RA]);
+    phi_apply_lanes(a, w, RA, p, upper, alpha, out, &mut sa, &mut sw)
+}
+
+/// [`kappa_lanes`] with `ra = RA` and its running sums in local arrays (registers).
+#[inline(always)]
+fn kappa_const<const RA: usize>(a: &[L], w: &[f64], p: &[f64], out: &mut [L]) {
+    let (mut sa, mut sw) = ([[0.0; LANES]; RA], [0.0; RA]);
+    kappa_lanes(a, w, RA, p, out, &mut sa, &mut sw)
 }
 
 /// `out += alpha · Φ(aᵀw + wᵀa)ᵀ p` (`upper`) or `alpha · Φ(aᵀw + wᵀa) p` per lane
