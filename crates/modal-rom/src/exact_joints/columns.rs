@@ -190,7 +190,15 @@ impl WithSimd for Kernel<'_> {
                 6 => kappa_const::<6>(a, w, p, out),
                 _ => kappa_lanes(a, w, ra, p, out, sa, sw),
             },
-            Kernel::Skew { dvw, pvw, rj, p, t, sd, sv } => skew_lanes(dvw, pvw, rj, p, t, sd, sv),
+            Kernel::Skew { dvw, pvw, rj, p, t, sd, sv } => match rj {
+                1 => skew_const::<2>(dvw, pvw, p, t),
+                2 => skew_const::<4>(dvw, pvw, p, t),
+                3 => skew_const::<6>(dvw, pvw, p, t),
+                4 => skew_const::<8>(dvw, pvw, p, t),
+                5 => skew_const::<10>(dvw, pvw, p, t),
+                6 => skew_const::<12>(dvw, pvw, p, t),
+                _ => skew_lanes(dvw, pvw, rj, p, t, sd, sv),
+            },
         }
     }
 }
@@ -381,6 +389,13 @@ fn right_phi_t_rows<const RA: usize>(
             }
         }
     }
+}
+
+/// [`skew_lanes`] with `2 rj = Q` and its running sums in local arrays.
+#[inline(always)]
+fn skew_const<const Q: usize>(dvw: &[L], pvw: &[f64], p: &[f64], t: &mut [L]) {
+    let (mut sd, mut sv) = ([[0.0; LANES]; Q], [0.0; Q]);
+    skew_lanes(dvw, pvw, Q / 2, p, t, &mut sd, &mut sv)
 }
 
 /// `t = K(∂V, W) p + K(V, ∂W) p` per lane with `dvw` lanes `[∂V; ∂W]` (`2rj × m`) and
