@@ -258,8 +258,30 @@ impl WithSimd for RightSolve<'_, '_> {
 
     #[inline(always)]
     fn with_simd<S: Simd>(self, _simd: S) {
-        lowrank_right_solve_lt_imp(self.y, self.h, self.d, self.q, self.xs, self.acc)
+        let RightSolve { y, h, d, q, xs, acc } = self;
+        // `q` as a constant: the `q` terms of each step unrolled, `y_i`, `h_i` in registers
+        match q {
+            1 => lowrank_right_solve_lt_const::<1>(y, h, d, xs, acc),
+            2 => lowrank_right_solve_lt_const::<2>(y, h, d, xs, acc),
+            3 => lowrank_right_solve_lt_const::<3>(y, h, d, xs, acc),
+            4 => lowrank_right_solve_lt_const::<4>(y, h, d, xs, acc),
+            5 => lowrank_right_solve_lt_const::<5>(y, h, d, xs, acc),
+            6 => lowrank_right_solve_lt_const::<6>(y, h, d, xs, acc),
+            _ => lowrank_right_solve_lt_imp(y, h, d, q, xs, acc),
+        }
     }
+}
+
+/// [`lowrank_right_solve_lt_imp`] with `q = Q`.
+#[inline(always)]
+fn lowrank_right_solve_lt_const<const Q: usize>(
+    y: &[f64],
+    h: &[f64],
+    d: &[f64],
+    xs: &mut [(&mut [f64], usize)],
+    acc: &mut [f64],
+) {
+    lowrank_right_solve_lt_imp(y, h, d, Q, xs, acc)
 }
 
 /// [`lowrank_right_solve_lt_imp`] compiled for the processor's vector instructions.
