@@ -117,6 +117,46 @@ pub(crate) fn skew_apply(
     out: &mut [f64],
     tmp: &mut [f64],
 ) {
+    Arch::new().dispatch(SkewApply { a, b, r, p, out, tmp });
+}
+
+/// [`skew_apply`] under the run-time dispatch, `r ≤ 6` as a constant (the running sums in
+/// registers; the same sums in the same order).
+struct SkewApply<'a> {
+    a: &'a [f64],
+    b: &'a [f64],
+    r: usize,
+    p: &'a [f64],
+    out: &'a mut [f64],
+    tmp: &'a mut [f64],
+}
+
+impl WithSimd for SkewApply<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) {
+        let SkewApply { a, b, r, p, out, tmp } = self;
+        match r {
+            1 => skew_apply_const::<1>(a, b, p, out),
+            2 => skew_apply_const::<2>(a, b, p, out),
+            3 => skew_apply_const::<3>(a, b, p, out),
+            4 => skew_apply_const::<4>(a, b, p, out),
+            5 => skew_apply_const::<5>(a, b, p, out),
+            6 => skew_apply_const::<6>(a, b, p, out),
+            _ => skew_apply_imp(a, b, r, p, out, tmp),
+        }
+    }
+}
+
+#[inline(always)]
+fn skew_apply_const<const R: usize>(a: &[f64], b: &[f64], p: &[f64], out: &mut [f64]) {
+    let mut tmp = [0.0; R];
+    skew_apply_imp(a, b, R, p, out, &mut tmp)
+}
+
+#[inline(always)]
+fn skew_apply_imp(a: &[f64], b: &[f64], r: usize, p: &[f64], out: &mut [f64], tmp: &mut [f64]) {
     let m = p.len();
     let tmp = &mut tmp[..r];
     // suffix sums of p_l a_l
@@ -309,7 +349,7 @@ pub(crate) fn lowrank_solve_l(
     t: &mut [f64],
     a: &mut [f64],
 ) {
-    lowrank_sweep(y, h, d, q, t, a, 0..d.len());
+    Arch::new().dispatch(Sweep { g: y, e: h, d, q, t, a, forward: true });
 }
 
 /// `t ← L⁻ᵀ t` (backward: `t_j = (t_j + h_jᵀ a) / d_j`, `a += y_j t_j`) with `L` of
@@ -322,11 +362,53 @@ pub(crate) fn lowrank_solve_lt(
     t: &mut [f64],
     a: &mut [f64],
 ) {
-    lowrank_sweep(h, y, d, q, t, a, (0..d.len()).rev());
+    Arch::new().dispatch(Sweep { g: h, e: y, d, q, t, a, forward: false });
+}
+
+/// [`lowrank_sweep`] under the run-time dispatch, `q ≤ 6` as a constant (the running sums in
+/// registers; the same sums in the same order).
+struct Sweep<'a> {
+    g: &'a [f64],
+    e: &'a [f64],
+    d: &'a [f64],
+    q: usize,
+    t: &'a mut [f64],
+    a: &'a mut [f64],
+    forward: bool,
+}
+
+impl WithSimd for Sweep<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) {
+        let Sweep { g, e, d, q, t, a, forward } = self;
+        match q {
+            1 => sweep_const::<1>(g, e, d, t, forward),
+            2 => sweep_const::<2>(g, e, d, t, forward),
+            3 => sweep_const::<3>(g, e, d, t, forward),
+            4 => sweep_const::<4>(g, e, d, t, forward),
+            5 => sweep_const::<5>(g, e, d, t, forward),
+            6 => sweep_const::<6>(g, e, d, t, forward),
+            _ if forward => lowrank_sweep(g, e, d, q, t, a, 0..d.len()),
+            _ => lowrank_sweep(g, e, d, q, t, a, (0..d.len()).rev()),
+        }
+    }
+}
+
+#[inline(always)]
+fn sweep_const<const Q: usize>(g: &[f64], e: &[f64], d: &[f64], t: &mut [f64], forward: bool) {
+    let mut a = [0.0; Q];
+    if forward {
+        lowrank_sweep(g, e, d, Q, t, &mut a, 0..d.len())
+    } else {
+        lowrank_sweep(g, e, d, Q, t, &mut a, (0..d.len()).rev())
+    }
 }
 
 /// The triangular sweep of both solves: for `i` in `order`, `t_i = (t_i + g_iᵀ a) / d_i`,
 /// then `a += e_i t_i` (`g`, `e`: `q` entries per row).
+#[inline(always)]
 fn lowrank_sweep(
     g: &[f64],
     e: &[f64],
