@@ -195,6 +195,71 @@ pub(crate) fn lowrank_cholesky(
     stage: &str,
     reason: &str,
 ) -> Result<()> {
+    let ok = Arch::new().dispatch(LowrankCholesky { y, q, m, d, h, mm, g, tol });
+    if ok {
+        Ok(())
+    } else {
+        Err(ModalError::Numerical { stage: stage.to_string(), reason: reason.to_string() })
+    }
+}
+
+/// [`lowrank_cholesky`] under the run-time dispatch, `q ≤ 6` as a constant (`M` and `g` in
+/// registers; the same sums in the same order). `false` when a pivot fails.
+struct LowrankCholesky<'a> {
+    y: &'a [f64],
+    q: usize,
+    m: usize,
+    d: &'a mut [f64],
+    h: &'a mut [f64],
+    mm: &'a mut [f64],
+    g: &'a mut [f64],
+    tol: f64,
+}
+
+impl WithSimd for LowrankCholesky<'_> {
+    type Output = bool;
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) -> bool {
+        let LowrankCholesky { y, q, m, d, h, mm, g, tol } = self;
+        match q {
+            1 => lowrank_cholesky_const::<1>(y, m, d, h, tol),
+            2 => lowrank_cholesky_const::<2>(y, m, d, h, tol),
+            3 => lowrank_cholesky_const::<3>(y, m, d, h, tol),
+            4 => lowrank_cholesky_const::<4>(y, m, d, h, tol),
+            5 => lowrank_cholesky_const::<5>(y, m, d, h, tol),
+            6 => lowrank_cholesky_const::<6>(y, m, d, h, tol),
+            _ => lowrank_cholesky_imp(y, q, m, d, h, mm, g, tol),
+        }
+    }
+}
+
+#[inline(always)]
+fn lowrank_cholesky_const<const Q: usize>(
+    y: &[f64],
+    m: usize,
+    d: &mut [f64],
+    h: &mut [f64],
+    tol: f64,
+) -> bool {
+    let (mut mm, mut g) = ([0.0; 36], [0.0; Q]);
+    lowrank_cholesky_imp(y, Q, m, d, h, &mut mm[..Q * Q], &mut g, tol)
+}
+
+/// The elimination of [`lowrank_cholesky`]; `M q`-products as [`gemv`]'s plain loops (`q² <
+/// 64` there too), so every `q` gives the same bits.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn lowrank_cholesky_imp(
+    y: &[f64],
+    q: usize,
+    m: usize,
+    d: &mut [f64],
+    h: &mut [f64],
+    mm: &mut [f64],
+    g: &mut [f64],
+    tol: f64,
+) -> bool {
     let (mm, g) = (&mut mm[..q * q], &mut g[..q]);
     mm.fill(0.0);
     for k in 0..q {
@@ -202,13 +267,19 @@ pub(crate) fn lowrank_cholesky(
     }
     for j in 0..m {
         let yj = &y[j * q..(j + 1) * q];
-        gemv(g, false, mm, q, yj, 1.0);
+        if q * q >= 64 {
+            gemv(g, false, mm, q, yj, 1.0);
+        } else {
+            g.fill(0.0);
+            for (c, &s) in yj.iter().enumerate() {
+                if s != 0.0 {
+                    g.iter_mut().zip(&mm[c * q..(c + 1) * q]).for_each(|(y, a)| *y += s * a);
+                }
+            }
+        }
         let d2 = 1.0 - yj.iter().zip(g.iter()).map(|(a, b)| a * b).sum::<f64>();
         if d2.is_nan() || d2 <= tol {
-            return Err(ModalError::Numerical {
-                stage: stage.to_string(),
-                reason: reason.to_string(),
-            });
+            return false;
         }
         let dj = d2.sqrt();
         d[j] = dj;
@@ -219,7 +290,7 @@ pub(crate) fn lowrank_cholesky(
             mm[c * q..(c + 1) * q].iter_mut().zip(hj.iter()).for_each(|(a, b)| *a += s * b);
         }
     }
-    Ok(())
+    true
 }
 
 /// `X ← X L⁻ᵀ` for each `X` of `xs` (`rows × m`, column-major) and `L` of
