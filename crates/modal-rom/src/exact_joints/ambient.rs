@@ -17,7 +17,7 @@
 //! forces (theory.md §10.3). `q1ᵀf1 + q2ᵀf2 = q1ᵀΣq1 + q1ᵀB_u u` for every `(q1, q2)`.
 
 use crate::error::{invalid, shape, ModalError, Result};
-use crate::exact_joints::frame::{gemm, gemv, gemv_t, view, view_mut};
+use crate::exact_joints::frame::{gemv, gemv_t, matvec};
 use crate::layout::Layout;
 use crate::rom::Input;
 use crate::structure::StructureModel;
@@ -321,6 +321,8 @@ pub(crate) struct LinkTensors {
     g1s: Vec<f64>,
     g2_lj: Vec<f64>,
     g2_jl: Vec<f64>,
+    /// `g2_t[j + m2(l + m2 i)] = Γ2^l_ij`: `K22 = Σ_i q1_i Γ2_i` as a matrix–vector product.
+    g2_t: Vec<f64>,
 }
 
 /// The Galerkin operators on a [`LinkBasis`] (module docs).
@@ -409,16 +411,26 @@ impl AmbientOps {
                 }
             }
             let (mut g2_lj, mut g2_jl) = (vec![0.0; m * m2 * m2], vec![0.0; m * m2 * m2]);
+            let mut g2_t = vec![0.0; m * m2 * m2];
             for l in 0..m2 {
                 for i in 0..m {
                     for j in 0..m2 {
                         let v = g2[(l * m + i) * m2 + j];
                         g2_lj[i + m * (j + m2 * l)] = v;
                         g2_jl[i + m * (l + m2 * j)] = v;
+                        g2_t[j + m2 * (l + m2 * i)] = v;
                     }
                 }
             }
-            links.push(LinkTensors { c1: (c1.0, m), c2: (c2.0, m2), g1_lj, g1s, g2_lj, g2_jl });
+            links.push(LinkTensors {
+                c1: (c1.0, m),
+                c2: (c2.0, m2),
+                g1_lj,
+                g1s,
+                g2_lj,
+                g2_jl,
+                g2_t,
+            });
         }
 
         let mut b_u = Mat::<f64>::zeros(na, inputs.len());
@@ -524,21 +536,7 @@ impl AmbientOps {
                     f1b.iter_mut().zip(c).for_each(|(f, a)| *f += s * a);
                     f2[o2 + j] = -c.iter().zip(&q1[o1..o1 + m]).map(|(a, q)| a * q).sum::<f64>();
                 }
-                if let Some(j) = jac.as_deref_mut() {
-                    for c in 0..m {
-                        j[(o1 + c) * n + o1..(o1 + c) * n + o1 + m]
-                            .copy_from_slice(&self.sigma.col_as_slice(o1 + c)[o1..o1 + m]);
-                    }
-                    for c in 0..m2 {
-                        let w = &self.w.col_as_slice(o2 + c)[o1..o1 + m];
-                        let cc = na + o2 + c;
-                        j[cc * n + o1..cc * n + o1 + m].copy_from_slice(w);
-                        for (r, wr) in w.iter().enumerate() {
-                            j[(o1 + r) * n + cc] = -wr;
-                        }
-                        j[cc * n + na + o2..cc * n + na + o2 + m2].fill(0.0);
-                    }
-                }
+                // the Jacobian's link blocks are written whole with the `Γ` terms below
             }
         } else {
             self.dense_linear_terms(q1, q2, f1, f2, jac.as_deref_mut());
@@ -548,7 +546,7 @@ impl AmbientOps {
             f1.iter_mut().zip(c).for_each(|(f, a)| *f += uk * a);
         }
         let mv = |out: &mut [f64], g: &[f64], rows: usize, x: &[f64]| {
-            gemm(view_mut(out, rows, 1), false, view(g, rows, x.len()), view(x, x.len(), 1), 1.0);
+            matvec(&mut out[..rows], false, g, x, 1.0);
         };
         for lt in &self.links {
             let ((o1, m), (o2, m2)) = (lt.c1, lt.c2);
@@ -570,13 +568,33 @@ impl AmbientOps {
             // Γ2: S for the Jacobian's q2 columns −(T + S)
             mv(s2, &lt.g2_jl, m * m2, q2b);
             // Γ2: K22[j, l] = Σ_i Γ2^l_ij q1_i
-            gemm(
-                view_mut(k22, m2 * m2, 1),
-                false,
-                view(&lt.g2_lj, m, m2 * m2).transpose(),
-                view(q1b, m, 1),
-                1.0,
-            );
+            mv(k22, &lt.g2_t, m2 * m2, q1b);
+            if self.block_diagonal {
+                // the link blocks whole: [Σ − M, W − T − S; (T − W)ᵀ, K22]
+                for c in 0..m {
+                    let col = &mut jm[(o1 + c) * n + o1..(o1 + c) * n + o1 + m];
+                    let sc = &self.sigma.col_as_slice(o1 + c)[o1..o1 + m];
+                    col.iter_mut()
+                        .zip(sc)
+                        .zip(&u1[c * m..(c + 1) * m])
+                        .for_each(|((x, s), a)| *x = s - a);
+                }
+                for c in 0..m2 {
+                    let cc = na + o2 + c;
+                    let w = &self.w.col_as_slice(o2 + c)[o1..o1 + m];
+                    let (t, s) = (&t2[c * m..(c + 1) * m], &s2[c * m..(c + 1) * m]);
+                    let col = &mut jm[cc * n + o1..cc * n + o1 + m];
+                    for i in 0..m {
+                        col[i] = w[i] - (t[i] + s[i]);
+                    }
+                    for i in 0..m {
+                        jm[(o1 + i) * n + cc] = -w[i] + t[i];
+                    }
+                    jm[cc * n + na + o2..cc * n + na + o2 + m2]
+                        .copy_from_slice(&k22[c * m2..(c + 1) * m2]);
+                }
+                continue;
+            }
             for c in 0..m {
                 let col = &mut jm[(o1 + c) * n + o1..(o1 + c) * n + o1 + m];
                 col.iter_mut().zip(&u1[c * m..(c + 1) * m]).for_each(|(x, a)| *x -= a);

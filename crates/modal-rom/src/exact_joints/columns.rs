@@ -11,9 +11,9 @@
 //! processor's vector instructions by pulp's run-time dispatch (as faer's kernels). Module docs
 //! of [`super::jacobian`] for the formulas.
 
-use crate::exact_joints::eval::{joint_rate_matrix, rates, Workspace};
+use crate::exact_joints::eval::{RateMap, Workspace};
 use crate::exact_joints::frame::{gemm, gemv, gemv_t, view, view_mut};
-use crate::exact_joints::model::{u_right, ExactJointsRom};
+use crate::exact_joints::model::ExactJointsRom;
 use faer::traits::pulp::{Arch, Simd, WithSimd};
 use nalgebra::Vector4;
 
@@ -30,6 +30,8 @@ pub(crate) struct Batch {
     u2: Vec<f64>,
     eqc: Vec<Vec<f64>>,
     dxd: Vec<Vector4<f64>>,
+    /// `ξ̇_i` as linear maps of the tracked values, per joint.
+    maps: Vec<RateMap>,
     lm: Vec<f64>,
     cd: Vec<f64>,
     dct: Vec<f64>,
@@ -72,6 +74,7 @@ impl Batch {
             u2: z(4 * m2),
             eqc: rom.tracked.iter().map(|t| z(4 * t.rows.nrows())).collect(),
             dxd: vec![Vector4::zeros(); 4 * joints.len()],
+            maps: joints.iter().map(|_| RateMap::default()).collect(),
             lm: z(LANES * 2 * rj * kx),
             cd: z(rx * kx),
             dct: z(4 * kx * rx),
@@ -130,6 +133,7 @@ enum Kernel<'a> {
         out: &'a mut [L],
         s1: &'a mut [L],
         s2: &'a mut [f64],
+        dl: &'a mut [L],
     },
     Kappa {
         a: &'a [L],
@@ -157,16 +161,67 @@ impl WithSimd for Kernel<'_> {
     #[inline(always)]
     fn with_simd<S: Simd>(self, _simd: S) {
         match self {
-            Kernel::Phi { a, w, ra, p, upper, alpha, out, sa, sw } => {
-                phi_apply_lanes(a, w, ra, p, upper, alpha, out, sa, sw)
-            }
-            Kernel::RightPhi { pm, q, a, w, ra, m, out, s1, s2 } => {
-                right_phi_t_lanes(pm, q, a, w, ra, m, out, s1, s2)
-            }
-            Kernel::Kappa { a, w, ra, p, out, sa, sw } => kappa_lanes(a, w, ra, p, out, sa, sw),
-            Kernel::Skew { dvw, pvw, rj, p, t, sd, sv } => skew_lanes(dvw, pvw, rj, p, t, sd, sv),
+            Kernel::Phi { a, w, ra, p, upper, alpha, out, sa, sw } => match ra {
+                // the running sums in registers: `ra` as a constant
+                1 => phi_apply_const::<1>(a, w, p, upper, alpha, out),
+                2 => phi_apply_const::<2>(a, w, p, upper, alpha, out),
+                3 => phi_apply_const::<3>(a, w, p, upper, alpha, out),
+                4 => phi_apply_const::<4>(a, w, p, upper, alpha, out),
+                5 => phi_apply_const::<5>(a, w, p, upper, alpha, out),
+                6 => phi_apply_const::<6>(a, w, p, upper, alpha, out),
+                _ => phi_apply_lanes(a, w, ra, p, upper, alpha, out, sa, sw),
+            },
+            Kernel::RightPhi { pm, q, a, w, ra, m, out, s1, s2, dl } => match ra {
+                // the running sums of one row in registers: `ra` as a constant
+                1 => right_phi_t_rows::<1>(pm, q, a, w, m, out, dl),
+                2 => right_phi_t_rows::<2>(pm, q, a, w, m, out, dl),
+                3 => right_phi_t_rows::<3>(pm, q, a, w, m, out, dl),
+                4 => right_phi_t_rows::<4>(pm, q, a, w, m, out, dl),
+                5 => right_phi_t_rows::<5>(pm, q, a, w, m, out, dl),
+                6 => right_phi_t_rows::<6>(pm, q, a, w, m, out, dl),
+                _ => right_phi_t_lanes(pm, q, a, w, ra, m, out, s1, s2),
+            },
+            Kernel::Kappa { a, w, ra, p, out, sa, sw } => match ra {
+                1 => kappa_const::<1>(a, w, p, out),
+                2 => kappa_const::<2>(a, w, p, out),
+                3 => kappa_const::<3>(a, w, p, out),
+                4 => kappa_const::<4>(a, w, p, out),
+                5 => kappa_const::<5>(a, w, p, out),
+                6 => kappa_const::<6>(a, w, p, out),
+                _ => kappa_lanes(a, w, ra, p, out, sa, sw),
+            },
+            Kernel::Skew { dvw, pvw, rj, p, t, sd, sv } => match rj {
+                1 => skew_const::<2>(dvw, pvw, p, t),
+                2 => skew_const::<4>(dvw, pvw, p, t),
+                3 => skew_const::<6>(dvw, pvw, p, t),
+                4 => skew_const::<8>(dvw, pvw, p, t),
+                5 => skew_const::<10>(dvw, pvw, p, t),
+                6 => skew_const::<12>(dvw, pvw, p, t),
+                _ => skew_lanes(dvw, pvw, rj, p, t, sd, sv),
+            },
         }
     }
+}
+
+/// [`phi_apply_lanes`] with `ra = RA` and its running sums in local arrays (registers).
+#[inline(always)]
+fn phi_apply_const<const RA: usize>(
+    a: &[L],
+    w: &[f64],
+    p: &[f64],
+    upper: bool,
+    alpha: f64,
+    out: &mut [L],
+) {
+    let (mut sa, mut sw) = ([[0.0; LANES]; RA], [0.0; RA]);
+    phi_apply_lanes(a, w, RA, p, upper, alpha, out, &mut sa, &mut sw)
+}
+
+/// [`kappa_lanes`] with `ra = RA` and its running sums in local arrays (registers).
+#[inline(always)]
+fn kappa_const<const RA: usize>(a: &[L], w: &[f64], p: &[f64], out: &mut [L]) {
+    let (mut sa, mut sw) = ([[0.0; LANES]; RA], [0.0; RA]);
+    kappa_lanes(a, w, RA, p, out, &mut sa, &mut sw)
 }
 
 /// `out += alpha · Φ(aᵀw + wᵀa)ᵀ p` (`upper`) or `alpha · Φ(aᵀw + wᵀa) p` per lane
@@ -274,26 +329,73 @@ fn right_phi_t_lanes(
             axpy(&mut d, wl[k], &al[k]);
         }
         let ol = &mut out[l * q..(l + 1) * q];
+        // row s of the running sums read once: the term of column l, then the update
         for s in 0..q {
+            let ps = pl[s];
             let mut acc = [0.0; LANES];
-            axpy(&mut acc, pl[s], &d);
-            let (c1, c2) = (&s1[s * ra..(s + 1) * ra], &s2[s * ra..(s + 1) * ra]);
+            axpy(&mut acc, ps, &d);
+            let (c1, c2) = (&mut s1[s * ra..(s + 1) * ra], &mut s2[s * ra..(s + 1) * ra]);
             for k in 0..ra {
                 axpy(&mut acc, wl[k], &c1[k]);
                 axpy(&mut acc, c2[k], &al[k]);
+                axpy(&mut c1[k], ps, &al[k]);
+                c2[k] = ps.mul_add(wl[k], c2[k]);
             }
             for (o, x) in ol[s].iter_mut().zip(&acc) {
                 *o += x;
             }
         }
-        for s in 0..q {
-            let ps = pl[s];
-            for k in 0..ra {
-                axpy(&mut s1[s * ra + k], ps, &al[k]);
-                s2[s * ra + k] = ps.mul_add(wl[k], s2[s * ra + k]);
+    }
+}
+
+/// [`right_phi_t_lanes`] row by row of `P` (the same sums in the same order for each entry):
+/// the running sums `S1[s, ·]` (lanes) and `S2[s, ·]` of one row `s` stay in registers over
+/// all columns `l` (`RA = ra` a constant); `dl`: `m` lanes of scratch for `a_l·w_l`.
+#[inline(always)]
+fn right_phi_t_rows<const RA: usize>(
+    pm: &[f64],
+    q: usize,
+    a: &[L],
+    w: &[f64],
+    m: usize,
+    out: &mut [L],
+    dl: &mut [L],
+) {
+    let dl = &mut dl[..m];
+    for (l, d) in dl.iter_mut().enumerate() {
+        let (al, wl) = (&a[l * RA..(l + 1) * RA], &w[l * RA..(l + 1) * RA]);
+        *d = [0.0; LANES];
+        for k in 0..RA {
+            axpy(d, wl[k], &al[k]);
+        }
+    }
+    for s in 0..q {
+        let mut c1 = [[0.0; LANES]; RA];
+        let mut c2 = [0.0; RA];
+        for l in 0..m {
+            let al: &[L; RA] = a[l * RA..(l + 1) * RA].try_into().expect("lanes");
+            let wl: &[f64; RA] = w[l * RA..(l + 1) * RA].try_into().expect("row");
+            let ps = pm[l * q + s];
+            let mut acc = [0.0; LANES];
+            axpy(&mut acc, ps, &dl[l]);
+            for k in 0..RA {
+                axpy(&mut acc, wl[k], &c1[k]);
+                axpy(&mut acc, c2[k], &al[k]);
+                axpy(&mut c1[k], ps, &al[k]);
+                c2[k] = ps.mul_add(wl[k], c2[k]);
+            }
+            for (o, x) in out[l * q + s].iter_mut().zip(&acc) {
+                *o += x;
             }
         }
     }
+}
+
+/// [`skew_lanes`] with `2 rj = Q` and its running sums in local arrays.
+#[inline(always)]
+fn skew_const<const Q: usize>(dvw: &[L], pvw: &[f64], p: &[f64], t: &mut [L]) {
+    let (mut sd, mut sv) = ([[0.0; LANES]; Q], [0.0; Q]);
+    skew_lanes(dvw, pvw, Q / 2, p, t, &mut sd, &mut sv)
 }
 
 /// `t = K(∂V, W) p + K(V, ∂W) p` per lane with `dvw` lanes `[∂V; ∂W]` (`2rj × m`) and
@@ -509,12 +611,16 @@ impl ExactJointsRom {
             );
         }
         // ∂ξ̇ (all joints, root)
+        for (i, map) in bt.maps.iter_mut().enumerate() {
+            *map = RateMap::new(self, &ws.xi[i], true);
+        }
+        let root_map = root_xi.map(|xr| RateMap::new(self, &xr, false));
         for (b, &c) in cs.iter().enumerate() {
             let col = self.joint_offset(j) + c;
             jx[col * n + m..col * n + m + m2].copy_from_slice(&bt.u2[b * m2..(b + 1) * m2]);
             for (i, tr) in self.tracked.iter().take(nj).enumerate() {
                 let nt = tr.rows.nrows();
-                let mut d = joint_rate_matrix(self, &bt.eqc[i][b * nt..(b + 1) * nt]) * ws.xi[i];
+                let mut d = bt.maps[i].apply(&bt.eqc[i][b * nt..(b + 1) * nt]);
                 if i == j {
                     d += ws.mjs[j].column(c);
                 }
@@ -522,10 +628,9 @@ impl ExactJointsRom {
                 let oi = self.joint_offset(i);
                 jx[col * n + oi..col * n + oi + 4].copy_from_slice(d.as_slice());
             }
-            if let Some(xr) = root_xi {
+            if let Some(map) = &root_map {
                 let kr = self.tracked[nj].rows.nrows();
-                let e = &bt.eqc[nj][b * kr..(b + 1) * kr];
-                let d = u_right(&rates(self, e, 0)) * xr;
+                let d = map.apply(&bt.eqc[nj][b * kr..(b + 1) * kr]);
                 let oi = self.root_offset();
                 jx[col * n + oi..col * n + oi + 4].copy_from_slice(d.as_slice());
             }
@@ -666,6 +771,7 @@ impl ExactJointsRom {
             out: dvw,
             s1: &mut bt.s1,
             s2: &mut bt.s2,
+            dl: &mut bt.lanes,
         });
         let t = &mut bt.lanes[..m];
         Arch::new().dispatch(Kernel::Skew { dvw, pvw, rj, p, t, sd: &mut bt.sd, sv: &mut bt.sv });

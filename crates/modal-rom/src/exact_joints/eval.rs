@@ -151,7 +151,10 @@ impl Workspace {
             lh: zeros(rj * m),
             ld: zeros(m),
             lmm: zeros(rj * rj),
-            lacc: zeros(na.max(r).max(kk).max(rs).max(1) * rj.max(1)),
+            lacc: zeros(
+                (na + r + rom.tracked.iter().map(|t| t.rows.nrows()).sum::<usize>()).max(1)
+                    * rj.max(1),
+            ),
             z: zeros(na * m),
             zt: zeros(na * m),
             ct: per(&|rj, kk| rj * kk),
@@ -204,6 +207,50 @@ pub(super) fn rates(rom: &ExactJointsRom, e: &[f64], end: usize) -> Vector3<f64>
         w[axis] = e[end * k + c];
     }
     w
+}
+
+/// `ξ̇ = (U(ω_b) − Ū(ω_a)) ξ` of a joint (or `U(ω) ξ` of the root) as a linear map of the
+/// tracked values `e`: `ξ̇ = Σ_k e[i_k] v_k` over the rate components (theory.md §10.4), with
+/// `v_k = U(e_axis) ξ` (end `b`, root) or `−Ū(e_axis) ξ` (end `a`).
+#[derive(Debug, Default)]
+pub(crate) struct RateMap {
+    terms: [(usize, Vector4<f64>); 6],
+    len: usize,
+}
+
+impl RateMap {
+    /// The map of a joint (`joint`, ends `a` then `b` in `e`) or of the root node at `xi`.
+    pub(super) fn new(rom: &ExactJointsRom, xi: &Vector4<f64>, joint: bool) -> Self {
+        let k = rom.basis.layout.k();
+        let mut terms = [(0, Vector4::zeros()); 6];
+        let mut len = 0;
+        for &(c, axis) in &rom.rate_comps {
+            let w = Vector3::ith(axis, 1.0);
+            if joint {
+                terms[len] = (c, -(u_left(&w) * xi));
+                terms[len + 1] = (k + c, u_right(&w) * xi);
+                len += 2;
+            } else {
+                terms[len] = (c, u_right(&w) * xi);
+                len += 1;
+            }
+        }
+        RateMap { terms, len }
+    }
+
+    /// The map as a `4 × t` matrix (column-major) into `d` (`t` tracked values).
+    pub(super) fn matrix(&self, d: &mut [f64]) {
+        d.fill(0.0);
+        for (i, v) in &self.terms[..self.len] {
+            d[4 * i..4 * i + 4].copy_from_slice(v.as_slice());
+        }
+    }
+
+    /// `ξ̇` for the tracked values `e`.
+    #[inline]
+    pub(super) fn apply(&self, e: &[f64]) -> Vector4<f64> {
+        self.terms[..self.len].iter().fold(Vector4::zeros(), |acc, (i, v)| acc + v * e[*i])
+    }
 }
 
 /// `U(ω_b) − Ū(ω_a)` of joint block `e`.
@@ -352,7 +399,6 @@ impl ExactJointsRom {
         }
         let rj = r - rs;
         ws.w.copy_from_slice(&ws.h);
-        lowrank_right_solve_lt(&ws.ly, &ws.lh, &ws.ld, rj, &mut ws.w, r, &mut ws.lacc);
         // T Z = (T Z0 − T Aᵀ H) L⁻ᵀ
         for (t, tr) in self.tracked.iter().enumerate() {
             let nt = tr.rows.nrows();
@@ -364,7 +410,6 @@ impl ExactJointsRom {
                 view(&ws.h, r, m),
                 -1.0,
             );
-            lowrank_right_solve_lt(&ws.ly, &ws.lh, &ws.ld, rj, &mut ws.tz[t], nt, &mut ws.lacc);
         }
         // Z = (Z0 − AᵀH) L⁻ᵀ, AᵀH = SᵀH_s + Σ E_jᵀ C_jᵀ H_j
         if with_z {
@@ -395,7 +440,30 @@ impl ExactJointsRom {
                     -1.0,
                 );
             }
-            lowrank_right_solve_lt(&ws.ly, &ws.lh, &ws.ld, rj, &mut ws.z, na, &mut ws.lacc);
+        }
+        // W = H L⁻ᵀ, T Z, Z: the right solves in one pass
+        {
+            // the list on the stack for up to six tracked blocks (no allocation per evaluation)
+            const STACK: usize = 8;
+            let count = self.tracked.len() + 1 + usize::from(with_z);
+            let mut stack: [(&mut [f64], usize); STACK] = std::array::from_fn(|_| (&mut [][..], 0));
+            let mut heap = Vec::new();
+            let xs = if count <= STACK {
+                &mut stack[..count]
+            } else {
+                heap.resize_with(count, || (&mut [][..], 0));
+                &mut heap[..]
+            };
+            xs[0] = (&mut ws.w[..], r);
+            for ((x, tz), tr) in xs[1..].iter_mut().zip(ws.tz.iter_mut()).zip(&self.tracked) {
+                *x = (&mut tz[..], tr.rows.nrows());
+            }
+            if with_z {
+                xs[count - 1] = (&mut ws.z[..], na);
+            }
+            lowrank_right_solve_lt(&ws.ly, &ws.lh, &ws.ld, rj, xs, &mut ws.lacc);
+        }
+        if with_z {
             for c in 0..m {
                 for (i, v) in ws.z[c * na..(c + 1) * na].iter().enumerate() {
                     ws.zt[i * m + c] = *v;

@@ -45,8 +45,13 @@ pub(crate) fn gemm(
     matmul(dst, if add { Accum::Add } else { Accum::Replace }, a, b, alpha, Par::Seq);
 }
 
-/// `y (+)= alpha · a x` for column-major `a` (`r × c`).
+/// `y (+)= alpha · a x` for column-major `a` (`r × c`): from 64 entries by the vector-lane
+/// [`matvec`], below by plain column loops (a few entries do not pay for the dispatch).
 pub(crate) fn gemv(y: &mut [f64], add: bool, a: &[f64], r: usize, x: &[f64], alpha: f64) {
+    if r * x.len() >= 64 {
+        matvec(&mut y[..r], add, &a[..r * x.len()], x, alpha);
+        return;
+    }
     if !add {
         y[..r].fill(0.0);
     }
@@ -58,8 +63,13 @@ pub(crate) fn gemv(y: &mut [f64], add: bool, a: &[f64], r: usize, x: &[f64], alp
     }
 }
 
-/// `y (+)= alpha · aᵀ x` for column-major `a` (`r × c`, `x` of length `r`).
+/// `y (+)= alpha · aᵀ x` for column-major `a` (`r × c`, `x` of length `r`): from 64 entries
+/// four columns at a time in vector lanes, below by plain dot products.
 pub(crate) fn gemv_t(y: &mut [f64], add: bool, a: &[f64], r: usize, x: &[f64], alpha: f64) {
+    if r * y.len() >= 64 {
+        Arch::new().dispatch(ColumnDots { y, add, a, r, x: &x[..r], alpha });
+        return;
+    }
     for (j, y) in y.iter_mut().enumerate() {
         let d: f64 = a[j * r..(j + 1) * r].iter().zip(x).map(|(a, x)| a * x).sum();
         *y = if add { *y + alpha * d } else { alpha * d };
@@ -107,6 +117,46 @@ pub(crate) fn skew_apply(
     out: &mut [f64],
     tmp: &mut [f64],
 ) {
+    Arch::new().dispatch(SkewApply { a, b, r, p, out, tmp });
+}
+
+/// [`skew_apply`] under the run-time dispatch, `r ≤ 6` as a constant (the running sums in
+/// registers; the same sums in the same order).
+struct SkewApply<'a> {
+    a: &'a [f64],
+    b: &'a [f64],
+    r: usize,
+    p: &'a [f64],
+    out: &'a mut [f64],
+    tmp: &'a mut [f64],
+}
+
+impl WithSimd for SkewApply<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) {
+        let SkewApply { a, b, r, p, out, tmp } = self;
+        match r {
+            1 => skew_apply_const::<1>(a, b, p, out),
+            2 => skew_apply_const::<2>(a, b, p, out),
+            3 => skew_apply_const::<3>(a, b, p, out),
+            4 => skew_apply_const::<4>(a, b, p, out),
+            5 => skew_apply_const::<5>(a, b, p, out),
+            6 => skew_apply_const::<6>(a, b, p, out),
+            _ => skew_apply_imp(a, b, r, p, out, tmp),
+        }
+    }
+}
+
+#[inline(always)]
+fn skew_apply_const<const R: usize>(a: &[f64], b: &[f64], p: &[f64], out: &mut [f64]) {
+    let mut tmp = [0.0; R];
+    skew_apply_imp(a, b, R, p, out, &mut tmp)
+}
+
+#[inline(always)]
+fn skew_apply_imp(a: &[f64], b: &[f64], r: usize, p: &[f64], out: &mut [f64], tmp: &mut [f64]) {
     let m = p.len();
     let tmp = &mut tmp[..r];
     // suffix sums of p_l a_l
@@ -145,6 +195,71 @@ pub(crate) fn lowrank_cholesky(
     stage: &str,
     reason: &str,
 ) -> Result<()> {
+    let ok = Arch::new().dispatch(LowrankCholesky { y, q, m, d, h, mm, g, tol });
+    if ok {
+        Ok(())
+    } else {
+        Err(ModalError::Numerical { stage: stage.to_string(), reason: reason.to_string() })
+    }
+}
+
+/// [`lowrank_cholesky`] under the run-time dispatch, `q ≤ 6` as a constant (`M` and `g` in
+/// registers; the same sums in the same order). `false` when a pivot fails.
+struct LowrankCholesky<'a> {
+    y: &'a [f64],
+    q: usize,
+    m: usize,
+    d: &'a mut [f64],
+    h: &'a mut [f64],
+    mm: &'a mut [f64],
+    g: &'a mut [f64],
+    tol: f64,
+}
+
+impl WithSimd for LowrankCholesky<'_> {
+    type Output = bool;
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) -> bool {
+        let LowrankCholesky { y, q, m, d, h, mm, g, tol } = self;
+        match q {
+            1 => lowrank_cholesky_const::<1>(y, m, d, h, tol),
+            2 => lowrank_cholesky_const::<2>(y, m, d, h, tol),
+            3 => lowrank_cholesky_const::<3>(y, m, d, h, tol),
+            4 => lowrank_cholesky_const::<4>(y, m, d, h, tol),
+            5 => lowrank_cholesky_const::<5>(y, m, d, h, tol),
+            6 => lowrank_cholesky_const::<6>(y, m, d, h, tol),
+            _ => lowrank_cholesky_imp(y, q, m, d, h, mm, g, tol),
+        }
+    }
+}
+
+#[inline(always)]
+fn lowrank_cholesky_const<const Q: usize>(
+    y: &[f64],
+    m: usize,
+    d: &mut [f64],
+    h: &mut [f64],
+    tol: f64,
+) -> bool {
+    let (mut mm, mut g) = ([0.0; 36], [0.0; Q]);
+    lowrank_cholesky_imp(y, Q, m, d, h, &mut mm[..Q * Q], &mut g, tol)
+}
+
+/// The elimination of [`lowrank_cholesky`]; `M q`-products as [`gemv`]'s plain loops (`q² <
+/// 64` there too), so every `q` gives the same bits.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn lowrank_cholesky_imp(
+    y: &[f64],
+    q: usize,
+    m: usize,
+    d: &mut [f64],
+    h: &mut [f64],
+    mm: &mut [f64],
+    g: &mut [f64],
+    tol: f64,
+) -> bool {
     let (mm, g) = (&mut mm[..q * q], &mut g[..q]);
     mm.fill(0.0);
     for k in 0..q {
@@ -152,13 +267,19 @@ pub(crate) fn lowrank_cholesky(
     }
     for j in 0..m {
         let yj = &y[j * q..(j + 1) * q];
-        gemv(g, false, mm, q, yj, 1.0);
+        if q * q >= 64 {
+            gemv(g, false, mm, q, yj, 1.0);
+        } else {
+            g.fill(0.0);
+            for (c, &s) in yj.iter().enumerate() {
+                if s != 0.0 {
+                    g.iter_mut().zip(&mm[c * q..(c + 1) * q]).for_each(|(y, a)| *y += s * a);
+                }
+            }
+        }
         let d2 = 1.0 - yj.iter().zip(g.iter()).map(|(a, b)| a * b).sum::<f64>();
         if d2.is_nan() || d2 <= tol {
-            return Err(ModalError::Numerical {
-                stage: stage.to_string(),
-                reason: reason.to_string(),
-            });
+            return false;
         }
         let dj = d2.sqrt();
         d[j] = dj;
@@ -169,80 +290,109 @@ pub(crate) fn lowrank_cholesky(
             mm[c * q..(c + 1) * q].iter_mut().zip(hj.iter()).for_each(|(a, b)| *a += s * b);
         }
     }
-    Ok(())
+    true
 }
 
-/// `X ← X L⁻ᵀ` for `X` (`rows × m`, column-major) and `L` of [`lowrank_cholesky`]: column
-/// `i` of `X Lᵀ` is `d_i X_i − (Σ_{j<i} X_j h_jᵀ) y_i`, so `X_i = (M_i + A y_i) / d_i` with the
-/// running sum `A = Σ_{j<i} X_j h_jᵀ` (`rows × q`, scratch `acc`): `O(rows m q)`.
+/// `X ← X L⁻ᵀ` for each `X` of `xs` (`rows × m`, column-major) and `L` of
+/// [`lowrank_cholesky`]: column `i` of `X Lᵀ` is `d_i X_i − (Σ_{j<i} X_j h_jᵀ) y_i`, so
+/// `X_i = (M_i + A y_i) / d_i` with the running sum `A = Σ_{j<i} X_j h_jᵀ` (`rows × q`, scratch
+/// `acc` of `Σ rows · q`): `O(rows m q)`. All matrices advance together column by column, so
+/// the latency of one matrix's recurrence is hidden by the others' work.
 #[inline(always)]
 fn lowrank_right_solve_lt_imp(
     y: &[f64],
     h: &[f64],
     d: &[f64],
     q: usize,
-    x: &mut [f64],
-    rows: usize,
+    xs: &mut [(&mut [f64], usize)],
     acc: &mut [f64],
 ) {
-    let acc = &mut acc[..rows * q];
-    acc.fill(0.0);
-    // rows in chunks of four (one vector), each row's value kept while the q terms are added
-    let full = rows / 4 * 4;
+    let total: usize = xs.iter().map(|(_, rows)| rows).sum();
+    acc[..total * q].fill(0.0);
     for (i, &di) in d.iter().enumerate() {
-        let xi = &mut x[i * rows..(i + 1) * rows];
         let (yi, hi) = (&y[i * q..(i + 1) * q], &h[i * q..(i + 1) * q]);
         let inv = 1.0 / di;
-        for c in (0..full).step_by(4) {
-            let mut v = [xi[c], xi[c + 1], xi[c + 2], xi[c + 3]];
-            for k in 0..q {
-                let a = &acc[k * rows + c..k * rows + c + 4];
-                for e in 0..4 {
-                    v[e] = yi[k].mul_add(a[e], v[e]);
+        let mut off = 0;
+        for (x, rows) in xs.iter_mut() {
+            let rows = *rows;
+            let acc = &mut acc[off * q..(off + rows) * q];
+            off += rows;
+            let xi = &mut x[i * rows..(i + 1) * rows];
+            // rows in chunks of four (one vector), each row's value kept while the q terms
+            // are added
+            let full = rows / 4 * 4;
+            for c in (0..full).step_by(4) {
+                let mut v = [xi[c], xi[c + 1], xi[c + 2], xi[c + 3]];
+                for k in 0..q {
+                    let a = &acc[k * rows + c..k * rows + c + 4];
+                    for e in 0..4 {
+                        v[e] = yi[k].mul_add(a[e], v[e]);
+                    }
+                }
+                for e in &mut v {
+                    *e *= inv;
+                }
+                xi[c..c + 4].copy_from_slice(&v);
+                for k in 0..q {
+                    let a = &mut acc[k * rows + c..k * rows + c + 4];
+                    for e in 0..4 {
+                        a[e] = hi[k].mul_add(v[e], a[e]);
+                    }
                 }
             }
-            for e in &mut v {
-                *e *= inv;
-            }
-            xi[c..c + 4].copy_from_slice(&v);
-            for k in 0..q {
-                let a = &mut acc[k * rows + c..k * rows + c + 4];
-                for e in 0..4 {
-                    a[e] = hi[k].mul_add(v[e], a[e]);
+            for c in full..rows {
+                let mut v = xi[c];
+                for k in 0..q {
+                    v = yi[k].mul_add(acc[k * rows + c], v);
                 }
-            }
-        }
-        for c in full..rows {
-            let mut v = xi[c];
-            for k in 0..q {
-                v = yi[k].mul_add(acc[k * rows + c], v);
-            }
-            v *= inv;
-            xi[c] = v;
-            for k in 0..q {
-                acc[k * rows + c] = hi[k].mul_add(v, acc[k * rows + c]);
+                v *= inv;
+                xi[c] = v;
+                for k in 0..q {
+                    acc[k * rows + c] = hi[k].mul_add(v, acc[k * rows + c]);
+                }
             }
         }
     }
 }
 
-struct RightSolve<'a> {
+struct RightSolve<'a, 'b> {
     y: &'a [f64],
     h: &'a [f64],
     d: &'a [f64],
     q: usize,
-    x: &'a mut [f64],
-    rows: usize,
+    xs: &'a mut [(&'b mut [f64], usize)],
     acc: &'a mut [f64],
 }
 
-impl WithSimd for RightSolve<'_> {
+impl WithSimd for RightSolve<'_, '_> {
     type Output = ();
 
     #[inline(always)]
     fn with_simd<S: Simd>(self, _simd: S) {
-        lowrank_right_solve_lt_imp(self.y, self.h, self.d, self.q, self.x, self.rows, self.acc)
+        let RightSolve { y, h, d, q, xs, acc } = self;
+        // `q` as a constant: the `q` terms of each step unrolled, `y_i`, `h_i` in registers
+        match q {
+            1 => lowrank_right_solve_lt_const::<1>(y, h, d, xs, acc),
+            2 => lowrank_right_solve_lt_const::<2>(y, h, d, xs, acc),
+            3 => lowrank_right_solve_lt_const::<3>(y, h, d, xs, acc),
+            4 => lowrank_right_solve_lt_const::<4>(y, h, d, xs, acc),
+            5 => lowrank_right_solve_lt_const::<5>(y, h, d, xs, acc),
+            6 => lowrank_right_solve_lt_const::<6>(y, h, d, xs, acc),
+            _ => lowrank_right_solve_lt_imp(y, h, d, q, xs, acc),
+        }
     }
+}
+
+/// [`lowrank_right_solve_lt_imp`] with `q = Q`.
+#[inline(always)]
+fn lowrank_right_solve_lt_const<const Q: usize>(
+    y: &[f64],
+    h: &[f64],
+    d: &[f64],
+    xs: &mut [(&mut [f64], usize)],
+    acc: &mut [f64],
+) {
+    lowrank_right_solve_lt_imp(y, h, d, Q, xs, acc)
 }
 
 /// [`lowrank_right_solve_lt_imp`] compiled for the processor's vector instructions.
@@ -251,14 +401,13 @@ pub(crate) fn lowrank_right_solve_lt(
     h: &[f64],
     d: &[f64],
     q: usize,
-    x: &mut [f64],
-    rows: usize,
+    xs: &mut [(&mut [f64], usize)],
     acc: &mut [f64],
 ) {
-    if rows == 0 {
+    if xs.iter().all(|(_, rows)| *rows == 0) {
         return;
     }
-    Arch::new().dispatch(RightSolve { y, h, d, q, x, rows, acc });
+    Arch::new().dispatch(RightSolve { y, h, d, q, xs, acc });
 }
 
 /// `t ← L⁻¹ t` (forward: `t_i = (t_i + y_iᵀ a) / d_i`, `a += h_i t_i`) with `L` of
@@ -271,7 +420,7 @@ pub(crate) fn lowrank_solve_l(
     t: &mut [f64],
     a: &mut [f64],
 ) {
-    lowrank_sweep(y, h, d, q, t, a, 0..d.len());
+    Arch::new().dispatch(Sweep { g: y, e: h, d, q, t, a, forward: true });
 }
 
 /// `t ← L⁻ᵀ t` (backward: `t_j = (t_j + h_jᵀ a) / d_j`, `a += y_j t_j`) with `L` of
@@ -284,11 +433,53 @@ pub(crate) fn lowrank_solve_lt(
     t: &mut [f64],
     a: &mut [f64],
 ) {
-    lowrank_sweep(h, y, d, q, t, a, (0..d.len()).rev());
+    Arch::new().dispatch(Sweep { g: h, e: y, d, q, t, a, forward: false });
+}
+
+/// [`lowrank_sweep`] under the run-time dispatch, `q ≤ 6` as a constant (the running sums in
+/// registers; the same sums in the same order).
+struct Sweep<'a> {
+    g: &'a [f64],
+    e: &'a [f64],
+    d: &'a [f64],
+    q: usize,
+    t: &'a mut [f64],
+    a: &'a mut [f64],
+    forward: bool,
+}
+
+impl WithSimd for Sweep<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) {
+        let Sweep { g, e, d, q, t, a, forward } = self;
+        match q {
+            1 => sweep_const::<1>(g, e, d, t, forward),
+            2 => sweep_const::<2>(g, e, d, t, forward),
+            3 => sweep_const::<3>(g, e, d, t, forward),
+            4 => sweep_const::<4>(g, e, d, t, forward),
+            5 => sweep_const::<5>(g, e, d, t, forward),
+            6 => sweep_const::<6>(g, e, d, t, forward),
+            _ if forward => lowrank_sweep(g, e, d, q, t, a, 0..d.len()),
+            _ => lowrank_sweep(g, e, d, q, t, a, (0..d.len()).rev()),
+        }
+    }
+}
+
+#[inline(always)]
+fn sweep_const<const Q: usize>(g: &[f64], e: &[f64], d: &[f64], t: &mut [f64], forward: bool) {
+    let mut a = [0.0; Q];
+    if forward {
+        lowrank_sweep(g, e, d, Q, t, &mut a, 0..d.len())
+    } else {
+        lowrank_sweep(g, e, d, Q, t, &mut a, (0..d.len()).rev())
+    }
 }
 
 /// The triangular sweep of both solves: for `i` in `order`, `t_i = (t_i + g_iᵀ a) / d_i`,
 /// then `a += e_i t_i` (`g`, `e`: `q` entries per row).
+#[inline(always)]
 fn lowrank_sweep(
     g: &[f64],
     e: &[f64],
@@ -305,5 +496,126 @@ fn lowrank_sweep(
         let ti = (t[i] + gi.iter().zip(a.iter()).map(|(x, y)| x * y).sum::<f64>()) / d[i];
         t[i] = ti;
         a.iter_mut().zip(ei).for_each(|(a, e)| *a += e * ti);
+    }
+}
+
+/// `out (+)= alpha · g x` for column-major `g` (`out.len() × x.len()`), by blocks of rows held
+/// in vector registers across all columns (each entry of `g` loaded once, `out` stored once;
+/// eight independent accumulators per block cover the latency of the fused multiply–adds),
+/// compiled for the processor's vector instructions by pulp's run-time dispatch.
+pub(crate) fn matvec(out: &mut [f64], add: bool, g: &[f64], x: &[f64], alpha: f64) {
+    Arch::new().dispatch(RowBlockMatvec { out, add, g, x, alpha });
+}
+
+struct RowBlockMatvec<'a> {
+    out: &'a mut [f64],
+    add: bool,
+    g: &'a [f64],
+    x: &'a [f64],
+    alpha: f64,
+}
+
+impl WithSimd for RowBlockMatvec<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) {
+        let RowBlockMatvec { out, add, g, x, alpha } = self;
+        let rows = out.len();
+        let mut r0 = 0;
+        r0 = row_blocks::<32>(out, add, g, x, alpha, rows, r0);
+        r0 = row_blocks::<4>(out, add, g, x, alpha, rows, r0);
+        row_blocks::<1>(out, add, g, x, alpha, rows, r0);
+    }
+}
+
+/// Rows `r0..` of [`RowBlockMatvec`] in blocks of `B` while a whole block fits; returns the
+/// first row not done.
+#[inline(always)]
+fn row_blocks<const B: usize>(
+    out: &mut [f64],
+    add: bool,
+    g: &[f64],
+    x: &[f64],
+    alpha: f64,
+    rows: usize,
+    mut r0: usize,
+) -> usize {
+    while r0 + B <= rows {
+        let mut acc = [0.0; B];
+        for (l, &xl) in x.iter().enumerate() {
+            let c: &[f64; B] = g[l * rows + r0..l * rows + r0 + B].try_into().expect("block");
+            for e in 0..B {
+                acc[e] = xl.mul_add(c[e], acc[e]);
+            }
+        }
+        let o = &mut out[r0..r0 + B];
+        if add {
+            o.iter_mut().zip(&acc).for_each(|(o, a)| *o = alpha.mul_add(*a, *o));
+        } else if alpha == 1.0 {
+            o.copy_from_slice(&acc);
+        } else {
+            o.iter_mut().zip(&acc).for_each(|(o, a)| *o = alpha * a);
+        }
+        r0 += B;
+    }
+    r0
+}
+
+/// `y (+)= alpha · aᵀ x` ([`gemv_t`]) four columns at a time: the dot products run along the
+/// rows in vector lanes (`x` loaded once per four columns), reduced across lanes at the end.
+struct ColumnDots<'a> {
+    y: &'a mut [f64],
+    add: bool,
+    a: &'a [f64],
+    r: usize,
+    x: &'a [f64],
+    alpha: f64,
+}
+
+impl WithSimd for ColumnDots<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) {
+        let ColumnDots { y, add, a, r, x, alpha } = self;
+        let full = r / 4 * 4;
+        let put = |y: &mut f64, d: f64| *y = if add { alpha.mul_add(d, *y) } else { alpha * d };
+        let lane_sum = |v: [f64; 4]| (v[0] + v[1]) + (v[2] + v[3]);
+        let c4 = y.len() / 4 * 4;
+        for j in (0..c4).step_by(4) {
+            let cols: [&[f64]; 4] = std::array::from_fn(|b| &a[(j + b) * r..(j + b + 1) * r]);
+            let mut acc = [[0.0f64; 4]; 4];
+            for i in (0..full).step_by(4) {
+                let xv: &[f64; 4] = x[i..i + 4].try_into().expect("chunk");
+                for b in 0..4 {
+                    let cv: &[f64; 4] = cols[b][i..i + 4].try_into().expect("chunk");
+                    for e in 0..4 {
+                        acc[b][e] = cv[e].mul_add(xv[e], acc[b][e]);
+                    }
+                }
+            }
+            for b in 0..4 {
+                let mut d = lane_sum(acc[b]);
+                for i in full..r {
+                    d = cols[b][i].mul_add(x[i], d);
+                }
+                put(&mut y[j + b], d);
+            }
+        }
+        for j in c4..y.len() {
+            let col = &a[j * r..(j + 1) * r];
+            let mut acc = [0.0f64; 4];
+            for i in (0..full).step_by(4) {
+                for e in 0..4 {
+                    acc[e] = col[i + e].mul_add(x[i + e], acc[e]);
+                }
+            }
+            let mut d = lane_sum(acc);
+            for i in full..r {
+                d = col[i].mul_add(x[i], d);
+            }
+            put(&mut y[j], d);
+        }
     }
 }

@@ -18,7 +18,7 @@
 //! components at an in-plane rotation) `Z_c = 0`, `∂W = 0`, and the column is `ξ̇_j`'s own
 //! term and `−K(∂Ȧ Z, W) p`.
 
-use crate::exact_joints::eval::{joint_rate_matrix, rates, Workspace};
+use crate::exact_joints::eval::{joint_rate_matrix, rates, RateMap, Workspace};
 use crate::exact_joints::frame::{gemm, gemv, skew_apply, view, view_mut};
 use crate::exact_joints::model::{u_right, ExactJointsRom};
 use nalgebra::Vector4;
@@ -142,27 +142,35 @@ impl ExactJointsRom {
                 .zip(&ws.mm[l * m + l + 1..(l + 1) * m])
                 .for_each(|(v, w)| *v += w);
         }
-        // Ξ = ∂ξ̇/∂p (joint and root rows)
+        // Ξ = ∂ξ̇/∂p (joint and root rows): D (T Z) with ξ̇ = D e (`RateMap`) on the tracked values
         for (j, jr) in self.cons.joints.iter().enumerate() {
             let kk = jr.e.nrows();
             let o = self.joint_offset(j);
+            let d = &mut ws.rtmp[..4 * kk];
+            RateMap::new(self, &ws.xi[j], true).matrix(d);
+            gemm(
+                view_mut(jx, n, n).submatrix_mut(o, 0, 4, m),
+                false,
+                view(d, 4, kk),
+                view(&ws.tz[j], kk, m),
+                1.0,
+            );
             for k in 0..m {
-                let d = joint_rate_matrix(self, &ws.tz[j][k * kk..(k + 1) * kk]) * ws.xi[j];
-                for i in 0..4 {
-                    jx[k * n + o + i] = d[i];
-                    ws.xi_p[j][k * 4 + i] = d[i];
-                }
+                ws.xi_p[j][k * 4..(k + 1) * 4].copy_from_slice(&jx[k * n + o..k * n + o + 4]);
             }
         }
         if let Some(xr) = root_xi {
             let kr = self.tracked[nj].rows.nrows();
             let o = self.root_offset();
-            for k in 0..m {
-                let d = u_right(&rates(self, &ws.tz[nj][k * kr..(k + 1) * kr], 0)) * xr;
-                for i in 0..4 {
-                    jx[k * n + o + i] = d[i];
-                }
-            }
+            let d = &mut ws.rtmp[..4 * kr];
+            RateMap::new(self, &xr, false).matrix(d);
+            gemm(
+                view_mut(jx, n, n).submatrix_mut(o, 0, 4, m),
+                false,
+                view(d, 4, kr),
+                view(&ws.tz[nj], kr, m),
+                1.0,
+            );
             let ur = u_right(&rates(self, &ws.eq[nj], 0));
             for c in 0..4 {
                 for i in 0..4 {
@@ -188,7 +196,9 @@ impl ExactJointsRom {
             }
         }
         // inputs: ZᵀB_u
-        gemm(view_mut(ju, n, nu).submatrix_mut(0, 0, m, nu), false, zt, self.ops.b_u.as_ref(), 1.0);
+        for c in 0..nu {
+            gemv(&mut ju[c * n..c * n + m], false, &ws.zt, m, self.ops.b_u.col_as_slice(c), 1.0);
+        }
         if nj == 0 {
             return;
         }

@@ -17,6 +17,7 @@
 
 use crate::error::{invalid, Result};
 use crate::exact_joints::ambient::LinkBasis;
+use faer::traits::pulp::{Arch, Simd, WithSimd};
 use faer::Mat;
 use intrinsic_beam::operators::tilde;
 use intrinsic_beam::rotation::rotation;
@@ -79,24 +80,7 @@ pub(crate) struct JointRows {
 impl JointRows {
     /// `C(ξ)` into `c` and `∂C/∂ξ_d` into `dc[d]` (each `r × 2k`, column-major).
     pub fn coefficients(&self, xi: &Vector4<f64>, c: &mut [f64], dc: &mut [&mut [f64]; 4]) {
-        let (r, dr) = rotation_and_derivatives(xi);
-        c.copy_from_slice(&self.c_c);
-        for d in dc.iter_mut() {
-            d.fill(0.0);
-        }
-        for p in 0..3 {
-            for q in 0..3 {
-                let cpq = &self.c_pq[3 * p + q];
-                let w = r[(p, q)];
-                c.iter_mut().zip(cpq).for_each(|(x, y)| *x += w * y);
-                for (d, drd) in dc.iter_mut().zip(&dr) {
-                    let w = drd[(p, q)];
-                    if w != 0.0 {
-                        d.iter_mut().zip(cpq).for_each(|(x, y)| *x += w * y);
-                    }
-                }
-            }
-        }
+        Arch::new().dispatch(Coefficients { rows: self, xi, c, dc });
     }
 
     /// `∂²C/∂ξ_c∂ξ_d` (constant).
@@ -324,5 +308,41 @@ impl Constraints {
     /// Total rows.
     pub fn n_rows(&self) -> usize {
         self.support.nrows() + self.joints.iter().map(|j| j.rows).sum::<usize>()
+    }
+}
+
+/// [`JointRows::coefficients`], compiled for the processor's vector instructions by pulp's
+/// run-time dispatch (the sums `C_c + Σ_pq R_pq C_pq` of `r × 2k` entries each).
+struct Coefficients<'a, 'b> {
+    rows: &'a JointRows,
+    xi: &'a Vector4<f64>,
+    c: &'a mut [f64],
+    dc: &'a mut [&'b mut [f64]; 4],
+}
+
+impl WithSimd for Coefficients<'_, '_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) {
+        let Coefficients { rows, xi, c, dc } = self;
+        let (r, dr) = rotation_and_derivatives(xi);
+        c.copy_from_slice(&rows.c_c);
+        for d in dc.iter_mut() {
+            d.fill(0.0);
+        }
+        for p in 0..3 {
+            for q in 0..3 {
+                let cpq = &rows.c_pq[3 * p + q];
+                let w = r[(p, q)];
+                c.iter_mut().zip(cpq).for_each(|(x, y)| *x += w * y);
+                for (d, drd) in dc.iter_mut().zip(&dr) {
+                    let w = drd[(p, q)];
+                    if w != 0.0 {
+                        d.iter_mut().zip(cpq).for_each(|(x, y)| *x += w * y);
+                    }
+                }
+            }
+        }
     }
 }
