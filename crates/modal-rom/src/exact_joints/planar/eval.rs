@@ -336,7 +336,7 @@ impl Planar {
             "the joint rotation is outside the range of the fields (ZᵀP Z0 singular)",
         )?;
         ws.w[..r * m].copy_from_slice(&ws.h[..r * m]);
-        lowrank_right_solve_lt(&ws.y, &ws.lh, &ws.ld, r, &mut ws.w, r, &mut ws.lacc);
+        lowrank_right_solve_lt(&ws.y, &ws.lh, &ws.ld, r, &mut [(&mut ws.w[..], r)], &mut ws.lacc);
         ws.z[..n * m].copy_from_slice(&self.z0);
         for c in 0..m {
             let h = &ws.h[c * r..(c + 1) * r];
@@ -346,7 +346,7 @@ impl Planar {
                 *z -= (0..r).map(|t| a[t] * h[t]).sum::<f64>();
             }
         }
-        lowrank_right_solve_lt(&ws.y, &ws.lh, &ws.ld, r, &mut ws.z, n, &mut ws.lacc);
+        lowrank_right_solve_lt(&ws.y, &ws.lh, &ws.ld, r, &mut [(&mut ws.z[..], n)], &mut ws.lacc);
         for c in 0..m {
             for i in 0..n {
                 ws.zt[i * m + c] = ws.z[c * n + i];
