@@ -15,6 +15,9 @@ use ocp_transcription::{
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
+mod first_sample;
+pub use first_sample::InitialGuess;
+
 /// Which controller.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -33,23 +36,6 @@ impl ControllerKind {
             ControllerKind::Lmpc => "lmpc",
         }
     }
-}
-
-/// Initial guess of the first sample's NMPC solve ([`ControllerSettings::first_sample_guess`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum InitialGuess {
-    /// The linear MPC plan (its QP on the model linearised at the reference): a trajectory
-    /// of the linearised model, consistent with the measured state.
-    #[default]
-    LinearMpc,
-    /// Shooting nodes on the line from the measured state to the reference, reached at the
-    /// end of the horizon, `s_k = x_r,k + (1 − k/Nc)(x0 − x_r,k)`, and the reference controls
-    /// (Bock's principle: multiple shooting may start from nodes near the wanted trajectory,
-    /// not on a rollout; the SQP closes the defects). The plan's nodes stay near the
-    /// reference, where the model is mildly nonlinear, instead of following a prediction of
-    /// the uncontrolled motion away from it.
-    Decay,
 }
 
 /// Default of [`ControllerSettings::plan_joint_limit_deg`] (deg).
@@ -87,6 +73,20 @@ pub struct ControllerSettings {
     pub first_sample_iterations: Option<usize>,
     /// Initial guess of the first sample's NMPC solve \[the linear MPC plan\].
     pub first_sample_guess: InitialGuess,
+    /// Full SQP with [`Self::first_sample_iterations`] only: continuation (homotopy) in the
+    /// initial state for the first sample. With `m` steps, the first sample's iterations run
+    /// `m` times, for the initial states `x0(α_j) = x_r + α_j (x0 − x_r)`, `α_j = j/m`
+    /// (`j = 1…m`, `α_m = 1`: the measured state), each from where the previous one ended;
+    /// the initial guess ([`Self::first_sample_guess`]) is built for `x0(α_1)`. A smaller
+    /// disturbance is closer to the reference, where the guess is good and the SQP converges,
+    /// and each solution is a start near the next one (first_sample::continuation_states).
+    /// Each step runs up to [`Self::first_sample_iterations`] iterations, all counted in the
+    /// first sample. `1`: no continuation \[1\].
+    pub first_sample_continuation: usize,
+    /// Full SQP with [`Self::first_sample_iterations`] only: Levenberg–Marquardt term of the
+    /// first sample's extra iterations (and its continuation steps); `None`: that of the
+    /// first attempt, [`Self::levenberg_marquardt`] \[None\].
+    pub first_sample_levenberg_marquardt: Option<f64>,
     /// KKT tolerance of the NMPC (max-norm natural residual; the inputs are O(0.1–5), so
     /// 1e-4 resolves them to far below what the plant feels within `τs`) [1e-4].
     pub kkt_tolerance: f64,
@@ -181,6 +181,8 @@ impl ControllerSettings {
             max_iterations: 10,
             first_sample_iterations: None,
             first_sample_guess: InitialGuess::LinearMpc,
+            first_sample_continuation: 1,
+            first_sample_levenberg_marquardt: None,
             kkt_tolerance: 1e-4,
             accept_violation: 1e-2,
             levenberg_marquardt: 0.0,
@@ -275,6 +277,32 @@ impl ControllerSettings {
                     "first_sample_iterations",
                     n,
                     "needs the full SQP (real_time_iteration = false)",
+                ));
+            }
+        }
+        if self.first_sample_continuation == 0 {
+            return Err(invalid("first_sample_continuation", 0, "must be at least 1"));
+        }
+        if self.first_sample_continuation > 1 && self.first_sample_iterations.is_none() {
+            return Err(invalid(
+                "first_sample_continuation",
+                self.first_sample_continuation,
+                "needs first_sample_iterations",
+            ));
+        }
+        if let Some(v) = self.first_sample_levenberg_marquardt {
+            if !(v >= 0.0 && v.is_finite()) {
+                return Err(invalid(
+                    "first_sample_levenberg_marquardt",
+                    v,
+                    "must be finite and ≥ 0",
+                ));
+            }
+            if self.first_sample_iterations.is_none() {
+                return Err(invalid(
+                    "first_sample_levenberg_marquardt",
+                    v,
+                    "needs first_sample_iterations",
                 ));
             }
         }
@@ -504,7 +532,13 @@ impl<D: Dynamics + Clone> Controller<D> {
                 };
                 let initial = match settings.first_sample_iterations {
                     Some(n) => {
-                        let i = SqpSettings { max_iterations: n, ..s.clone() };
+                        let i = SqpSettings {
+                            max_iterations: n,
+                            levenberg_marquardt: settings
+                                .first_sample_levenberg_marquardt
+                                .unwrap_or(settings.levenberg_marquardt),
+                            ..s.clone()
+                        };
                         Some(SqpSolver::new(model.clone(), ocp.clone(), i)?)
                     }
                     None => None,
@@ -732,29 +766,8 @@ impl<D: Dynamics + Clone> Controller<D> {
         let mut lmpc_done = false;
         let mut initial_iterations = 0;
         if self.samples == 0 {
-            // first sample: initial guess from the linear MPC plan
-            self.solve_lmpc(x0, shift)?;
+            initial_iterations = self.first_sample_start(x0, shift)?;
             lmpc_done = true;
-            self.nmpc_from_lmpc();
-            if self.settings.first_sample_guess == InitialGuess::Decay {
-                let target = match self.initial.as_mut() {
-                    Some(i) => Some(i),
-                    None => self.nmpc.as_mut(),
-                };
-                if let Some(solver) = target {
-                    decay_guess(solver, x0);
-                }
-            } else if let Some(i) = self.initial.as_mut() {
-                copy_plan(&self.lmpc, i);
-            }
-            if let (Some(i), Some(n)) = (self.initial.as_mut(), self.nmpc.as_mut()) {
-                // more iterations from that guess; the NMPC goes on from where they ended
-                let (st, _) = i.solve_with_fallback_starts(x0)?;
-                initial_iterations = st.iterations;
-                if st.status.has_iterate() && plan_finite(i) {
-                    copy_plan(i, n);
-                }
-            }
         } else if let Some(n) = self.nmpc.as_mut() {
             n.shift_time(shift)?;
         }
@@ -910,32 +923,13 @@ fn accepted(st: &ocp_transcription::SqpStats, accept: f64) -> bool {
     }
 }
 
-/// Sets `solver`'s iterate to the [`InitialGuess::Decay`] guess from `x0`.
-pub(crate) fn decay_guess<D: Dynamics>(solver: &mut SqpSolver<D>, x0: &[f64]) {
-    let n = solver.controls().len();
-    let ocp = solver.ocp();
-    let refs: Vec<DVector<f64>> = (0..=n)
-        .map(|k| ocp.x_ref_nodes.get(k).cloned().unwrap_or_else(|| ocp.x_ref.clone()))
-        .collect();
-    let u_ref = ocp.u_ref.clone();
-    for (k, (s, r)) in solver.states_mut().iter_mut().zip(&refs).enumerate() {
-        let w = 1.0 - k as f64 / n as f64;
-        for (i, v) in s.iter_mut().enumerate() {
-            *v = r[i] + w * (x0[i] - r[i]);
-        }
-    }
-    for u in solver.controls_mut() {
-        u.copy_from(&u_ref);
-    }
-}
-
 /// Whether every node and control of `solver`'s iterate is finite.
-fn plan_finite<D: Dynamics>(solver: &SqpSolver<D>) -> bool {
+pub(super) fn plan_finite<D: Dynamics>(solver: &SqpSolver<D>) -> bool {
     solver.states().iter().chain(solver.controls()).all(|v| v.iter().all(|x| x.is_finite()))
 }
 
 /// Copies nodes and controls of `from` into `to` (same problem dimensions).
-fn copy_plan<D: Dynamics>(from: &SqpSolver<D>, to: &mut SqpSolver<D>) {
+pub(super) fn copy_plan<D: Dynamics>(from: &SqpSolver<D>, to: &mut SqpSolver<D>) {
     for (d, s) in to.states_mut().iter_mut().zip(from.states()) {
         d.copy_from(s);
     }

@@ -9,7 +9,7 @@ use proptest::test_runner::{Config, RngSeed};
 use std::sync::OnceLock;
 
 /// The paper's 2D scenario on a coarse mesh (10 elements per link: same mode set, fast).
-fn setup_2d() -> &'static Setup {
+pub(crate) fn setup_2d() -> &'static Setup {
     static S: OnceLock<Setup> = OnceLock::new();
     S.get_or_init(|| Setup::new(&Scenario::paper_2d(10).unwrap()).unwrap())
 }
@@ -843,79 +843,4 @@ fn parallel_intervals_give_the_same_closed_loop_for_any_thread_count() {
     assert!(a.summary.error.is_none(), "{:?}", a.summary);
     assert_eq!(a.without_timings(), c.without_timings());
     assert_eq!(c.summary.solve_threads, 2);
-}
-
-/// The first sample's settings: an iteration limit of 0, or one with the real-time iteration,
-/// is an error naming the field.
-#[test]
-fn first_sample_settings_validation_names_the_field() {
-    let ok =
-        ControllerSettings { first_sample_iterations: Some(30), ..ControllerSettings::full_sqp() };
-    assert!(ok.validate().is_ok());
-    let zero = ControllerSettings { first_sample_iterations: Some(0), ..ok.clone() };
-    assert!(zero.validate().unwrap_err().to_string().contains("first_sample_iterations"));
-    let rti = ControllerSettings { real_time_iteration: true, ..ok };
-    assert!(rti.validate().unwrap_err().to_string().contains("first_sample_iterations"));
-}
-
-/// The decay guess puts the first node at the measured state, the last at the reference and
-/// the others on the line between (weights `1 − k/Nc`), with the reference controls.
-#[test]
-fn decay_guess_runs_from_the_state_to_the_reference() {
-    let setup = setup_2d();
-    let mpc = &setup.scenario.mpc;
-    let model = RomDynamics::new(&setup.rom).unwrap();
-    let (nx, nu) = (model.nx(), model.nu());
-    let ocp = setup.weights.ocp(mpc, nx, nu).unwrap();
-    let x_ref = ocp.x_ref.clone();
-    let mut solver =
-        ocp_transcription::SqpSolver::new(model, ocp, ocp_transcription::SqpSettings::default())
-            .unwrap();
-    let x0: Vec<f64> = (0..nx).map(|i| x_ref[i] + 0.1 * (i as f64 + 1.0)).collect();
-    crate::controller::decay_guess(&mut solver, &x0);
-    let n = mpc.timing.intervals;
-    for (k, s) in solver.states().iter().enumerate() {
-        let w = 1.0 - k as f64 / n as f64;
-        for i in 0..nx {
-            let want = x_ref[i] + w * (x0[i] - x_ref[i]);
-            assert!((s[i] - want).abs() <= 1e-15 * (1.0 + want.abs()), "node {k} entry {i}");
-        }
-    }
-    assert_eq!(solver.states()[0].as_slice(), &x0[..]);
-    assert!(solver.controls().iter().all(|u| u.iter().all(|v| *v == 0.0)));
-}
-
-/// More iterations on the first sample bring its plan closer to the KKT point than the
-/// per-sample limit does, and count in the sample's report; from the decay guess the first
-/// sample iterates too and applies a finite control within the bounds (on this 2D problem it
-/// ends farther from the KKT point than the linear MPC start: the guess is a setting, not a
-/// default).
-#[test]
-fn first_sample_iterations_refine_the_first_plan() {
-    let setup = setup_2d();
-    let s = &setup.scenario;
-    let mut x0: Vec<f64> = setup.weights.x_ref.iter().copied().collect();
-    x0[0] = 1.5; // a fast rigid rotation: two SQP iterations are far from converged
-    let step = |c: &ControllerSettings| {
-        let model = RomDynamics::new(&setup.rom).unwrap();
-        Controller::new(model, &setup.weights, &s.mpc, c).unwrap().step(0.0, &x0).unwrap()
-    };
-    let base = ControllerSettings {
-        max_iterations: 2,
-        retry_relaxation: None,
-        fallback_to_lmpc: false,
-        ..ControllerSettings::full_sqp()
-    };
-    let plain = step(&base);
-    let more = step(&ControllerSettings { first_sample_iterations: Some(30), ..base.clone() });
-    let decay = step(&ControllerSettings {
-        first_sample_iterations: Some(30),
-        first_sample_guess: InitialGuess::Decay,
-        ..base.clone()
-    });
-    assert_eq!(plain.iterations, 2, "{plain:?}");
-    assert!(more.iterations > 2 && more.iterations <= 32, "{more:?}");
-    assert!(more.kkt < plain.kkt, "{} !< {}", more.kkt, plain.kkt);
-    assert!(decay.iterations > 2 && decay.kkt.is_finite(), "{decay:?}");
-    assert!(decay.u.iter().all(|u| u.is_finite() && u.abs() <= s.mpc.cost.u_max + 1e-9));
 }

@@ -120,6 +120,12 @@ pub(super) enum Owner {
 const KEYS: &[(&str, &str, &str)] = &[
     ("controller", "max_iterations", "controller.max_iterations"),
     ("controller", "first_sample_iterations", "controller.first_sample_iterations"),
+    ("controller", "first_sample_continuation", "controller.first_sample_continuation"),
+    (
+        "controller",
+        "first_sample_levenberg_marquardt",
+        "controller.first_sample_levenberg_marquardt",
+    ),
     ("controller", "kkt_tolerance", "controller.kkt_tolerance"),
     ("controller", "accept_violation", "controller.accept_violation"),
     ("controller", "levenberg_marquardt", "controller.levenberg_marquardt"),

@@ -266,6 +266,13 @@ pub struct ControllerSpec {
     /// `decay` (shooting nodes on the line from the measured state to the reference,
     /// reference controls).
     pub first_sample_guess: Option<mpc::InitialGuess>,
+    /// With `first_sample_iterations`: steps `m` (≥ 1) of the continuation in the initial
+    /// state — the first sample's iterations run for `x_r + (j/m)(x0 − x_r)`, `j = 1…m`,
+    /// each from the previous solution (1: none).
+    pub first_sample_continuation: Option<usize>,
+    /// With `first_sample_iterations`: Levenberg–Marquardt term (≥ 0) of the first sample's
+    /// extra iterations (default: `levenberg_marquardt`).
+    pub first_sample_levenberg_marquardt: Option<f64>,
     /// With `line_search = true`: the second-order-corrected merit line search (adaptive
     /// penalty, corrections of the shooting defects) instead of the plain merit line search.
     pub second_order_correction: Option<bool>,

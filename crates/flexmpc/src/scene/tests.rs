@@ -341,13 +341,31 @@ controllers = ["nmpc"]
     check("selection = \"paper-2d\"", "lowest = 0", "lowest = 0", "modes.lowest", "at least 1");
     // the first sample's settings and the corrected line search
     let keys = "substeps = 16\nreal_time_iteration = false\nfirst_sample_iterations = 30\n\
-                first_sample_guess = \"decay\"\nsecond_order_correction = true";
+                first_sample_guess = \"decay\"\nsecond_order_correction = true\n\
+                first_sample_continuation = 4\nfirst_sample_levenberg_marquardt = 1e-2";
     let text = base.replacen("substeps = 16", keys, 1);
     let c = load_str(Path::new("ok.toml"), &text).unwrap_or_else(|e| panic!("{e}"));
     let c = c.control.expect("[scenario]").controller;
     assert_eq!(c.first_sample_iterations, Some(30));
     assert_eq!(c.first_sample_guess, mpc::InitialGuess::Decay);
     assert_eq!(c.globalisation, ocp_transcription::Globalisation::merit_soc());
+    assert_eq!(c.first_sample_continuation, 4);
+    assert_eq!(c.first_sample_levenberg_marquardt, Some(1e-2));
+    check(
+        "substeps = 16",
+        "substeps = 16\nreal_time_iteration = false\nfirst_sample_continuation = 2",
+        "first_sample_continuation = 2",
+        "controller.first_sample_continuation",
+        "needs first_sample_iterations",
+    );
+    check(
+        "substeps = 16",
+        "substeps = 16\nreal_time_iteration = false\nfirst_sample_iterations = 5\n\
+         first_sample_levenberg_marquardt = -1.0",
+        "first_sample_levenberg_marquardt = -1.0",
+        "controller.first_sample_levenberg_marquardt",
+        "≥ 0",
+    );
     check(
         "substeps = 16",
         "substeps = 16\nreal_time_iteration = false\nfirst_sample_iterations = 0",
