@@ -32,6 +32,7 @@ pub(crate) struct PlanarWs {
     pub(super) lacc: Vec<f64>,
     pub(super) w: Vec<f64>,
     pub(super) z: Vec<f64>,
+    /// `Zᵀ` (`m × n`, column-major).
     pub(super) zt: Vec<f64>,
     pub(super) q1: Vec<f64>,
     pub(super) q2: Vec<f64>,
@@ -52,10 +53,10 @@ pub(crate) struct PlanarWs {
     pub(super) xid: Vec<Vector4<f64>>,
     pub(super) mj: Vec<Matrix4<f64>>,
     pub(super) rtmp: Vec<f64>,
-    pub(super) t11: Vec<f64>,
-    pub(super) t12: Vec<f64>,
-    pub(super) u21: Vec<f64>,
-    pub(super) mm: Vec<f64>,
+    /// `J (Z_c p)` (`n + nb`).
+    pub(super) tz: Vec<f64>,
+    /// `J blockdiag(Z, Z2)` (`(n + nb) × max(m, m2)`).
+    pub(super) tzm: Vec<f64>,
     pub(super) dz: Vec<f64>,
     pub(super) kap: Vec<f64>,
     pub(super) af1: Vec<f64>,
@@ -66,7 +67,9 @@ pub(crate) struct PlanarWs {
     pub(super) adag: Vec<f64>,
     pub(super) vc: Vec<f64>,
     pub(super) v2c: Vec<f64>,
-    pub(super) lam: Vec<f64>,
+    /// Running sums of the columns' `Λ` products (`2 r_j`, `4 r r_j`).
+    pub(super) rsum: Vec<f64>,
+    pub(super) lsum: Vec<f64>,
     pub(super) lp: Vec<f64>,
     pub(super) aac: Vec<f64>,
     pub(super) dd: Vec<f64>,
@@ -78,7 +81,6 @@ pub(crate) struct PlanarWs {
     pub(super) gaac: Vec<f64>,
     pub(super) dkp: Vec<f64>,
     pub(super) ddw: Vec<f64>,
-    pub(super) big: Vec<f64>,
     /// Per joint `α = 1…3`: `A A_αᵀ`, `Ȧ A_αᵀ` (`r × r_j`), `A_α P f1` (`r_j`), `A_αᵀ (W p)_j`
     /// (`n`); the stacked `[∂V; V]`, `[W; ∂W]` (`2r × m`) of the columns' `∂(Kp)`.
     pub(super) aa: Vec<f64>,
@@ -112,7 +114,7 @@ fn z(n: usize) -> Vec<f64> {
 
 impl PlanarWs {
     fn new(pl: &Planar, key: Vec<usize>) -> Self {
-        let (n, m, m2, r) = (pl.n, pl.m, pl.m2, pl.r);
+        let (n, m, r) = (pl.n, pl.m, pl.r);
         let nb = pl.ops.w.ncols();
         let nj = pl.joints.len();
         let rx = pl.joints.iter().map(|j| j.rows).max().unwrap_or(0);
@@ -151,10 +153,8 @@ impl PlanarWs {
             xid: vec![Vector4::zeros(); nj],
             mj: vec![Matrix4::zeros(); nj],
             rtmp: z(2 * r),
-            t11: z(m * n),
-            t12: z(m * nb),
-            u21: z(m2.max(nb) * n),
-            mm: z(m * m),
+            tz: z(n + nb),
+            tzm: z((n + nb) * m.max(pl.m2)),
             dz: z(nj * m),
             kap: z(m),
             af1: z(r),
@@ -165,7 +165,8 @@ impl PlanarWs {
             adag: z(r * r),
             vc: z(rx * m),
             v2c: z(rx * m),
-            lam: z(m * m),
+            rsum: z(2 * rx),
+            lsum: z(4 * r * rx),
             lp: z(m),
             aac: z(r * rx),
             dd: z(r),
@@ -177,7 +178,6 @@ impl PlanarWs {
             gaac: z(r * rx),
             dkp: z(m),
             ddw: z(nj),
-            big: z(nb * m2.max(m)),
             aa: z(3 * r * rx),
             ada: z(3 * r * rx),
             apf: z(3 * rx),
