@@ -6,7 +6,7 @@
 use super::Planar;
 use crate::error::{ModalError, Result};
 use crate::exact_joints::frame::{
-    gemv, gemv_t, lowrank_cholesky, lowrank_right_solve_lt, skew_apply,
+    gemv, gemv_t, lowrank_cholesky, lowrank_right_solve_lt, matmul_nn, skew_apply,
 };
 use crate::exact_joints::model::{u_left, u_right};
 use nalgebra::{Matrix4, Vector3, Vector4};
@@ -338,12 +338,13 @@ impl Planar {
         ws.w[..r * m].copy_from_slice(&ws.h[..r * m]);
         lowrank_right_solve_lt(&ws.y, &ws.lh, &ws.ld, r, &mut [(&mut ws.w[..], r)], &mut ws.lacc);
         ws.z[..n * m].copy_from_slice(&self.z0);
+        // (Aᵀ H's columns as sums of A's rows, contiguous in `at`)
         for c in 0..m {
             let h = &ws.h[c * r..(c + 1) * r];
             let zc = &mut ws.z[c * n..(c + 1) * n];
-            for (k, z) in zc.iter_mut().enumerate() {
-                let a = &ws.a[k * r..(k + 1) * r];
-                *z -= (0..r).map(|t| a[t] * h[t]).sum::<f64>();
+            for (t, &ht) in h.iter().enumerate() {
+                let at = &ws.at[t * n..(t + 1) * n];
+                zc.iter_mut().zip(at).for_each(|(z, a)| *z -= ht * a);
             }
         }
         lowrank_right_solve_lt(&ws.y, &ws.lh, &ws.ld, r, &mut [(&mut ws.z[..], n)], &mut ws.lacc);
@@ -413,14 +414,7 @@ impl Planar {
             }
             for jr in &self.joints {
                 let (rj, o) = if R > 0 { (R, 0) } else { (jr.rows, jr.offset) };
-                let aj = &jr.at[al + 1];
-                for c in 0..m {
-                    let zc = &ws.z[c * n..(c + 1) * n];
-                    for t in 0..rj {
-                        let at = &aj[t * n..(t + 1) * n];
-                        az[c * r + o + t] = at.iter().zip(zc).map(|(x, y)| x * y).sum();
-                    }
-                }
+                matmul_nn(&mut az[o..], r, &jr.a[al + 1], rj, &ws.z, n, n, m);
             }
         }
         for (j, jr) in self.joints.iter().enumerate() {
