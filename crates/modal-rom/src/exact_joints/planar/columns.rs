@@ -236,54 +236,47 @@ impl Planar {
                 // ∂V = ∂ȦZ − ȦAᵀG V_c − X1 W_j − VΛᵀ into rows 0..r of sa,
                 // ∂W = G V_c − G A A_cᵀ W_j − WΛᵀ into rows r..2r of sb
                 let dw = ws.dw[j];
+                // per row: (δ_i Z_c p) of the row's joint, and `Δω_j` on joint j's rows
+                for (i, ir) in self.joints.iter().enumerate() {
+                    let (ro, rr) = if R > 0 { (0, R) } else { (ir.offset, ir.rows) };
+                    ws.rowd[ro..ro + rr].fill(ws.ddw[i]);
+                }
                 ws.lsum[..4 * r * rj].fill(0.0);
                 for c in 0..m {
                     let (dv, dwm) =
                         (&mut ws.sa[c * r2..c * r2 + r], &mut ws.sb[c * r2 + r..(c + 1) * r2]);
-                    dv.fill(0.0);
-                    for (i, ir) in self.joints.iter().enumerate() {
-                        let d = ws.ddw[i];
-                        let (ro, rr) = if R > 0 { (0, R) } else { (ir.offset, ir.rows) };
-                        for t in ro..ro + rr {
-                            dv[t] = d * ws.vth[c * r + t];
-                        }
-                    }
-                    for t in 0..rj {
-                        dv[o + t] += dw * ws.v2c[c * rj + t];
-                    }
-                    dwm.fill(0.0);
-                    for t in 0..rj {
-                        let (vct, wct) = (ws.vc[c * rj + t], ws.w[c * r + o + t]);
-                        let (ag, g) = (
-                            &ws.adag[(o + t) * r..(o + t + 1) * r],
-                            &ws.g[(o + t) * r..(o + t + 1) * r],
-                        );
-                        let (x1, ga) = (&ws.x1[t * r..(t + 1) * r], &ws.gaac[t * r..(t + 1) * r]);
-                        for i in 0..r {
-                            dv[i] -= ag[i] * vct + x1[i] * wct;
-                            dwm[i] += g[i] * vct - ga[i] * wct;
-                        }
-                    }
+                    let (wc, vc) = (&ws.w[c * r + o..c * r + o + rj], &ws.vc[c * rj..(c + 1) * rj]);
+                    let v2c = &ws.v2c[c * rj..(c + 1) * rj];
+                    let wv: f64 = (0..rj).map(|t| wc[t] * vc[t]).sum();
+                    let (vcol, wcol) = (&ws.v[c * r..(c + 1) * r], &ws.w[c * r..(c + 1) * r]);
+                    let vth = &ws.vth[c * r..(c + 1) * r];
                     // −(XΛᵀ)_c = Σ_{l<c} X_l (v_lᵀ w_c + w_lᵀ v_c) + X_c w_c·v_c (X = V, W) by
                     // the running sums Σ_{l<c} X_l v_lᵀ, Σ_{l<c} X_l w_lᵀ (r × r_j each)
-                    let (wc, vc) = (&ws.w[c * r + o..c * r + o + rj], &ws.vc[c * rj..(c + 1) * rj]);
-                    let wv: f64 = (0..rj).map(|t| wc[t] * vc[t]).sum();
                     let (pv, rest) = ws.lsum.split_at_mut(r * rj);
                     let (qv, rest) = rest.split_at_mut(r * rj);
                     let (pw, qw) = rest.split_at_mut(r * rj);
-                    let (vcol, wcol) = (&ws.v[c * r..(c + 1) * r], &ws.w[c * r..(c + 1) * r]);
                     for i in 0..r {
+                        let mut sv = ws.rowd[i] * vth[i] + vcol[i] * wv;
+                        let mut sw = wcol[i] * wv;
+                        if i >= o && i < o + rj {
+                            sv += dw * v2c[i - o];
+                        }
+                        for t in 0..rj {
+                            let (vct, wct) = (vc[t], wc[t]);
+                            let k = (o + t) * r + i;
+                            sv -= ws.adag[k] * vct + ws.x1[t * r + i] * wct;
+                            sw += ws.g[k] * vct - ws.gaac[t * r + i] * wct;
+                        }
                         let (pvi, qvi) =
                             (&mut pv[i * rj..(i + 1) * rj], &mut qv[i * rj..(i + 1) * rj]);
                         let (pwi, qwi) =
                             (&mut pw[i * rj..(i + 1) * rj], &mut qw[i * rj..(i + 1) * rj]);
-                        let (mut sv, mut sw) = (vcol[i] * wv, wcol[i] * wv);
                         for t in 0..rj {
                             sv += pvi[t] * wc[t] + qvi[t] * vc[t];
                             sw += pwi[t] * wc[t] + qwi[t] * vc[t];
                         }
-                        dv[i] += sv;
-                        dwm[i] += sw;
+                        dv[i] = sv;
+                        dwm[i] = sw;
                         for t in 0..rj {
                             pvi[t] += vcol[i] * vc[t];
                             qvi[t] += vcol[i] * wc[t];

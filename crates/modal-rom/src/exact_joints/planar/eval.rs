@@ -70,6 +70,8 @@ pub(crate) struct PlanarWs {
     /// Running sums of the columns' `Λ` products (`2 r_j`, `4 r r_j`).
     pub(super) rsum: Vec<f64>,
     pub(super) lsum: Vec<f64>,
+    /// Per row: `δ_i Z_c p` of the row's joint (`r`).
+    pub(super) rowd: Vec<f64>,
     pub(super) lp: Vec<f64>,
     pub(super) aac: Vec<f64>,
     pub(super) dd: Vec<f64>,
@@ -167,6 +169,7 @@ impl PlanarWs {
             v2c: z(rx * m),
             rsum: z(2 * rx),
             lsum: z(4 * r * rx),
+            rowd: z(r),
             lp: z(m),
             aac: z(r * rx),
             dd: z(r),
