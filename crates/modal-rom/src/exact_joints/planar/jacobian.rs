@@ -38,7 +38,29 @@ impl Planar {
         jx: &mut [f64],
         ju: &mut [f64],
     ) {
-        let (n, m, m2, r) = (self.n, self.m, self.m2, self.r);
+        // one revolute joint (two rows): row counts known at compile time
+        if self.r == 2 && self.joints.len() == 1 {
+            self.jacobian_imp::<2>(ws, x, nu, offsets, root, jx, ju)
+        } else {
+            self.jacobian_imp::<0>(ws, x, nu, offsets, root, jx, ju)
+        }
+    }
+
+    /// [`Planar::jacobian`]; `R > 0`: one joint of `R` rows.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn jacobian_imp<const R: usize>(
+        &self,
+        ws: &mut PlanarWs,
+        x: &[f64],
+        nu: usize,
+        offsets: &[usize],
+        root: Option<(usize, f64)>,
+        jx: &mut [f64],
+        ju: &mut [f64],
+    ) {
+        let (n, m, m2) = (self.n, self.m, self.m2);
+        let r = if R > 0 { R } else { self.r };
         let nb = self.ops.w.ncols();
         let ns = ws.ns;
         jx.fill(0.0);
@@ -72,13 +94,13 @@ impl Planar {
         for l in 0..m {
             let (vl, wl) = (&ws.v[l * r..(l + 1) * r], &ws.w[l * r..(l + 1) * r]);
             let col = &mut jx[l * ns..l * ns + m];
-            for (i, c) in col.iter_mut().enumerate() {
-                let (vi, wi) = (&ws.v[i * r..(i + 1) * r], &ws.w[i * r..(i + 1) * r]);
-                if i < l {
-                    *c -= vl.iter().zip(wi).map(|(a, b)| a * b).sum::<f64>();
-                } else if i > l {
-                    *c += vi.iter().zip(wl).map(|(a, b)| a * b).sum::<f64>();
-                }
+            for (i, c) in col[..l].iter_mut().enumerate() {
+                let wi = &ws.w[i * r..(i + 1) * r];
+                *c -= (0..r).map(|t| vl[t] * wi[t]).sum::<f64>();
+            }
+            for (i, c) in col.iter_mut().enumerate().skip(l + 1) {
+                let vi = &ws.v[i * r..(i + 1) * r];
+                *c += (0..r).map(|t| vi[t] * wl[t]).sum::<f64>();
             }
         }
         // Ξ (joint rows: ½ (δ_j Z)_k (−b, a n)) and −κΞ with κ_θj = K(V_θj, W_j) p
