@@ -742,7 +742,7 @@ impl WithSimd for MatmulTn<'_> {
     #[inline(always)]
     fn with_simd<S: Simd>(self, _simd: S) {
         let MatmulTn { out, ldo, a, r, b, ldb, cols } = self;
-        let c = if r == 0 { 0 } else { a.len() / r };
+        let c = a.len().checked_div(r).unwrap_or(0);
         for j in 0..cols {
             let y = &mut out[j * ldo..j * ldo + c];
             column_dots(y, false, a, r, &b[j * ldb..j * ldb + r], 1.0);
