@@ -579,43 +579,173 @@ impl WithSimd for ColumnDots<'_> {
     #[inline(always)]
     fn with_simd<S: Simd>(self, _simd: S) {
         let ColumnDots { y, add, a, r, x, alpha } = self;
-        let full = r / 4 * 4;
-        let put = |y: &mut f64, d: f64| *y = if add { alpha.mul_add(d, *y) } else { alpha * d };
-        let lane_sum = |v: [f64; 4]| (v[0] + v[1]) + (v[2] + v[3]);
-        let c4 = y.len() / 4 * 4;
-        for j in (0..c4).step_by(4) {
-            let cols: [&[f64]; 4] = std::array::from_fn(|b| &a[(j + b) * r..(j + b + 1) * r]);
-            let mut acc = [[0.0f64; 4]; 4];
-            for i in (0..full).step_by(4) {
-                let xv: &[f64; 4] = x[i..i + 4].try_into().expect("chunk");
-                for b in 0..4 {
-                    let cv: &[f64; 4] = cols[b][i..i + 4].try_into().expect("chunk");
-                    for e in 0..4 {
-                        acc[b][e] = cv[e].mul_add(xv[e], acc[b][e]);
-                    }
-                }
-            }
+        column_dots(y, add, a, r, x, alpha);
+    }
+}
+
+/// The body of [`ColumnDots`].
+#[inline(always)]
+fn column_dots(y: &mut [f64], add: bool, a: &[f64], r: usize, x: &[f64], alpha: f64) {
+    let full = r / 4 * 4;
+    let put = |y: &mut f64, d: f64| *y = if add { alpha.mul_add(d, *y) } else { alpha * d };
+    let lane_sum = |v: [f64; 4]| (v[0] + v[1]) + (v[2] + v[3]);
+    let c4 = y.len() / 4 * 4;
+    for j in (0..c4).step_by(4) {
+        let cols: [&[f64]; 4] = std::array::from_fn(|b| &a[(j + b) * r..(j + b + 1) * r]);
+        let mut acc = [[0.0f64; 4]; 4];
+        for i in (0..full).step_by(4) {
+            let xv: &[f64; 4] = x[i..i + 4].try_into().expect("chunk");
             for b in 0..4 {
-                let mut d = lane_sum(acc[b]);
-                for i in full..r {
-                    d = cols[b][i].mul_add(x[i], d);
+                let cv: &[f64; 4] = cols[b][i..i + 4].try_into().expect("chunk");
+                for e in 0..4 {
+                    acc[b][e] = cv[e].mul_add(xv[e], acc[b][e]);
                 }
-                put(&mut y[j + b], d);
             }
         }
-        for j in c4..y.len() {
-            let col = &a[j * r..(j + 1) * r];
-            let mut acc = [0.0f64; 4];
-            for i in (0..full).step_by(4) {
-                for e in 0..4 {
-                    acc[e] = col[i + e].mul_add(x[i + e], acc[e]);
-                }
-            }
-            let mut d = lane_sum(acc);
+        for b in 0..4 {
+            let mut d = lane_sum(acc[b]);
             for i in full..r {
-                d = col[i].mul_add(x[i], d);
+                d = cols[b][i].mul_add(x[i], d);
             }
-            put(&mut y[j], d);
+            put(&mut y[j + b], d);
+        }
+    }
+    for j in c4..y.len() {
+        let col = &a[j * r..(j + 1) * r];
+        let mut acc = [0.0f64; 4];
+        for i in (0..full).step_by(4) {
+            for e in 0..4 {
+                acc[e] = col[i + e].mul_add(x[i + e], acc[e]);
+            }
+        }
+        let mut d = lane_sum(acc);
+        for i in full..r {
+            d = col[i].mul_add(x[i], d);
+        }
+        put(&mut y[j], d);
+    }
+}
+
+/// `out = g x` for column-major `g` (`rows × k`) and `x` (`k × cols`, column stride `ldx`) into
+/// the first `rows` entries of `cols` columns of `out` (column stride `ldo`), under one run-time
+/// dispatch: two columns at a time, rows in blocks of sixteen, eight and four (up to eight
+/// independent accumulator vectors across the `k` fused multiply–adds).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn matmul_nn(
+    out: &mut [f64],
+    ldo: usize,
+    g: &[f64],
+    rows: usize,
+    x: &[f64],
+    ldx: usize,
+    k: usize,
+    cols: usize,
+) {
+    Arch::new().dispatch(MatmulNn { out, ldo, g, rows, x, ldx, k, cols });
+}
+
+struct MatmulNn<'a> {
+    out: &'a mut [f64],
+    ldo: usize,
+    g: &'a [f64],
+    rows: usize,
+    x: &'a [f64],
+    ldx: usize,
+    k: usize,
+    cols: usize,
+}
+
+impl WithSimd for MatmulNn<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) {
+        let MatmulNn { out, ldo, g, rows, x, ldx, k, cols } = self;
+        let g = &g[..rows * k];
+        let mut j = 0;
+        while j + 2 <= cols {
+            let (x0, x1) = (&x[j * ldx..j * ldx + k], &x[(j + 1) * ldx..(j + 1) * ldx + k]);
+            let (o0, o1) = out[j * ldo..(j + 1) * ldo + rows].split_at_mut(ldo);
+            let (o0, o1) = (&mut o0[..rows], &mut o1[..rows]);
+            let mut r0 = 0;
+            r0 = nn_blocks2::<16>(o0, o1, g, rows, x0, x1, r0);
+            r0 = nn_blocks2::<8>(o0, o1, g, rows, x0, x1, r0);
+            r0 = nn_blocks2::<4>(o0, o1, g, rows, x0, x1, r0);
+            nn_blocks2::<1>(o0, o1, g, rows, x0, x1, r0);
+            j += 2;
+        }
+        if j < cols {
+            let x0 = &x[j * ldx..j * ldx + k];
+            let o = &mut out[j * ldo..j * ldo + rows];
+            let r0 = row_blocks::<16>(o, false, g, x0, 1.0, rows, 0);
+            let r0 = row_blocks::<4>(o, false, g, x0, 1.0, rows, r0);
+            row_blocks::<1>(o, false, g, x0, 1.0, rows, r0);
+        }
+    }
+}
+
+/// Rows `r0..` of two columns of [`MatmulNn`] in blocks of `B`; returns the first row not done.
+#[inline(always)]
+fn nn_blocks2<const B: usize>(
+    o0: &mut [f64],
+    o1: &mut [f64],
+    g: &[f64],
+    rows: usize,
+    x0: &[f64],
+    x1: &[f64],
+    mut r0: usize,
+) -> usize {
+    while r0 + B <= rows {
+        let (mut a0, mut a1) = ([0.0; B], [0.0; B]);
+        for (l, (&y0, &y1)) in x0.iter().zip(x1).enumerate() {
+            let c: &[f64; B] = g[l * rows + r0..l * rows + r0 + B].try_into().expect("block");
+            for e in 0..B {
+                a0[e] = y0.mul_add(c[e], a0[e]);
+                a1[e] = y1.mul_add(c[e], a1[e]);
+            }
+        }
+        o0[r0..r0 + B].copy_from_slice(&a0);
+        o1[r0..r0 + B].copy_from_slice(&a1);
+        r0 += B;
+    }
+    r0
+}
+
+/// `out[:, j] = aᵀ b[:, j]` for column-major `a` (`r × c`) and the columns of `b` (`r` rows,
+/// column stride `ldb`) into the columns of `out` (`c` rows from each column's start, stride
+/// `ldo`), under one run-time dispatch ([`gemv_t`]'s four-column dot products).
+pub(crate) fn matmul_tn(
+    out: &mut [f64],
+    ldo: usize,
+    a: &[f64],
+    r: usize,
+    b: &[f64],
+    ldb: usize,
+    cols: usize,
+) {
+    Arch::new().dispatch(MatmulTn { out, ldo, a, r, b, ldb, cols });
+}
+
+struct MatmulTn<'a> {
+    out: &'a mut [f64],
+    ldo: usize,
+    a: &'a [f64],
+    r: usize,
+    b: &'a [f64],
+    ldb: usize,
+    cols: usize,
+}
+
+impl WithSimd for MatmulTn<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) {
+        let MatmulTn { out, ldo, a, r, b, ldb, cols } = self;
+        let c = a.len().checked_div(r).unwrap_or(0);
+        for j in 0..cols {
+            let y = &mut out[j * ldo..j * ldo + c];
+            column_dots(y, false, a, r, &b[j * ldb..j * ldb + r], 1.0);
         }
     }
 }

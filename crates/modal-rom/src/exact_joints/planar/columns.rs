@@ -1,12 +1,13 @@
 //! The in-plane joint-quaternion columns of the planar Jacobian (formulas in
 //! [`super::jacobian`]): per joint, the pieces linear in `A_α` (`A A_αᵀ`, `Ȧ A_αᵀ`, `A_α P f1`,
 //! `A_αᵀ (W p)_j`) once, each column `c` combining them with `∂w_α/∂ξ_c` (`w = (1, c, s, ρ)`);
-//! `Λ_c` formed explicitly (`m × m`, rank `2r_j`), and `∂(Kp) = K(∂V, W)p + K(V, ∂W)p` as one
-//! skew application on the stacked `[∂V; V]`, `[W; ∂W]` (`K` is bilinear in its row sums).
+//! `Λ_c` (`m × m`, rank `2r_j`) applied by running sums of its generators, never formed; and
+//! `∂(Kp) = K(∂V, W)p + K(V, ∂W)p` as one skew application on the stacked `[∂V; V]`, `[W; ∂W]`
+//! (`K` is bilinear in its row sums).
 
 use super::eval::PlanarWs;
 use super::Planar;
-use crate::exact_joints::frame::{gemv, gemv_t, skew_apply};
+use crate::exact_joints::frame::{gemv, gemv_t, matmul_nn, skew_apply};
 use nalgebra::Vector4;
 
 impl Planar {
@@ -133,20 +134,25 @@ impl Planar {
                         ws.v2c[col * rj + t] = d2[0] * ws.az[0][i] + d2[1] * ws.az[1][i];
                     }
                 }
-                // Λ = Φ(−(W_jᵀV_c + V_cᵀW_j)) (lower triangle, column-major)
-                for l in 0..m {
+                // Λ = Φ(−(W_jᵀV_c + V_cᵀW_j)) is never formed: Λ_il = −(w_i·v_l + w_l·v_i)
+                // (i > l), −w_l·v_l (i = l) with w_l, v_l the columns of W_j, V_c, so Λᵀp and
+                // Λy take suffix and prefix sums of p_i w_i, p_i v_i (r_j entries each);
+                // Λᵀp: lp_l = −v_l·Σ_{i>l} p_i w_i − w_l·Σ_{i>l} p_i v_i − p_l w_l·v_l
+                let (sw, sv) = ws.rsum.split_at_mut(rj);
+                let sv = &mut sv[..rj];
+                sw.fill(0.0);
+                sv.fill(0.0);
+                for l in (0..m).rev() {
                     let (wl, vl) = (&ws.w[l * r + o..l * r + o + rj], &ws.vc[l * rj..(l + 1) * rj]);
-                    let lam = &mut ws.lam[l * m..(l + 1) * m];
-                    lam[l] = -(0..rj).map(|t| wl[t] * vl[t]).sum::<f64>();
-                    for i in l + 1..m {
-                        let (wi, vi) =
-                            (&ws.w[i * r + o..i * r + o + rj], &ws.vc[i * rj..(i + 1) * rj]);
-                        lam[i] = -(0..rj).map(|t| wi[t] * vl[t] + wl[t] * vi[t]).sum::<f64>();
+                    let mut d = 0.0;
+                    for t in 0..rj {
+                        d += vl[t] * sw[t] + wl[t] * sv[t] + p[l] * (wl[t] * vl[t]);
                     }
-                }
-                for l in 0..m {
-                    let lam = &ws.lam[l * m + l..(l + 1) * m];
-                    ws.lp[l] = lam.iter().zip(&p[l..]).map(|(a, b)| a * b).sum();
+                    ws.lp[l] = -d;
+                    for t in 0..rj {
+                        sw[t] += p[l] * wl[t];
+                        sv[t] += p[l] * vl[t];
+                    }
                 }
                 // d = V_c p − A A_cᵀ (W p)_j, G d
                 let wpj = &ws.wp[o..o + rj];
@@ -162,11 +168,26 @@ impl Planar {
                 }
                 gemv(&mut ws.zcp, true, &ws.z, n, &ws.lp, -1.0);
                 // Z_cᵀ f1 + ZᵀJ11 Z_c p = ZᵀJ11 Z_c p − V_cᵀ(GAf1)_j − W_jᵀ A_c P f1 − Λ Zᵀf1
-                gemv(&mut ws.colp, false, &ws.t11, m, &ws.zcp, 1.0);
-                // (Λ Zᵀf1 by columns of Λ)
-                for (l, &y) in ws.ztf.iter().enumerate() {
-                    let lam = &ws.lam[l * m + l..(l + 1) * m];
-                    ws.colp[l..].iter_mut().zip(lam).for_each(|(c, a)| *c -= a * y);
+                // (J11 Z_c p; J21 Z_c p) by `matmul_nn`, then Zᵀ of the upper rows
+                matmul_nn(&mut ws.tz, nf, &ws.jf[..nf * n], nf, &ws.zcp, n, n, 1);
+                gemv_t(&mut ws.colp, false, &ws.z[..n * m], n, &ws.tz[..n], 1.0);
+                // (Λ Zᵀf1 by prefix sums: (Λy)_i = −w_i·Σ_{l<i} y_l v_l − v_i·Σ_{l<i} y_l w_l
+                // − y_i w_i·v_i)
+                let (sw, sv) = ws.rsum.split_at_mut(rj);
+                let sv = &mut sv[..rj];
+                sw.fill(0.0);
+                sv.fill(0.0);
+                for (i, &y) in ws.ztf.iter().enumerate() {
+                    let (wi, vi) = (&ws.w[i * r + o..i * r + o + rj], &ws.vc[i * rj..(i + 1) * rj]);
+                    let mut d = 0.0;
+                    for t in 0..rj {
+                        d += wi[t] * sv[t] + vi[t] * sw[t] + y * (wi[t] * vi[t]);
+                    }
+                    ws.colp[i] += d;
+                    for t in 0..rj {
+                        sw[t] += y * wi[t];
+                        sv[t] += y * vi[t];
+                    }
                 }
                 let (gaf, dcp) = (&ws.gaf[o..o + rj], &ws.dcp[..rj]);
                 for (i, c) in ws.colp.iter_mut().enumerate() {
@@ -177,14 +198,9 @@ impl Planar {
                 let col = offsets[j] + ci;
                 let jc = &mut jx[col * ns..(col + 1) * ns];
                 if self.z2_identity {
-                    let u2 = &mut jc[m..m + m2];
-                    u2.fill(0.0);
-                    for (k, &zk) in ws.zcp.iter().enumerate() {
-                        let src = &ws.jf[k * nf + n..k * nf + n + m2];
-                        u2.iter_mut().zip(src).for_each(|(u, s)| *u += zk * s);
-                    }
+                    jc[m..m + m2].copy_from_slice(&ws.tz[n..nf]);
                 } else {
-                    gemv(&mut jc[m..m + m2], false, &ws.u21, m2, &ws.zcp, 1.0);
+                    gemv_t(&mut jc[m..m + m2], false, &self.z2, nb, &ws.tz[n..nf], 1.0);
                 }
                 for (i, ir) in self.joints.iter().enumerate() {
                     let d: f64 = ir.delta.iter().zip(&ws.zcp).map(|(a, b)| a * b).sum();
@@ -220,42 +236,53 @@ impl Planar {
                 // ∂V = ∂ȦZ − ȦAᵀG V_c − X1 W_j − VΛᵀ into rows 0..r of sa,
                 // ∂W = G V_c − G A A_cᵀ W_j − WΛᵀ into rows r..2r of sb
                 let dw = ws.dw[j];
+                // per row: (δ_i Z_c p) of the row's joint, and `Δω_j` on joint j's rows
+                for (i, ir) in self.joints.iter().enumerate() {
+                    let (ro, rr) = if R > 0 { (0, R) } else { (ir.offset, ir.rows) };
+                    ws.rowd[ro..ro + rr].fill(ws.ddw[i]);
+                }
+                ws.lsum[..4 * r * rj].fill(0.0);
                 for c in 0..m {
                     let (dv, dwm) =
                         (&mut ws.sa[c * r2..c * r2 + r], &mut ws.sb[c * r2 + r..(c + 1) * r2]);
-                    dv.fill(0.0);
-                    for (i, ir) in self.joints.iter().enumerate() {
-                        let d = ws.ddw[i];
-                        let (ro, rr) = if R > 0 { (0, R) } else { (ir.offset, ir.rows) };
-                        for t in ro..ro + rr {
-                            dv[t] = d * ws.vth[c * r + t];
-                        }
-                    }
-                    for t in 0..rj {
-                        dv[o + t] += dw * ws.v2c[c * rj + t];
-                    }
-                    dwm.fill(0.0);
-                    for t in 0..rj {
-                        let (vct, wct) = (ws.vc[c * rj + t], ws.w[c * r + o + t]);
-                        let (ag, g) = (
-                            &ws.adag[(o + t) * r..(o + t + 1) * r],
-                            &ws.g[(o + t) * r..(o + t + 1) * r],
-                        );
-                        let (x1, ga) = (&ws.x1[t * r..(t + 1) * r], &ws.gaac[t * r..(t + 1) * r]);
-                        for i in 0..r {
-                            dv[i] -= ag[i] * vct + x1[i] * wct;
-                            dwm[i] += g[i] * vct - ga[i] * wct;
-                        }
-                    }
+                    let (wc, vc) = (&ws.w[c * r + o..c * r + o + rj], &ws.vc[c * rj..(c + 1) * rj]);
+                    let v2c = &ws.v2c[c * rj..(c + 1) * rj];
+                    let wv: f64 = (0..rj).map(|t| wc[t] * vc[t]).sum();
+                    let (vcol, wcol) = (&ws.v[c * r..(c + 1) * r], &ws.w[c * r..(c + 1) * r]);
+                    let vth = &ws.vth[c * r..(c + 1) * r];
+                    // −(XΛᵀ)_c = Σ_{l<c} X_l (v_lᵀ w_c + w_lᵀ v_c) + X_c w_c·v_c (X = V, W) by
+                    // the running sums Σ_{l<c} X_l v_lᵀ, Σ_{l<c} X_l w_lᵀ (r × r_j each)
+                    let (pv, rest) = ws.lsum.split_at_mut(r * rj);
+                    let (qv, rest) = rest.split_at_mut(r * rj);
+                    let (pw, qw) = rest.split_at_mut(r * rj);
                     for i in 0..r {
-                        let (mut sv, mut sw) = (0.0, 0.0);
-                        for l in 0..=c {
-                            let lam = ws.lam[l * m + c];
-                            sv += lam * ws.v[l * r + i];
-                            sw += lam * ws.w[l * r + i];
+                        let mut sv = ws.rowd[i] * vth[i] + vcol[i] * wv;
+                        let mut sw = wcol[i] * wv;
+                        if i >= o && i < o + rj {
+                            sv += dw * v2c[i - o];
                         }
-                        dv[i] -= sv;
-                        dwm[i] -= sw;
+                        for t in 0..rj {
+                            let (vct, wct) = (vc[t], wc[t]);
+                            let k = (o + t) * r + i;
+                            sv -= ws.adag[k] * vct + ws.x1[t * r + i] * wct;
+                            sw += ws.g[k] * vct - ws.gaac[t * r + i] * wct;
+                        }
+                        let (pvi, qvi) =
+                            (&mut pv[i * rj..(i + 1) * rj], &mut qv[i * rj..(i + 1) * rj]);
+                        let (pwi, qwi) =
+                            (&mut pw[i * rj..(i + 1) * rj], &mut qw[i * rj..(i + 1) * rj]);
+                        for t in 0..rj {
+                            sv += pvi[t] * wc[t] + qvi[t] * vc[t];
+                            sw += pwi[t] * wc[t] + qwi[t] * vc[t];
+                        }
+                        dv[i] = sv;
+                        dwm[i] = sw;
+                        for t in 0..rj {
+                            pvi[t] += vcol[i] * vc[t];
+                            qvi[t] += vcol[i] * wc[t];
+                            pwi[t] += wcol[i] * vc[t];
+                            qwi[t] += wcol[i] * wc[t];
+                        }
                     }
                 }
                 ws.dkp.fill(0.0);

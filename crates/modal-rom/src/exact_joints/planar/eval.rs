@@ -6,7 +6,7 @@
 use super::Planar;
 use crate::error::{ModalError, Result};
 use crate::exact_joints::frame::{
-    gemv, gemv_t, lowrank_cholesky, lowrank_right_solve_lt, skew_apply,
+    gemv, gemv_t, lowrank_cholesky, lowrank_right_solve_lt, matmul_nn, skew_apply,
 };
 use crate::exact_joints::model::{u_left, u_right};
 use nalgebra::{Matrix4, Vector3, Vector4};
@@ -32,6 +32,7 @@ pub(crate) struct PlanarWs {
     pub(super) lacc: Vec<f64>,
     pub(super) w: Vec<f64>,
     pub(super) z: Vec<f64>,
+    /// `Zᵀ` (`m × n`, column-major).
     pub(super) zt: Vec<f64>,
     pub(super) q1: Vec<f64>,
     pub(super) q2: Vec<f64>,
@@ -52,10 +53,10 @@ pub(crate) struct PlanarWs {
     pub(super) xid: Vec<Vector4<f64>>,
     pub(super) mj: Vec<Matrix4<f64>>,
     pub(super) rtmp: Vec<f64>,
-    pub(super) t11: Vec<f64>,
-    pub(super) t12: Vec<f64>,
-    pub(super) u21: Vec<f64>,
-    pub(super) mm: Vec<f64>,
+    /// `J (Z_c p)` (`n + nb`).
+    pub(super) tz: Vec<f64>,
+    /// `J blockdiag(Z, Z2)` (`(n + nb) × max(m, m2)`).
+    pub(super) tzm: Vec<f64>,
     pub(super) dz: Vec<f64>,
     pub(super) kap: Vec<f64>,
     pub(super) af1: Vec<f64>,
@@ -66,7 +67,11 @@ pub(crate) struct PlanarWs {
     pub(super) adag: Vec<f64>,
     pub(super) vc: Vec<f64>,
     pub(super) v2c: Vec<f64>,
-    pub(super) lam: Vec<f64>,
+    /// Running sums of the columns' `Λ` products (`2 r_j`, `4 r r_j`).
+    pub(super) rsum: Vec<f64>,
+    pub(super) lsum: Vec<f64>,
+    /// Per row: `δ_i Z_c p` of the row's joint (`r`).
+    pub(super) rowd: Vec<f64>,
     pub(super) lp: Vec<f64>,
     pub(super) aac: Vec<f64>,
     pub(super) dd: Vec<f64>,
@@ -78,7 +83,6 @@ pub(crate) struct PlanarWs {
     pub(super) gaac: Vec<f64>,
     pub(super) dkp: Vec<f64>,
     pub(super) ddw: Vec<f64>,
-    pub(super) big: Vec<f64>,
     /// Per joint `α = 1…3`: `A A_αᵀ`, `Ȧ A_αᵀ` (`r × r_j`), `A_α P f1` (`r_j`), `A_αᵀ (W p)_j`
     /// (`n`); the stacked `[∂V; V]`, `[W; ∂W]` (`2r × m`) of the columns' `∂(Kp)`.
     pub(super) aa: Vec<f64>,
@@ -112,7 +116,7 @@ fn z(n: usize) -> Vec<f64> {
 
 impl PlanarWs {
     fn new(pl: &Planar, key: Vec<usize>) -> Self {
-        let (n, m, m2, r) = (pl.n, pl.m, pl.m2, pl.r);
+        let (n, m, r) = (pl.n, pl.m, pl.r);
         let nb = pl.ops.w.ncols();
         let nj = pl.joints.len();
         let rx = pl.joints.iter().map(|j| j.rows).max().unwrap_or(0);
@@ -151,10 +155,8 @@ impl PlanarWs {
             xid: vec![Vector4::zeros(); nj],
             mj: vec![Matrix4::zeros(); nj],
             rtmp: z(2 * r),
-            t11: z(m * n),
-            t12: z(m * nb),
-            u21: z(m2.max(nb) * n),
-            mm: z(m * m),
+            tz: z(n + nb),
+            tzm: z((n + nb) * m.max(pl.m2)),
             dz: z(nj * m),
             kap: z(m),
             af1: z(r),
@@ -165,7 +167,9 @@ impl PlanarWs {
             adag: z(r * r),
             vc: z(rx * m),
             v2c: z(rx * m),
-            lam: z(m * m),
+            rsum: z(2 * rx),
+            lsum: z(4 * r * rx),
+            rowd: z(r),
             lp: z(m),
             aac: z(r * rx),
             dd: z(r),
@@ -177,7 +181,6 @@ impl PlanarWs {
             gaac: z(r * rx),
             dkp: z(m),
             ddw: z(nj),
-            big: z(nb * m2.max(m)),
             aa: z(3 * r * rx),
             ada: z(3 * r * rx),
             apf: z(3 * rx),
@@ -338,12 +341,13 @@ impl Planar {
         ws.w[..r * m].copy_from_slice(&ws.h[..r * m]);
         lowrank_right_solve_lt(&ws.y, &ws.lh, &ws.ld, r, &mut [(&mut ws.w[..], r)], &mut ws.lacc);
         ws.z[..n * m].copy_from_slice(&self.z0);
+        // (Aᵀ H's columns as sums of A's rows, contiguous in `at`)
         for c in 0..m {
             let h = &ws.h[c * r..(c + 1) * r];
             let zc = &mut ws.z[c * n..(c + 1) * n];
-            for (k, z) in zc.iter_mut().enumerate() {
-                let a = &ws.a[k * r..(k + 1) * r];
-                *z -= (0..r).map(|t| a[t] * h[t]).sum::<f64>();
+            for (t, &ht) in h.iter().enumerate() {
+                let at = &ws.at[t * n..(t + 1) * n];
+                zc.iter_mut().zip(at).for_each(|(z, a)| *z -= ht * a);
             }
         }
         lowrank_right_solve_lt(&ws.y, &ws.lh, &ws.ld, r, &mut [(&mut ws.z[..], n)], &mut ws.lacc);
@@ -413,14 +417,7 @@ impl Planar {
             }
             for jr in &self.joints {
                 let (rj, o) = if R > 0 { (R, 0) } else { (jr.rows, jr.offset) };
-                let aj = &jr.at[al + 1];
-                for c in 0..m {
-                    let zc = &ws.z[c * n..(c + 1) * n];
-                    for t in 0..rj {
-                        let at = &aj[t * n..(t + 1) * n];
-                        az[c * r + o + t] = at.iter().zip(zc).map(|(x, y)| x * y).sum();
-                    }
-                }
+                matmul_nn(&mut az[o..], r, &jr.a[al + 1], rj, &ws.z, n, n, m);
             }
         }
         for (j, jr) in self.joints.iter().enumerate() {

@@ -16,12 +16,12 @@
 
 use super::eval::PlanarWs;
 use super::Planar;
-use crate::exact_joints::frame::{gemm, skew_apply, view, view_mut};
+use crate::exact_joints::frame::{gemv_t, matmul_nn, matmul_tn, skew_apply};
 use nalgebra::Vector4;
 
 /// `y = aᵀ x` (`a`: `x.len() × y.len()`, column-major).
 fn mtv(y: &mut [f64], a: &[f64], x: &[f64]) {
-    crate::exact_joints::frame::gemv_t(y, false, a, x.len(), x, 1.0);
+    gemv_t(y, false, a, x.len(), x, 1.0);
 }
 
 impl Planar {
@@ -38,63 +38,69 @@ impl Planar {
         jx: &mut [f64],
         ju: &mut [f64],
     ) {
-        let (n, m, m2, r) = (self.n, self.m, self.m2, self.r);
+        // one revolute joint (two rows): row counts known at compile time
+        if self.r == 2 && self.joints.len() == 1 {
+            self.jacobian_imp::<2>(ws, x, nu, offsets, root, jx, ju)
+        } else {
+            self.jacobian_imp::<0>(ws, x, nu, offsets, root, jx, ju)
+        }
+    }
+
+    /// [`Planar::jacobian`]; `R > 0`: one joint of `R` rows.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn jacobian_imp<const R: usize>(
+        &self,
+        ws: &mut PlanarWs,
+        x: &[f64],
+        nu: usize,
+        offsets: &[usize],
+        root: Option<(usize, f64)>,
+        jx: &mut [f64],
+        ju: &mut [f64],
+    ) {
+        let (n, m, m2) = (self.n, self.m, self.m2);
+        let r = if R > 0 { R } else { self.r };
         let nb = self.ops.w.ncols();
         let ns = ws.ns;
         jx.fill(0.0);
         ju.fill(0.0);
         let nf = n + nb;
-        let jf = view(&ws.jf, nf, nf);
-        let (z, zt) = (view(&ws.z, n, m), view(&ws.zt, m, n));
-        gemm(view_mut(&mut ws.t11, m, n), false, zt, jf.submatrix(0, 0, n, n), 1.0);
-        gemm(view_mut(jx, ns, ns).submatrix_mut(0, 0, m, m), false, view(&ws.t11, m, n), z, 1.0);
-        gemm(view_mut(&mut ws.t12, m, nb), false, zt, jf.submatrix(0, n, n, nb), 1.0);
-        let (j21, j22) = (jf.submatrix(n, 0, nb, n), jf.submatrix(n, n, nb, nb));
+        // [J11 J12; J21 J22] blockdiag(Z, Z2) (`T`, nf rows), then Zᵀ T's upper rows and
+        // Z2ᵀ T's lower rows; with `Z2 = I` the lower rows and `J`'s own columns as they are
+        let zm = &ws.z[..n * m];
+        let zt = &ws.zt[..m * n];
+        let t = &mut ws.tzm[..nf * m];
+        matmul_nn(t, nf, &ws.jf[..nf * n], nf, zm, n, n, m);
+        matmul_nn(jx, ns, zt, m, t, nf, n, m);
         if self.z2_identity {
-            view_mut(jx, ns, ns).submatrix_mut(0, m, m, m2).copy_from(view(&ws.t12, m, nb));
-            gemm(view_mut(jx, ns, ns).submatrix_mut(m, 0, m2, m), false, j21, z, 1.0);
-            view_mut(jx, ns, ns).submatrix_mut(m, m, m2, m2).copy_from(j22);
+            for k in 0..m {
+                jx[k * ns + m..k * ns + m + m2].copy_from_slice(&t[k * nf + n..(k + 1) * nf]);
+            }
+            matmul_nn(&mut jx[m * ns..], ns, zt, m, &ws.jf[n * nf..], nf, n, m2);
+            for k in 0..m2 {
+                let src = &ws.jf[(n + k) * nf + n..(n + k + 1) * nf];
+                jx[(m + k) * ns + m..(m + k) * ns + m + m2].copy_from_slice(src);
+            }
         } else {
-            let z2 = view(&self.z2, nb, m2);
-            gemm(
-                view_mut(jx, ns, ns).submatrix_mut(0, m, m, m2),
-                false,
-                view(&ws.t12, m, nb),
-                z2,
-                1.0,
-            );
-            gemm(view_mut(&mut ws.u21, m2, n), false, z2.transpose(), j21, 1.0);
-            gemm(
-                view_mut(jx, ns, ns).submatrix_mut(m, 0, m2, m),
-                false,
-                view(&ws.u21, m2, n),
-                z,
-                1.0,
-            );
-            gemm(view_mut(&mut ws.big, nb, m2), false, j22, z2, 1.0);
-            gemm(
-                view_mut(jx, ns, ns).submatrix_mut(m, m, m2, m2),
-                false,
-                z2.transpose(),
-                view(&ws.big, nb, m2),
-                1.0,
-            );
+            let z2 = &self.z2[..nb * m2];
+            matmul_tn(&mut jx[m..], ns, z2, nb, &t[n..], nf, m);
+            let t2 = &mut ws.tzm[..nf * m2];
+            matmul_nn(t2, nf, &ws.jf[n * nf..nf * nf], nf, z2, nb, nb, m2);
+            matmul_nn(&mut jx[m * ns..], ns, zt, m, t2, nf, n, m2);
+            matmul_tn(&mut jx[m * ns + m..], ns, z2, nb, &t2[n..], nf, m2);
         }
         // − K: K_il = M_li (i < l), −M_il (i > l), M = VᵀW
-        gemm(
-            view_mut(&mut ws.mm, m, m),
-            false,
-            view(&ws.v, r, m).transpose(),
-            view(&ws.w, r, m),
-            1.0,
-        );
         for l in 0..m {
+            let (vl, wl) = (&ws.v[l * r..(l + 1) * r], &ws.w[l * r..(l + 1) * r]);
             let col = &mut jx[l * ns..l * ns + m];
-            for i in 0..l {
-                col[i] -= ws.mm[i * m + l];
+            for (i, c) in col[..l].iter_mut().enumerate() {
+                let wi = &ws.w[i * r..(i + 1) * r];
+                *c -= (0..r).map(|t| vl[t] * wi[t]).sum::<f64>();
             }
-            for i in l + 1..m {
-                col[i] += ws.mm[l * m + i];
+            for (i, c) in col.iter_mut().enumerate().skip(l + 1) {
+                let vi = &ws.v[i * r..(i + 1) * r];
+                *c += (0..r).map(|t| vi[t] * wl[t]).sum::<f64>();
             }
         }
         // Ξ (joint rows: ½ (δ_j Z)_k (−b, a n)) and −κΞ with κ_θj = K(V_θj, W_j) p
@@ -145,13 +151,9 @@ impl Planar {
                 }
             }
         }
-        gemm(
-            view_mut(ju, ns, nu).submatrix_mut(0, 0, m, nu),
-            false,
-            zt,
-            self.ops.b_u.as_ref(),
-            1.0,
-        );
+        for k in 0..nu {
+            gemv_t(&mut ju[k * ns..k * ns + m], false, zm, n, self.ops.b_u.col_as_slice(k), 1.0);
+        }
         if !self.joints.is_empty() {
             self.joint_columns(ws, x, offsets, root.map(|(o, _)| o), jx);
         }
