@@ -12,7 +12,7 @@
 //! of [`super::jacobian`] for the formulas.
 
 use crate::exact_joints::eval::{RateMap, Workspace};
-use crate::exact_joints::frame::{gemm, gemv, gemv_t, view, view_mut};
+use crate::exact_joints::frame::{gemm, gemv, gemv_t, small_size, view, view_mut};
 use crate::exact_joints::model::ExactJointsRom;
 use faer::traits::pulp::{Arch, Simd, WithSimd};
 use nalgebra::Vector4;
@@ -161,35 +161,19 @@ impl WithSimd for Kernel<'_> {
     #[inline(always)]
     fn with_simd<S: Simd>(self, _simd: S) {
         match self {
-            Kernel::Phi { a, w, ra, p, upper, alpha, out, sa, sw } => match ra {
-                // the running sums in registers: `ra` as a constant
-                1 => phi_apply_const::<1>(a, w, p, upper, alpha, out),
-                2 => phi_apply_const::<2>(a, w, p, upper, alpha, out),
-                3 => phi_apply_const::<3>(a, w, p, upper, alpha, out),
-                4 => phi_apply_const::<4>(a, w, p, upper, alpha, out),
-                5 => phi_apply_const::<5>(a, w, p, upper, alpha, out),
-                6 => phi_apply_const::<6>(a, w, p, upper, alpha, out),
-                _ => phi_apply_lanes(a, w, ra, p, upper, alpha, out, sa, sw),
-            },
-            Kernel::RightPhi { pm, q, a, w, ra, m, out, s1, s2, dl } => match ra {
-                // the running sums of one row in registers: `ra` as a constant
-                1 => right_phi_t_rows::<1>(pm, q, a, w, m, out, dl),
-                2 => right_phi_t_rows::<2>(pm, q, a, w, m, out, dl),
-                3 => right_phi_t_rows::<3>(pm, q, a, w, m, out, dl),
-                4 => right_phi_t_rows::<4>(pm, q, a, w, m, out, dl),
-                5 => right_phi_t_rows::<5>(pm, q, a, w, m, out, dl),
-                6 => right_phi_t_rows::<6>(pm, q, a, w, m, out, dl),
-                _ => right_phi_t_lanes(pm, q, a, w, ra, m, out, s1, s2),
-            },
-            Kernel::Kappa { a, w, ra, p, out, sa, sw } => match ra {
-                1 => kappa_const::<1>(a, w, p, out),
-                2 => kappa_const::<2>(a, w, p, out),
-                3 => kappa_const::<3>(a, w, p, out),
-                4 => kappa_const::<4>(a, w, p, out),
-                5 => kappa_const::<5>(a, w, p, out),
-                6 => kappa_const::<6>(a, w, p, out),
-                _ => kappa_lanes(a, w, ra, p, out, sa, sw),
-            },
+            Kernel::Phi { a, w, ra, p, upper, alpha, out, sa, sw } => small_size!(
+                ra,
+                phi_apply_const(a, w, p, upper, alpha, out),
+                phi_apply_lanes(a, w, ra, p, upper, alpha, out, sa, sw)
+            ),
+            Kernel::RightPhi { pm, q, a, w, ra, m, out, s1, s2, dl } => small_size!(
+                ra,
+                right_phi_t_rows(pm, q, a, w, m, out, dl),
+                right_phi_t_lanes(pm, q, a, w, ra, m, out, s1, s2)
+            ),
+            Kernel::Kappa { a, w, ra, p, out, sa, sw } => {
+                small_size!(ra, kappa_const(a, w, p, out), kappa_lanes(a, w, ra, p, out, sa, sw))
+            }
             Kernel::Skew { dvw, pvw, rj, p, t, sd, sv } => match rj {
                 1 => skew_const::<2>(dvw, pvw, p, t),
                 2 => skew_const::<4>(dvw, pvw, p, t),

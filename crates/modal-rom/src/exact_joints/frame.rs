@@ -14,6 +14,24 @@ use faer::linalg::matmul::matmul;
 use faer::traits::pulp::{Arch, Simd, WithSimd};
 use faer::{Accum, MatMut, MatRef, Par};
 
+/// `match n { 1 => f::<1>(args), …, 6 => f::<6>(args), _ => fallback }`: a small run-time size
+/// (a joint's row count) as a compile-time constant, so a kernel's running sums stay in
+/// registers; larger sizes take `fallback`.
+macro_rules! small_size {
+    ($n:expr, $f:ident($($arg:expr),* $(,)?), $fallback:expr) => {
+        match $n {
+            1 => $f::<1>($($arg),*),
+            2 => $f::<2>($($arg),*),
+            3 => $f::<3>($($arg),*),
+            4 => $f::<4>($($arg),*),
+            5 => $f::<5>($($arg),*),
+            6 => $f::<6>($($arg),*),
+            _ => $fallback,
+        }
+    };
+}
+pub(crate) use small_size;
+
 /// `r × c` column-major view of `d`.
 pub(crate) fn view(d: &[f64], r: usize, c: usize) -> MatRef<'_, f64> {
     MatRef::from_column_major_slice(&d[..r * c], r, c)
@@ -137,15 +155,7 @@ impl WithSimd for SkewApply<'_> {
     #[inline(always)]
     fn with_simd<S: Simd>(self, _simd: S) {
         let SkewApply { a, b, r, p, out, tmp } = self;
-        match r {
-            1 => skew_apply_const::<1>(a, b, p, out),
-            2 => skew_apply_const::<2>(a, b, p, out),
-            3 => skew_apply_const::<3>(a, b, p, out),
-            4 => skew_apply_const::<4>(a, b, p, out),
-            5 => skew_apply_const::<5>(a, b, p, out),
-            6 => skew_apply_const::<6>(a, b, p, out),
-            _ => skew_apply_imp(a, b, r, p, out, tmp),
-        }
+        small_size!(r, skew_apply_const(a, b, p, out), skew_apply_imp(a, b, r, p, out, tmp))
     }
 }
 
@@ -222,15 +232,11 @@ impl WithSimd for LowrankCholesky<'_> {
     #[inline(always)]
     fn with_simd<S: Simd>(self, _simd: S) -> bool {
         let LowrankCholesky { y, q, m, d, h, mm, g, tol } = self;
-        match q {
-            1 => lowrank_cholesky_const::<1>(y, m, d, h, tol),
-            2 => lowrank_cholesky_const::<2>(y, m, d, h, tol),
-            3 => lowrank_cholesky_const::<3>(y, m, d, h, tol),
-            4 => lowrank_cholesky_const::<4>(y, m, d, h, tol),
-            5 => lowrank_cholesky_const::<5>(y, m, d, h, tol),
-            6 => lowrank_cholesky_const::<6>(y, m, d, h, tol),
-            _ => lowrank_cholesky_imp(y, q, m, d, h, mm, g, tol),
-        }
+        small_size!(
+            q,
+            lowrank_cholesky_const(y, m, d, h, tol),
+            lowrank_cholesky_imp(y, q, m, d, h, mm, g, tol)
+        )
     }
 }
 
@@ -371,15 +377,11 @@ impl WithSimd for RightSolve<'_, '_> {
     fn with_simd<S: Simd>(self, _simd: S) {
         let RightSolve { y, h, d, q, xs, acc } = self;
         // `q` as a constant: the `q` terms of each step unrolled, `y_i`, `h_i` in registers
-        match q {
-            1 => lowrank_right_solve_lt_const::<1>(y, h, d, xs, acc),
-            2 => lowrank_right_solve_lt_const::<2>(y, h, d, xs, acc),
-            3 => lowrank_right_solve_lt_const::<3>(y, h, d, xs, acc),
-            4 => lowrank_right_solve_lt_const::<4>(y, h, d, xs, acc),
-            5 => lowrank_right_solve_lt_const::<5>(y, h, d, xs, acc),
-            6 => lowrank_right_solve_lt_const::<6>(y, h, d, xs, acc),
-            _ => lowrank_right_solve_lt_imp(y, h, d, q, xs, acc),
-        }
+        small_size!(
+            q,
+            lowrank_right_solve_lt_const(y, h, d, xs, acc),
+            lowrank_right_solve_lt_imp(y, h, d, q, xs, acc)
+        )
     }
 }
 
@@ -454,16 +456,15 @@ impl WithSimd for Sweep<'_> {
     #[inline(always)]
     fn with_simd<S: Simd>(self, _simd: S) {
         let Sweep { g, e, d, q, t, a, forward } = self;
-        match q {
-            1 => sweep_const::<1>(g, e, d, t, forward),
-            2 => sweep_const::<2>(g, e, d, t, forward),
-            3 => sweep_const::<3>(g, e, d, t, forward),
-            4 => sweep_const::<4>(g, e, d, t, forward),
-            5 => sweep_const::<5>(g, e, d, t, forward),
-            6 => sweep_const::<6>(g, e, d, t, forward),
-            _ if forward => lowrank_sweep(g, e, d, q, t, a, 0..d.len()),
-            _ => lowrank_sweep(g, e, d, q, t, a, (0..d.len()).rev()),
-        }
+        small_size!(
+            q,
+            sweep_const(g, e, d, t, forward),
+            if forward {
+                lowrank_sweep(g, e, d, q, t, a, 0..d.len())
+            } else {
+                lowrank_sweep(g, e, d, q, t, a, (0..d.len()).rev())
+            }
+        )
     }
 }
 
