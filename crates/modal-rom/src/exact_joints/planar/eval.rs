@@ -457,7 +457,7 @@ impl Planar {
             f[o..o + 4].copy_from_slice(ws.xid[j].as_slice());
         }
         if let Some((jx, ju)) = jac {
-            self.jacobian(ws, x, u.len(), offsets, root.zip(root_w), jx, ju);
+            self.jacobian::<R>(ws, x, u.len(), offsets, root.zip(root_w), jx, ju);
         }
         Ok(())
     }

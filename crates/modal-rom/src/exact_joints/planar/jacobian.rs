@@ -26,30 +26,11 @@ fn mtv(y: &mut [f64], a: &[f64], x: &[f64]) {
 
 impl Planar {
     /// The Jacobians into `jx` (`ns × ns`) and `ju` (`ns × nu`) after [`Planar::eval`]
-    /// filled `ws`; `root`: the root quaternion's offset and rate.
-    #[allow(clippy::too_many_arguments)]
-    pub(super) fn jacobian(
-        &self,
-        ws: &mut PlanarWs,
-        x: &[f64],
-        nu: usize,
-        offsets: &[usize],
-        root: Option<(usize, f64)>,
-        jx: &mut [f64],
-        ju: &mut [f64],
-    ) {
-        // one revolute joint (two rows): row counts known at compile time
-        if self.r == 2 && self.joints.len() == 1 {
-            self.jacobian_imp::<2>(ws, x, nu, offsets, root, jx, ju)
-        } else {
-            self.jacobian_imp::<0>(ws, x, nu, offsets, root, jx, ju)
-        }
-    }
-
-    /// [`Planar::jacobian`]; `R > 0`: one joint of `R` rows.
+    /// filled `ws`; `root`: the root quaternion's offset and rate; `R > 0`: one joint of `R`
+    /// rows (chosen once by [`Planar::eval`]).
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn jacobian_imp<const R: usize>(
+    pub(super) fn jacobian<const R: usize>(
         &self,
         ws: &mut PlanarWs,
         x: &[f64],
