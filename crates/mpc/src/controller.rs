@@ -87,6 +87,14 @@ pub struct ControllerSettings {
     /// first sample's extra iterations (and its continuation steps); `None`: that of the
     /// first attempt, [`Self::levenberg_marquardt`] \[None\].
     pub first_sample_levenberg_marquardt: Option<f64>,
+    /// Warm start of the later samples: after the shift, the first `rollout_intervals` nodes
+    /// of the plan are re-simulated from the measured state with the plan's controls
+    /// ([`SqpSolver::roll_out`]), so the solve starts with zero defects there instead of
+    /// the jump between the measured state and the shifted plan's first node (the plant's
+    /// motion the model did not predict). When the rollout is not finite, the shifted plan
+    /// is kept. Values above the horizon's interval count re-simulate the whole plan. `0`: the
+    /// shifted plan as it is \[0\].
+    pub rollout_intervals: usize,
     /// KKT tolerance of the NMPC (max-norm natural residual; the inputs are O(0.1–5), so
     /// 1e-4 resolves them to far below what the plant feels within `τs`) [1e-4].
     pub kkt_tolerance: f64,
@@ -183,6 +191,7 @@ impl ControllerSettings {
             first_sample_guess: InitialGuess::LinearMpc,
             first_sample_continuation: 1,
             first_sample_levenberg_marquardt: None,
+            rollout_intervals: 0,
             kkt_tolerance: 1e-4,
             accept_violation: 1e-2,
             levenberg_marquardt: 0.0,
@@ -770,6 +779,14 @@ impl<D: Dynamics + Clone> Controller<D> {
             lmpc_done = true;
         } else if let Some(n) = self.nmpc.as_mut() {
             n.shift_time(shift)?;
+            if self.settings.rollout_intervals > 0 {
+                let shifted = n.states().to_vec();
+                let rolled = n.roll_out(x0, self.settings.rollout_intervals).is_ok()
+                    && n.states().iter().all(|v| v.iter().all(|x| x.is_finite()));
+                if !rolled {
+                    n.states_mut().clone_from_slice(&shifted);
+                }
+            }
         }
         let first = match self.nmpc.as_mut() {
             Some(n) => n.solve(x0)?,

@@ -155,6 +155,7 @@ fn controller_of(ctx: &Ctx<'_>, spec: &SceneSpec) -> Result<mpc::ControllerSetti
     set(&mut c.first_sample_guess, cs.first_sample_guess);
     set(&mut c.first_sample_continuation, cs.first_sample_continuation);
     set(&mut c.first_sample_levenberg_marquardt, cs.first_sample_levenberg_marquardt.map(Some));
+    set(&mut c.rollout_intervals, cs.rollout_intervals);
     set(&mut c.kkt_tolerance, cs.kkt_tolerance);
     set(&mut c.accept_violation, cs.accept_violation);
     set(&mut c.levenberg_marquardt, cs.levenberg_marquardt);

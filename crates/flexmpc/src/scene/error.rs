@@ -121,6 +121,7 @@ const KEYS: &[(&str, &str, &str)] = &[
     ("controller", "max_iterations", "controller.max_iterations"),
     ("controller", "first_sample_iterations", "controller.first_sample_iterations"),
     ("controller", "first_sample_continuation", "controller.first_sample_continuation"),
+    ("controller", "rollout_intervals", "controller.rollout_intervals"),
     (
         "controller",
         "first_sample_levenberg_marquardt",

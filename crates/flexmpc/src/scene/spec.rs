@@ -273,6 +273,9 @@ pub struct ControllerSpec {
     /// With `first_sample_iterations`: Levenberg–Marquardt term (≥ 0) of the first sample's
     /// extra iterations (default: `levenberg_marquardt`).
     pub first_sample_levenberg_marquardt: Option<f64>,
+    /// Later samples: re-simulate the first this-many nodes of the shifted plan from the
+    /// measured state with the plan's controls before solving (0: the shifted plan as is).
+    pub rollout_intervals: Option<usize>,
     /// With `line_search = true`: the second-order-corrected merit line search (adaptive
     /// penalty, corrections of the shooting defects) instead of the plain merit line search.
     pub second_order_correction: Option<bool>,

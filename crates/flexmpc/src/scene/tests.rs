@@ -342,7 +342,8 @@ controllers = ["nmpc"]
     // the first sample's settings and the corrected line search
     let keys = "substeps = 16\nreal_time_iteration = false\nfirst_sample_iterations = 30\n\
                 first_sample_guess = \"decay\"\nsecond_order_correction = true\n\
-                first_sample_continuation = 4\nfirst_sample_levenberg_marquardt = 1e-2";
+                first_sample_continuation = 4\nfirst_sample_levenberg_marquardt = 1e-2\n\
+                rollout_intervals = 3";
     let text = base.replacen("substeps = 16", keys, 1);
     let c = load_str(Path::new("ok.toml"), &text).unwrap_or_else(|e| panic!("{e}"));
     let c = c.control.expect("[scenario]").controller;
@@ -351,6 +352,14 @@ controllers = ["nmpc"]
     assert_eq!(c.globalisation, ocp_transcription::Globalisation::merit_soc());
     assert_eq!(c.first_sample_continuation, 4);
     assert_eq!(c.first_sample_levenberg_marquardt, Some(1e-2));
+    assert_eq!(c.rollout_intervals, 3);
+    check(
+        "substeps = 16",
+        "rollout_intervals = -1",
+        "rollout_intervals = -1",
+        "controller.rollout_intervals",
+        "",
+    );
     check(
         "substeps = 16",
         "substeps = 16\nreal_time_iteration = false\nfirst_sample_continuation = 2",

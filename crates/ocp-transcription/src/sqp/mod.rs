@@ -396,9 +396,23 @@ impl<D: Dynamics> SqpSolver<D> {
     /// model are outside the domain where this model's integration stays finite). `Err` with
     /// the integrator's error when the rollout itself is not finite.
     pub fn initialize_by_rollout(&mut self, x0: &[f64]) -> Result<()> {
+        self.roll_out(x0, self.n)?;
+        for l in &mut self.lam {
+            l.fill(0.0);
+        }
+        Ok(())
+    }
+
+    /// Re-simulates the first `intervals` nodes from `x0` with the current controls:
+    /// `s_0 = x0`, `s_{k+1} = Φ(s_k, u_k)` for `k < intervals` (clamped to the horizon); the
+    /// later nodes and the multipliers are kept. A warm start whose first defects are zero
+    /// when the measured state is away from the shifted plan's first node. `Err` with the
+    /// integrator's error when the rollout is not finite (the iterate is then partly
+    /// overwritten; the caller restores it).
+    pub fn roll_out(&mut self, x0: &[f64], intervals: usize) -> Result<()> {
         check_dim("x0", self.nx, x0.len())?;
         self.s[0].copy_from_slice(x0);
-        for k in 0..self.n {
+        for k in 0..intervals.min(self.n) {
             let (head, tail) = self.s.split_at_mut(k + 1);
             let c = self.integrators[0].choose_substeps(
                 &self.model,
@@ -414,9 +428,6 @@ impl<D: Dynamics> SqpSolver<D> {
                 self.u[k].as_slice(),
                 tail[0].as_mut_slice(),
             )?;
-        }
-        for l in &mut self.lam {
-            l.fill(0.0);
         }
         Ok(())
     }

@@ -292,3 +292,30 @@ fn shift_time_of_one_interval_equals_shift() {
         assert_eq!(a.controls()[k], b.controls()[k]);
     }
 }
+
+/// `roll_out(x0, k)`: the first `k` nodes are the controls integrated from `x0` (the same
+/// bits as the full rollout's first `k`), the later nodes and the multipliers stay.
+#[test]
+fn roll_out_resimulates_only_the_head() {
+    let (model, ocp) = lqr_problem();
+    let n = ocp.intervals;
+    let x0 = DVector::from_vec(vec![0.5, -0.3, 0.2, 0.0, 0.4, -0.1]);
+    let mut solver = SqpSolver::new(&model, ocp, SqpSettings::default()).unwrap();
+    solver.solve(x0.as_slice()).unwrap();
+    let (plan, lam) = (solver.states().to_vec(), solver.multipliers().to_vec());
+    let x1 = DVector::from_vec(vec![0.6, -0.2, 0.1, 0.3, 0.4, 0.0]);
+    let mut full = SqpSolver::new(&model, solver.ocp().clone(), SqpSettings::default()).unwrap();
+    full.controls_mut().clone_from_slice(solver.controls());
+    full.initialize_by_rollout(x1.as_slice()).unwrap();
+    solver.roll_out(x1.as_slice(), 3).unwrap();
+    for k in 0..=n {
+        let want = if k <= 3 { &full.states()[k] } else { &plan[k] };
+        assert_eq!(&solver.states()[k], want, "node {k}");
+    }
+    assert_eq!(solver.multipliers(), &lam[..], "multipliers kept");
+    assert!(lam.iter().any(|l| l.amax() > 0.0), "the solve left non-zero multipliers");
+    // more intervals than the horizon: the whole plan, like the full rollout
+    solver.roll_out(x1.as_slice(), n + 5).unwrap();
+    assert_eq!(solver.states(), full.states());
+    assert!(solver.roll_out(&[0.0; 2], 1).is_err(), "wrong x0 length");
+}
