@@ -51,25 +51,17 @@ impl Planar {
         ws.pf1.copy_from_slice(&ws.f1);
         gemv_t(&mut ws.pf1, true, &ws.a, r, &ws.gaf, -1.0);
         gemv(&mut ws.wp, false, &ws.w, r, p, 1.0);
+        // ȦAᵀ (rows of each joint: only its own Ȧ rows are non-zero): Ȧ_j = Δω_j (−s A_j1 +
+        // c A_j2), so its rows are combinations of the frame's A_jα Aᵀ
         for (j, jr) in self.joints.iter().enumerate() {
             let [c, s, _] = ws.csr[j];
             let dw = ws.dw[j];
-            let rj = jr.rows;
+            let (rj, o) = (jr.rows, jr.offset);
+            let paa = &ws.paa[3 * r * o..3 * r * (o + rj)];
             for t in 0..rj {
-                let (a1, a2) = (&jr.at[1][t * n..(t + 1) * n], &jr.at[2][t * n..(t + 1) * n]);
-                let row = &mut ws.adt[(jr.offset + t) * n..(jr.offset + t + 1) * n];
-                for ((d, x), y) in row.iter_mut().zip(a1).zip(a2) {
-                    *d = dw * (-s * x + c * y);
-                }
-            }
-        }
-        // ȦAᵀ (rows of each joint: only its own Ȧ rows are non-zero), ȦAᵀG
-        for jr in &self.joints {
-            for t in jr.offset..jr.offset + jr.rows {
-                let ad = &ws.adt[t * n..(t + 1) * n];
+                let (p1, p2) = (&paa[t * r..(t + 1) * r], &paa[(rj + t) * r..(rj + t + 1) * r]);
                 for col in 0..r {
-                    let ac = &ws.at[col * n..(col + 1) * n];
-                    ws.adat[col * r + t] = ad.iter().zip(ac).map(|(x, y)| x * y).sum();
+                    ws.adat[col * r + o + t] = dw * (-s * p1[col] + c * p2[col]);
                 }
             }
         }
@@ -88,20 +80,19 @@ impl Planar {
             let (rj, o) = if R > 0 { (R, 0) } else { (jr.rows, jr.offset) };
             let [a, b] = ws.ab[j];
             let alphas = if jr.a3_zero { 2 } else { 3 };
-            // per α: A A_αᵀ, Ȧ A_αᵀ (r × r_j), A_α P f1 (r_j), A_αᵀ (W p)_j (n)
+            // per α: Ȧ A_αᵀ (r × r_j) from the constants A_jα A_kβᵀ, A_α P f1 (r_j),
+            // A_αᵀ (W p)_j (n); A A_αᵀ is the frame's
+            let aa = &ws.paa[3 * r * o..3 * r * (o + rj)];
             for al in 0..alphas {
                 let aal = &jr.a[al + 1];
                 for t in 0..rj {
-                    let y = &jr.at[al + 1][t * n..(t + 1) * n];
-                    for i in 0..r {
-                        let (ai, di) = (&ws.at[i * n..(i + 1) * n], &ws.adt[i * n..(i + 1) * n]);
-                        let (mut s1, mut s2) = (0.0, 0.0);
-                        for k in 0..n {
-                            s1 += ai[k] * y[k];
-                            s2 += di[k] * y[k];
+                    for (k, kr) in self.joints.iter().enumerate() {
+                        let [c, s, _] = ws.csr[k];
+                        let dw = ws.dw[k];
+                        for i in kr.offset..kr.offset + kr.rows {
+                            let e = |be: usize| jr.pa[((al * 4 + be) * rj + t) * r + i];
+                            ws.ada[(al * rj + t) * r + i] = dw * (-s * e(1) + c * e(2));
                         }
-                        ws.aa[(al * rj + t) * r + i] = s1;
-                        ws.ada[(al * rj + t) * r + i] = s2;
                     }
                 }
                 gemv(&mut ws.apf[al * rj..(al + 1) * rj], false, aal, rj, &ws.pf1, 1.0);
@@ -119,7 +110,7 @@ impl Planar {
                     }
                 };
                 // A A_cᵀ, Ȧ A_cᵀ (r × r_j), A_c P f1 (r_j)
-                comb(&ws.aa, r * rj, &mut ws.aac);
+                comb(aa, r * rj, &mut ws.aac);
                 comb(&ws.ada, r * rj, &mut ws.x1);
                 comb(&ws.apf, rj, &mut ws.dcp);
                 // V_c = A_c Z, ∂A_θ/∂ξ_c Z (r_j × m)

@@ -6,7 +6,7 @@
 use super::Planar;
 use crate::error::{ModalError, Result};
 use crate::exact_joints::frame::{
-    gemv, gemv_t, lowrank_cholesky, lowrank_right_solve_lt, matmul_nn, skew_apply,
+    gemv, gemv_t, lowrank_cholesky, lowrank_right_solve_lt, skew_apply,
 };
 use crate::exact_joints::model::{u_left, u_right};
 use nalgebra::{Matrix4, Vector3, Vector4};
@@ -17,9 +17,8 @@ use std::cell::RefCell;
 pub(crate) struct PlanarWs {
     key: Vec<usize>,
     pub(super) a: Vec<f64>,
-    /// `A` and `Ȧ` row by row (`r` rows of `n`, each contiguous).
+    /// `A` row by row (`r` rows of `n`, each contiguous).
     pub(super) at: Vec<f64>,
-    pub(super) adt: Vec<f64>,
     pub(super) gram: Vec<f64>,
     pub(super) linv: Vec<f64>,
     pub(super) g: Vec<f64>,
@@ -42,6 +41,8 @@ pub(crate) struct PlanarWs {
     pub(super) amb: Vec<f64>,
     pub(super) ztf: Vec<f64>,
     pub(super) kp: Vec<f64>,
+    /// Per joint (from `3 r o_j`): `A A_αᵀ` (`r × r_j` for `α = 1…3`, column `(α − 1) r_j + t`).
+    pub(super) paa: Vec<f64>,
     /// `A_α Z` (`r × m`), `α = 1, 2, 3`; `V_θ = A_θ Z` and `V = ȦZ` (`r × m`).
     pub(super) az: [Vec<f64>; 3],
     pub(super) vth: Vec<f64>,
@@ -57,6 +58,7 @@ pub(crate) struct PlanarWs {
     pub(super) tz: Vec<f64>,
     /// `J blockdiag(Z, Z2)` (`(n + nb) × max(m, m2)`).
     pub(super) tzm: Vec<f64>,
+    /// `Zᵀ` times the columns of [`Planar::zcon`] (`m` each).
     pub(super) dz: Vec<f64>,
     pub(super) kap: Vec<f64>,
     pub(super) af1: Vec<f64>,
@@ -83,9 +85,8 @@ pub(crate) struct PlanarWs {
     pub(super) gaac: Vec<f64>,
     pub(super) dkp: Vec<f64>,
     pub(super) ddw: Vec<f64>,
-    /// Per joint `α = 1…3`: `A A_αᵀ`, `Ȧ A_αᵀ` (`r × r_j`), `A_α P f1` (`r_j`), `A_αᵀ (W p)_j`
-    /// (`n`); the stacked `[∂V; V]`, `[W; ∂W]` (`2r × m`) of the columns' `∂(Kp)`.
-    pub(super) aa: Vec<f64>,
+    /// Per joint `α = 1…3`: `Ȧ A_αᵀ` (`r × r_j`), `A_α P f1` (`r_j`), `A_αᵀ (W p)_j` (`n`);
+    /// the stacked `[∂V; V]`, `[W; ∂W]` (`2r × m`) of the columns' `∂(Kp)`.
     pub(super) ada: Vec<f64>,
     pub(super) apf: Vec<f64>,
     pub(super) atw: Vec<f64>,
@@ -124,7 +125,6 @@ impl PlanarWs {
             key,
             a: z(r * n),
             at: z(r * n),
-            adt: z(r * n),
             gram: z(r * r),
             linv: z(r * r),
             g: z(r * r),
@@ -134,7 +134,8 @@ impl PlanarWs {
             ld: z(m),
             lh: z(r * m),
             lmm: z(r * r),
-            lacc: z(n.max(r) * r),
+            lacc: z((n + 3 * r) * r),
+            paa: z(3 * r * r),
             w: z(r * m),
             z: z(n * m),
             zt: z(n * m),
@@ -157,7 +158,7 @@ impl PlanarWs {
             rtmp: z(2 * r),
             tz: z(n + nb),
             tzm: z((n + nb) * m.max(pl.m2)),
-            dz: z(nj * m),
+            dz: z(pl.zcon.len() / n.max(1) * m),
             kap: z(m),
             af1: z(r),
             gaf: z(r),
@@ -181,7 +182,6 @@ impl PlanarWs {
             gaac: z(r * rx),
             dkp: z(m),
             ddw: z(nj),
-            aa: z(3 * r * rx),
             ada: z(3 * r * rx),
             apf: z(3 * rx),
             atw: z(3 * n),
@@ -350,7 +350,45 @@ impl Planar {
                 zc.iter_mut().zip(at).for_each(|(z, a)| *z -= ht * a);
             }
         }
-        lowrank_right_solve_lt(&ws.y, &ws.lh, &ws.ld, r, &mut [(&mut ws.z[..], n)], &mut ws.lacc);
+        // A A_αᵀ from the constant A_jα A_iβᵀ, and A_α Z = (A_α Ẑ0 − (A_α Aᵀ) H) L⁻ᵀ (no
+        // product with Z: A_α Ẑ0 is a constant; the rows join Ẑ's right solve)
+        let alphas = if self.joints.iter().all(|j| j.a3_zero) { 2 } else { 3 };
+        for jr in &self.joints {
+            let (rj, o) = if R > 0 { (R, 0) } else { (jr.rows, jr.offset) };
+            let paa = &mut ws.paa[3 * r * o..3 * r * (o + rj)];
+            for al in 0..alphas {
+                for t in 0..rj {
+                    for (k, kr) in self.joints.iter().enumerate() {
+                        let [c, s, rho] = ws.csr[k];
+                        let (kn, ko) = if R > 0 { (R, 0) } else { (kr.rows, kr.offset) };
+                        for i in ko..ko + kn {
+                            let e = |be: usize| jr.pa[((al * 4 + be) * rj + t) * r + i];
+                            let mut v = e(0) + c * e(1) + s * e(2);
+                            if !kr.a3_zero {
+                                v += rho * e(3);
+                            }
+                            paa[(al * rj + t) * r + i] = v;
+                        }
+                    }
+                }
+                let (az, az0) = (&mut ws.az[al], &jr.az0[al + 1]);
+                for c in 0..m {
+                    let h = &ws.h[c * r..(c + 1) * r];
+                    for t in 0..rj {
+                        let pt = &paa[(al * rj + t) * r..(al * rj + t + 1) * r];
+                        let d: f64 = pt.iter().zip(h).map(|(a, b)| a * b).sum();
+                        az[c * r + o + t] = az0[c * rj + t] - d;
+                    }
+                }
+            }
+        }
+        {
+            let [a1, a2, a3] = &mut ws.az;
+            let (a1, a2, a3) = (&mut a1[..r * m], &mut a2[..r * m], &mut a3[..r * m]);
+            let mut xs = [(&mut ws.z[..], n), (a1, r), (a2, r), (a3, r)];
+            let xs = &mut xs[..1 + alphas];
+            lowrank_right_solve_lt(&ws.y, &ws.lh, &ws.ld, r, xs, &mut ws.lacc);
+        }
         for c in 0..m {
             for i in 0..n {
                 ws.zt[i * m + c] = ws.z[c * n + i];
@@ -410,16 +448,7 @@ impl Planar {
         let jf = if want { Some(&mut ws.jf[..]) } else { None };
         self.ops.eval(&ws.q1, &ws.q2, u, &mut ws.f1, &mut ws.f2, jf, &mut ws.amb);
         mtv(&mut ws.ztf, &ws.z[..n * m], &ws.f1);
-        // joint rates, ξ̇_j, V = ȦZ = Δω A_θ Z
-        for (al, az) in ws.az.iter_mut().enumerate() {
-            if al == 2 && (!want || self.joints.iter().all(|j| j.a3_zero)) {
-                continue;
-            }
-            for jr in &self.joints {
-                let (rj, o) = if R > 0 { (R, 0) } else { (jr.rows, jr.offset) };
-                matmul_nn(&mut az[o..], r, &jr.a[al + 1], rj, &ws.z, n, n, m);
-            }
-        }
+        // joint rates, ξ̇_j, V = ȦZ = Δω A_θ Z (`A_α Z` from the frame)
         for (j, jr) in self.joints.iter().enumerate() {
             let dot = |row: &[f64]| row.iter().zip(&ws.q1).map(|(a, b)| a * b).sum::<f64>();
             let (wa, wb) = (dot(&jr.wa), dot(&jr.wb));

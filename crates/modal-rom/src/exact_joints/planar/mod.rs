@@ -48,6 +48,10 @@ pub(crate) struct PlanarJoint {
     at: [Vec<f64>; 4],
     /// `A_jα Ẑ0` (`r_j × m`), set with the coordinates.
     az0: [Vec<f64>; 4],
+    /// `A_jα A_iβᵀ` for `α = 1…3`, `β = 0…3` over the rows `i` of all joints: entry
+    /// `((α − 1)·4 + β)·r_j·r + t·r + i` is `A_jα[t, ·] · A_{k(i)β}[i, ·]` (`k(i)` the joint of
+    /// row `i`), so that `A A_αᵀ` and `Ȧ A_αᵀ` are combinations of constants (theory.md §10.9).
+    pa: Vec<f64>,
     /// Whether `A_j3 = 0`.
     a3_zero: bool,
     /// Rows of `ω_a`, `ω_b` (`n` each).
@@ -71,6 +75,9 @@ pub(crate) struct Planar {
     r: usize,
     /// Root node's rate row (`n`) when the root is carried.
     root: Option<Vec<f64>>,
+    /// The constant vectors the Jacobian multiplies by `Zᵀ`, as the columns of one `n × k`
+    /// matrix (one product): the joints' `δ_j`, the root's rate row, the input columns `B_u`.
+    zcon: Vec<f64>,
     /// `Ẑ0 = NᵀZ0` (`n × m`), `Z2` (`nb × m2`), column-major.
     z0: Vec<f64>,
     z2: Vec<f64>,
@@ -205,6 +212,7 @@ impl Planar {
                 a,
                 at,
                 az0: Default::default(),
+                pa: Vec::new(),
                 a3_zero,
                 wa,
                 wb,
@@ -212,12 +220,35 @@ impl Planar {
             });
             r += rj;
         }
+        for j in 0..joints.len() {
+            let rj = joints[j].rows;
+            let mut pa = vec![0.0; 12 * rj * r];
+            for al in 0..3 {
+                for be in 0..4 {
+                    for t in 0..rj {
+                        let x = &joints[j].at[al + 1][t * n..(t + 1) * n];
+                        for k in &joints {
+                            for il in 0..k.rows {
+                                let y = &k.at[be][il * n..(il + 1) * n];
+                                let d = x.iter().zip(y).map(|(a, b)| a * b).sum();
+                                pa[((al * 4 + be) * rj + t) * r + k.offset + il] = d;
+                            }
+                        }
+                    }
+                }
+            }
+            joints[j].pa = pa;
+        }
         let root = cons.root.map(|(b, nd, _)| {
             let i = layout.x1_index(b, nd, rate_c);
             (0..n).map(|c| (0..na).map(|a| basis.phi1[(i, a)] * reduce[(a, c)]).sum()).collect()
         });
+        let mut zcon: Vec<f64> = joints.iter().flat_map(|j| j.delta.iter().copied()).collect();
+        zcon.extend(root.iter().flatten());
+        zcon.extend((0..ops.b_u.ncols()).flat_map(|k| ops.b_u.col_as_slice(k).iter().copied()));
         Some(Planar {
             nu: 1 + axis,
+            zcon,
             n,
             reduce,
             ops,
