@@ -58,8 +58,10 @@ pub(crate) struct PlanarWs {
     pub(super) tz: Vec<f64>,
     /// `J blockdiag(Z, Z2)` (`(n + nb) × max(m, m2)`).
     pub(super) tzm: Vec<f64>,
-    /// `Zᵀ` times the columns of [`Planar::zcon`] (`m` each).
-    pub(super) dz: Vec<f64>,
+    /// `Zᵀ C` for the columns `C` of [`Planar::zcon`], row by row (`m × k`, row-major);
+    /// `A C` (`r × k`).
+    pub(super) ztc: Vec<f64>,
+    pub(super) acz: Vec<f64>,
     pub(super) kap: Vec<f64>,
     pub(super) af1: Vec<f64>,
     pub(super) gaf: Vec<f64>,
@@ -134,7 +136,7 @@ impl PlanarWs {
             ld: z(m),
             lh: z(r * m),
             lmm: z(r * r),
-            lacc: z((n + 3 * r) * r),
+            lacc: z((n + 4 * r + pl.kc) * r),
             paa: z(3 * r * r),
             w: z(r * m),
             z: z(n * m),
@@ -158,7 +160,8 @@ impl PlanarWs {
             rtmp: z(2 * r),
             tz: z(n + nb),
             tzm: z((n + nb) * m.max(pl.m2)),
-            dz: z(pl.zcon.len() / n.max(1) * m),
+            ztc: z(pl.kc * m),
+            acz: z(pl.kc * r),
             kap: z(m),
             af1: z(r),
             gaf: z(r),
@@ -229,7 +232,13 @@ impl Planar {
 
     /// The frame `Ẑ(ξ)` and its factors into `ws` for the joint quaternions at `offsets`.
     #[inline(always)]
-    fn frame<const R: usize>(&self, ws: &mut PlanarWs, x: &[f64], offsets: &[usize]) -> Result<()> {
+    fn frame<const R: usize>(
+        &self,
+        ws: &mut PlanarWs,
+        x: &[f64],
+        offsets: &[usize],
+        want: bool,
+    ) -> Result<()> {
         let (n, m) = (self.n, self.m);
         let r = if R > 0 { R } else { self.r };
         ws.a[..r * n].fill(0.0);
@@ -339,7 +348,6 @@ impl Planar {
             "the joint rotation is outside the range of the fields (ZᵀP Z0 singular)",
         )?;
         ws.w[..r * m].copy_from_slice(&ws.h[..r * m]);
-        lowrank_right_solve_lt(&ws.y, &ws.lh, &ws.ld, r, &mut [(&mut ws.w[..], r)], &mut ws.lacc);
         ws.z[..n * m].copy_from_slice(&self.z0);
         // (Aᵀ H's columns as sums of A's rows, contiguous in `at`)
         for c in 0..m {
@@ -382,11 +390,38 @@ impl Planar {
                 }
             }
         }
+        // with the Jacobian, (Zᵀ C)ᵀ = (Ẑ0ᵀC − Hᵀ(A C))ᵀ L⁻ᵀ for the constant columns C of
+        // `zcon` (A C = Σ_α w_α A_α C from constants): rows of the same right solve
+        let kc = if want { self.kc } else { 0 };
+        if kc > 0 {
+            let acz = &mut ws.acz[..r * kc];
+            acz.fill(0.0);
+            for (j, jr) in self.joints.iter().enumerate() {
+                let (rj, o) = if R > 0 { (R, 0) } else { (jr.rows, jr.offset) };
+                let [c, s, rho] = ws.csr[j];
+                let wgt = [1.0, c, s, rho];
+                for (al, &wa) in wgt.iter().enumerate() {
+                    for k in 0..kc {
+                        let src = &jr.acon[al][k * rj..(k + 1) * rj];
+                        let dst = &mut acz[k * r + o..k * r + o + rj];
+                        dst.iter_mut().zip(src).for_each(|(d, v)| *d += wa * v);
+                    }
+                }
+            }
+            for i in 0..m {
+                let h = &ws.h[i * r..(i + 1) * r];
+                for k in 0..kc {
+                    let d: f64 = h.iter().zip(&acz[k * r..(k + 1) * r]).map(|(a, b)| a * b).sum();
+                    ws.ztc[i * kc + k] = self.z0con[i * kc + k] - d;
+                }
+            }
+        }
         {
             let [a1, a2, a3] = &mut ws.az;
             let (a1, a2, a3) = (&mut a1[..r * m], &mut a2[..r * m], &mut a3[..r * m]);
-            let mut xs = [(&mut ws.z[..], n), (a1, r), (a2, r), (a3, r)];
-            let xs = &mut xs[..1 + alphas];
+            let (w, zc) = (&mut ws.w[..r * m], &mut ws.ztc[..kc * m]);
+            let mut xs = [(&mut ws.z[..], n), (w, r), (zc, kc), (a1, r), (a2, r), (a3, r)];
+            let xs = &mut xs[..3 + alphas];
             lowrank_right_solve_lt(&ws.y, &ws.lh, &ws.ld, r, xs, &mut ws.lacc);
         }
         for c in 0..m {
@@ -436,7 +471,8 @@ impl Planar {
         let r = if R > 0 { R } else { self.r };
         let nb = self.ops.w.ncols();
         ws.ns = f.len();
-        self.frame::<R>(ws, x, offsets)?;
+        let want = jac.is_some();
+        self.frame::<R>(ws, x, offsets, want)?;
         let (p, p2) = (&x[..m], &x[m..m + m2]);
         mv(&mut ws.q1, &ws.z, n, p);
         if self.z2_identity {
@@ -444,7 +480,6 @@ impl Planar {
         } else {
             mv(&mut ws.q2, &self.z2, nb, p2);
         }
-        let want = jac.is_some();
         let jf = if want { Some(&mut ws.jf[..]) } else { None };
         self.ops.eval(&ws.q1, &ws.q2, u, &mut ws.f1, &mut ws.f2, jf, &mut ws.amb);
         mtv(&mut ws.ztf, &ws.z[..n * m], &ws.f1);

@@ -79,14 +79,14 @@ impl Planar {
                 *c += (0..r).map(|t| vi[t] * wl[t]).sum::<f64>();
             }
         }
-        // Zᵀ δ_j, Zᵀ (root rate row), Zᵀ B_u in one product
-        let kc = self.zcon.len() / n.max(1);
-        matmul_tn(&mut ws.dz, m, zm, n, &self.zcon, n, kc);
+        // Zᵀ δ_j, Zᵀ (root rate row), Zᵀ B_u: the frame's `ztc` (row by row, `kc` per row)
+        let kc = self.kc;
         // Ξ (joint rows: ½ (δ_j Z)_k (−b, a n)) and −κΞ with κ_θj = K(V_θj, W_j) p
         let p = &x[..m];
         for (j, jr) in self.joints.iter().enumerate() {
             let (rj, o) = (jr.rows, jr.offset);
-            let dz = &ws.dz[j * m..(j + 1) * m];
+            let dz = &mut ws.lp[..m];
+            dz.iter_mut().enumerate().for_each(|(i, d)| *d = ws.ztc[i * kc + j]);
             let [a, b] = ws.ab[j];
             let oj = offsets[j];
             for (k, &d) in dz.iter().enumerate() {
@@ -116,8 +116,8 @@ impl Planar {
             let xr = Vector4::from_column_slice(&x[o..o + 4]);
             let u1 = self.u_n(1.0, false) * xr;
             let nj = self.joints.len();
-            let tz = &ws.dz[nj * m..(nj + 1) * m];
-            for (k, &d) in tz.iter().enumerate() {
+            for k in 0..m {
+                let d = ws.ztc[k * kc + nj];
                 for i in 0..4 {
                     jx[k * ns + o + i] = d * u1[i];
                 }
@@ -129,9 +129,11 @@ impl Planar {
                 }
             }
         }
-        let o = (self.joints.len() + usize::from(self.root.is_some())) * m;
+        let o = self.joints.len() + usize::from(self.root.is_some());
         for k in 0..nu {
-            ju[k * ns..k * ns + m].copy_from_slice(&ws.dz[o + k * m..o + (k + 1) * m]);
+            for i in 0..m {
+                ju[k * ns + i] = ws.ztc[i * kc + o + k];
+            }
         }
         if !self.joints.is_empty() {
             self.joint_columns(ws, x, offsets, root.map(|(o, _)| o), jx);
