@@ -299,6 +299,118 @@ fn lowrank_cholesky_imp(
     true
 }
 
+/// [`lowrank_cholesky`]'s factor with the elimination's recurrence reduced to prefix sums: by
+/// Sherman–Morrison the `M` of step `j` is `N_j⁻¹` with `N_j = I − Σ_{i<j} y_i y_iᵀ` (`q × q`),
+/// so `g = N_j⁻¹ y_j` (a `q × q` `LDLᵀ` solve), `d_j² = 1 − y_jᵀ g`, `h_j = g / d_j`: the only
+/// dependence from one column to the next is the update of `N`, and the divisions and square
+/// roots of different columns overlap (the same factor to round-off). For `q ≤ 6`; larger `q`
+/// take [`lowrank_cholesky`].
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn lowrank_cholesky_prefix(
+    y: &[f64],
+    q: usize,
+    m: usize,
+    d: &mut [f64],
+    h: &mut [f64],
+    mm: &mut [f64],
+    g: &mut [f64],
+    tol: f64,
+    stage: &str,
+    reason: &str,
+) -> Result<()> {
+    if q > 6 {
+        return lowrank_cholesky(y, q, m, d, h, mm, g, tol, stage, reason);
+    }
+    let ok = Arch::new().dispatch(LowrankPrefix { y, q, m, d, h, tol });
+    if ok {
+        Ok(())
+    } else {
+        Err(ModalError::Numerical { stage: stage.to_string(), reason: reason.to_string() })
+    }
+}
+
+struct LowrankPrefix<'a> {
+    y: &'a [f64],
+    q: usize,
+    m: usize,
+    d: &'a mut [f64],
+    h: &'a mut [f64],
+    tol: f64,
+}
+
+impl WithSimd for LowrankPrefix<'_> {
+    type Output = bool;
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) -> bool {
+        let LowrankPrefix { y, q, m, d, h, tol } = self;
+        small_size!(q, lowrank_prefix_const(y, m, d, h, tol), false)
+    }
+}
+
+/// The body of [`lowrank_cholesky_prefix`] for `q = Q`.
+#[inline(always)]
+fn lowrank_prefix_const<const Q: usize>(
+    y: &[f64],
+    m: usize,
+    d: &mut [f64],
+    h: &mut [f64],
+    tol: f64,
+) -> bool {
+    let mut nn = [[0.0f64; Q]; Q];
+    for (k, row) in nn.iter_mut().enumerate() {
+        row[k] = 1.0;
+    }
+    for j in 0..m {
+        let yj: &[f64; Q] = y[j * Q..(j + 1) * Q].try_into().expect("column");
+        // LDLᵀ of N_j (lower triangle of `l`, pivots in `dd`), then g = N_j⁻¹ y_j
+        let (mut l, mut dd) = ([[0.0f64; Q]; Q], [0.0f64; Q]);
+        for k in 0..Q {
+            let mut dk = nn[k][k];
+            for i in 0..k {
+                dk -= l[k][i] * l[k][i] * dd[i];
+            }
+            dd[k] = dk;
+            for r in k + 1..Q {
+                let mut v = nn[r][k];
+                for i in 0..k {
+                    v -= l[r][i] * l[k][i] * dd[i];
+                }
+                l[r][k] = v / dk;
+            }
+        }
+        let mut g = *yj;
+        for k in 0..Q {
+            for i in 0..k {
+                g[k] -= l[k][i] * g[i];
+            }
+        }
+        for k in 0..Q {
+            g[k] /= dd[k];
+        }
+        for k in (0..Q).rev() {
+            for r in k + 1..Q {
+                g[k] -= l[r][k] * g[r];
+            }
+        }
+        let d2 = 1.0 - (0..Q).map(|k| yj[k] * g[k]).sum::<f64>();
+        if d2.is_nan() || d2 <= tol {
+            return false;
+        }
+        let dj = d2.sqrt();
+        d[j] = dj;
+        for k in 0..Q {
+            h[j * Q + k] = g[k] / dj;
+        }
+        for a in 0..Q {
+            for b in 0..Q {
+                nn[a][b] -= yj[a] * yj[b];
+            }
+        }
+    }
+    true
+}
+
 /// `X ← X L⁻ᵀ` for each `X` of `xs` (`rows × m`, column-major) and `L` of
 /// [`lowrank_cholesky`]: column `i` of `X Lᵀ` is `d_i X_i − (Σ_{j<i} X_j h_jᵀ) y_i`, so
 /// `X_i = (M_i + A y_i) / d_i` with the running sum `A = Σ_{j<i} X_j h_jᵀ` (`rows × q`, scratch

@@ -6,7 +6,7 @@
 use super::Planar;
 use crate::error::{ModalError, Result};
 use crate::exact_joints::frame::{
-    gemv, gemv_t, lowrank_cholesky, lowrank_right_solve_lt, skew_apply,
+    gemv, gemv_t, lowrank_cholesky_prefix, lowrank_right_solve_lt, skew_apply,
 };
 use crate::exact_joints::model::{u_left, u_right};
 use nalgebra::{Matrix4, Vector3, Vector4};
@@ -335,7 +335,7 @@ impl Planar {
                 ws.h[c * r + i] = h;
             }
         }
-        lowrank_cholesky(
+        lowrank_cholesky_prefix(
             &ws.y,
             r,
             m,
