@@ -364,19 +364,21 @@ fn lowrank_prefix_const<const Q: usize>(
     for j in 0..m {
         let yj: &[f64; Q] = y[j * Q..(j + 1) * Q].try_into().expect("column");
         // LDLᵀ of N_j (lower triangle of `l`, pivots in `dd`), then g = N_j⁻¹ y_j
-        let (mut l, mut dd) = ([[0.0f64; Q]; Q], [0.0f64; Q]);
+        // (pivots kept as reciprocals: one division per pivot)
+        let (mut l, mut dd, mut rd) = ([[0.0f64; Q]; Q], [0.0f64; Q], [0.0f64; Q]);
         for k in 0..Q {
             let mut dk = nn[k][k];
             for i in 0..k {
                 dk -= l[k][i] * l[k][i] * dd[i];
             }
             dd[k] = dk;
+            rd[k] = 1.0 / dk;
             for r in k + 1..Q {
                 let mut v = nn[r][k];
                 for i in 0..k {
                     v -= l[r][i] * l[k][i] * dd[i];
                 }
-                l[r][k] = v / dk;
+                l[r][k] = v * rd[k];
             }
         }
         let mut g = *yj;
@@ -386,7 +388,7 @@ fn lowrank_prefix_const<const Q: usize>(
             }
         }
         for k in 0..Q {
-            g[k] /= dd[k];
+            g[k] *= rd[k];
         }
         for k in (0..Q).rev() {
             for r in k + 1..Q {
@@ -399,8 +401,9 @@ fn lowrank_prefix_const<const Q: usize>(
         }
         let dj = d2.sqrt();
         d[j] = dj;
+        let rj = 1.0 / dj;
         for k in 0..Q {
-            h[j * Q + k] = g[k] / dj;
+            h[j * Q + k] = g[k] * rj;
         }
         for a in 0..Q {
             for b in 0..Q {
