@@ -81,6 +81,33 @@ pub(crate) fn gemv(y: &mut [f64], add: bool, a: &[f64], r: usize, x: &[f64], alp
     }
 }
 
+/// [`gemv`] for a small row count `r ≤ 6` (below its 64 entries) with the `r` sums in a local
+/// array of constant length (registers) instead of the output slice (each column's update
+/// otherwise waits for the previous one's store); the same sums in the same order. Other
+/// sizes take [`gemv`].
+pub(crate) fn gemv_small(y: &mut [f64], add: bool, a: &[f64], r: usize, x: &[f64], alpha: f64) {
+    if r * x.len() >= 64 {
+        return gemv(y, add, a, r, x, alpha);
+    }
+    small_size!(r, gemv_const(y, add, a, x, alpha), gemv(y, add, a, r, x, alpha))
+}
+
+#[inline(always)]
+fn gemv_const<const R: usize>(y: &mut [f64], add: bool, a: &[f64], x: &[f64], alpha: f64) {
+    let y: &mut [f64; R] = (&mut y[..R]).try_into().expect("rows");
+    let mut acc = if add { *y } else { [0.0; R] };
+    for (j, &xj) in x.iter().enumerate() {
+        let s = alpha * xj;
+        if s != 0.0 {
+            let c: &[f64; R] = a[j * R..(j + 1) * R].try_into().expect("column");
+            for e in 0..R {
+                acc[e] += s * c[e];
+            }
+        }
+    }
+    *y = acc;
+}
+
 /// `y (+)= alpha · aᵀ x` for column-major `a` (`r × c`, `x` of length `r`): from 64 entries
 /// four columns at a time in vector lanes, below by plain dot products.
 pub(crate) fn gemv_t(y: &mut [f64], add: bool, a: &[f64], r: usize, x: &[f64], alpha: f64) {

@@ -7,7 +7,7 @@
 
 use super::eval::PlanarWs;
 use super::Planar;
-use crate::exact_joints::frame::{gemv, gemv_t, matmul_nn, skew_apply};
+use crate::exact_joints::frame::{gemv, gemv_small, gemv_t, matmul_nn, skew_apply};
 use nalgebra::Vector4;
 
 impl Planar {
@@ -46,11 +46,11 @@ impl Planar {
         let r2 = 2 * r;
         let p = &x[..m];
         // A f1, G A f1, P f1, W p, Ȧ, ȦAᵀ, ȦAᵀG
-        gemv(&mut ws.af1, false, &ws.a, r, &ws.f1, 1.0);
-        gemv(&mut ws.gaf, false, &ws.g, r, &ws.af1, 1.0);
+        gemv_small(&mut ws.af1, false, &ws.a, r, &ws.f1, 1.0);
+        gemv_small(&mut ws.gaf, false, &ws.g, r, &ws.af1, 1.0);
         ws.pf1.copy_from_slice(&ws.f1);
         gemv_t(&mut ws.pf1, true, &ws.a, r, &ws.gaf, -1.0);
-        gemv(&mut ws.wp, false, &ws.w, r, p, 1.0);
+        gemv_small(&mut ws.wp, false, &ws.w, r, p, 1.0);
         // ȦAᵀ (rows of each joint: only its own Ȧ rows are non-zero): Ȧ_j = Δω_j (−s A_j1 +
         // c A_j2), so its rows are combinations of the frame's A_jα Aᵀ
         for (j, jr) in self.joints.iter().enumerate() {
@@ -95,7 +95,7 @@ impl Planar {
                         }
                     }
                 }
-                gemv(&mut ws.apf[al * rj..(al + 1) * rj], false, aal, rj, &ws.pf1, 1.0);
+                gemv_small(&mut ws.apf[al * rj..(al + 1) * rj], false, aal, rj, &ws.pf1, 1.0);
                 gemv_t(&mut ws.atw[al * n..(al + 1) * n], false, aal, rj, &ws.wp[o..o + rj], 1.0);
             }
             for ci in [0, self.nu] {
@@ -129,10 +129,8 @@ impl Planar {
                 // (i > l), −w_l·v_l (i = l) with w_l, v_l the columns of W_j, V_c, so Λᵀp and
                 // Λy take suffix and prefix sums of p_i w_i, p_i v_i (r_j entries each);
                 // Λᵀp: lp_l = −v_l·Σ_{i>l} p_i w_i − w_l·Σ_{i>l} p_i v_i − p_l w_l·v_l
-                let (sw, sv) = ws.rsum.split_at_mut(rj);
-                let sv = &mut sv[..rj];
-                sw.fill(0.0);
-                sv.fill(0.0);
+                let (mut sw, mut sv) = ([0.0f64; 6], [0.0f64; 6]);
+                let (sw, sv) = (&mut sw[..rj], &mut sv[..rj]);
                 for l in (0..m).rev() {
                     let (wl, vl) = (&ws.w[l * r + o..l * r + o + rj], &ws.vc[l * rj..(l + 1) * rj]);
                     let mut d = 0.0;
@@ -147,9 +145,9 @@ impl Planar {
                 }
                 // d = V_c p − A A_cᵀ (W p)_j, G d
                 let wpj = &ws.wp[o..o + rj];
-                gemv(&mut ws.dd, false, &ws.aac, r, wpj, -1.0);
-                gemv(&mut ws.dd[o..o + rj], true, &ws.vc, rj, p, 1.0);
-                gemv(&mut ws.gd, false, &ws.g, r, &ws.dd, 1.0);
+                gemv_small(&mut ws.dd, false, &ws.aac, r, wpj, -1.0);
+                gemv_small(&mut ws.dd[o..o + rj], true, &ws.vc, rj, p, 1.0);
+                gemv_small(&mut ws.gd, false, &ws.g, r, &ws.dd, 1.0);
                 // Z_c p = −AᵀG d − A_cᵀ (W p)_j − Z Λᵀ p
                 gemv_t(&mut ws.zcp, false, &ws.a, r, &ws.gd, -1.0);
                 for al in 0..alphas {
@@ -164,10 +162,8 @@ impl Planar {
                 gemv_t(&mut ws.colp, false, &ws.z[..n * m], n, &ws.tz[..n], 1.0);
                 // (Λ Zᵀf1 by prefix sums: (Λy)_i = −w_i·Σ_{l<i} y_l v_l − v_i·Σ_{l<i} y_l w_l
                 // − y_i w_i·v_i)
-                let (sw, sv) = ws.rsum.split_at_mut(rj);
-                let sv = &mut sv[..rj];
-                sw.fill(0.0);
-                sv.fill(0.0);
+                let (mut sw, mut sv) = ([0.0f64; 6], [0.0f64; 6]);
+                let (sw, sv) = (&mut sw[..rj], &mut sv[..rj]);
                 for (i, &y) in ws.ztf.iter().enumerate() {
                     let (wi, vi) = (&ws.w[i * r + o..i * r + o + rj], &ws.vc[i * rj..(i + 1) * rj]);
                     let mut d = 0.0;
@@ -232,7 +228,16 @@ impl Planar {
                     let (ro, rr) = if R > 0 { (0, R) } else { (ir.offset, ir.rows) };
                     ws.rowd[ro..ro + rr].fill(ws.ddw[i]);
                 }
-                ws.lsum[..4 * r * rj].fill(0.0);
+                // (the running sums in a local array when they fit: with the row counts known
+                // at compile time they stay in registers)
+                let mut local = [0.0f64; 144];
+                let lsum: &mut [f64] = if 4 * r * rj > local.len() {
+                    let l = &mut ws.lsum[..4 * r * rj];
+                    l.fill(0.0);
+                    l
+                } else {
+                    &mut local[..4 * r * rj]
+                };
                 for c in 0..m {
                     let (dv, dwm) =
                         (&mut ws.sa[c * r2..c * r2 + r], &mut ws.sb[c * r2 + r..(c + 1) * r2]);
@@ -243,7 +248,7 @@ impl Planar {
                     let vth = &ws.vth[c * r..(c + 1) * r];
                     // −(XΛᵀ)_c = Σ_{l<c} X_l (v_lᵀ w_c + w_lᵀ v_c) + X_c w_c·v_c (X = V, W) by
                     // the running sums Σ_{l<c} X_l v_lᵀ, Σ_{l<c} X_l w_lᵀ (r × r_j each)
-                    let (pv, rest) = ws.lsum.split_at_mut(r * rj);
+                    let (pv, rest) = lsum.split_at_mut(r * rj);
                     let (qv, rest) = rest.split_at_mut(r * rj);
                     let (pw, qw) = rest.split_at_mut(r * rj);
                     for i in 0..r {

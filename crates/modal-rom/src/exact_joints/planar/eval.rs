@@ -71,8 +71,8 @@ pub(crate) struct PlanarWs {
     pub(super) adag: Vec<f64>,
     pub(super) vc: Vec<f64>,
     pub(super) v2c: Vec<f64>,
-    /// Running sums of the columns' `Λ` products (`2 r_j`, `4 r r_j`).
-    pub(super) rsum: Vec<f64>,
+    /// Running sums of the columns' `Λ` products (`4 r r_j`) when they do not fit the local
+    /// array.
     pub(super) lsum: Vec<f64>,
     /// Per row: `δ_i Z_c p` of the row's joint (`r`).
     pub(super) rowd: Vec<f64>,
@@ -171,7 +171,6 @@ impl PlanarWs {
             adag: z(r * r),
             vc: z(rx * m),
             v2c: z(rx * m),
-            rsum: z(2 * rx),
             lsum: z(4 * r * rx),
             rowd: z(r),
             lp: z(m),

@@ -119,6 +119,10 @@ impl Planar {
         let (rate_c, axis) = rate_comps[0];
         let na = basis.n1();
         // rows of joints: no mixed R_pn coefficient
+        // (a joint's running sums are local arrays of up to six rows)
+        if cons.joints.iter().any(|j| j.rows > 6) {
+            return None;
+        }
         for j in &cons.joints {
             for p in 0..3 {
                 for q in 0..3 {
