@@ -554,6 +554,104 @@ pub(crate) fn lowrank_right_solve_lt(
     Arch::new().dispatch(RightSolve { y, h, d, q, xs, acc });
 }
 
+/// [`lowrank_right_solve_lt`] for one matrix whose row count `rows` is a multiple of four
+/// (callers pad with zero rows), `q ≤ 6`: blocks of up to sixteen rows advance through all `m`
+/// columns with their running sums `A` in registers (the general kernel keeps them in `acc`,
+/// so each column's update waits for the previous column's store), and the `1 / d_i` are formed
+/// once (`rinv`: `m` scratch). The same operations in the same order per row: the same bits.
+pub(crate) fn lowrank_right_solve_lt_padded(
+    y: &[f64],
+    h: &[f64],
+    d: &[f64],
+    q: usize,
+    x: &mut [f64],
+    rows: usize,
+    rinv: &mut [f64],
+) {
+    debug_assert!(rows % 4 == 0 && q <= 6);
+    Arch::new().dispatch(PaddedSolve { y, h, d, q, x, rows, rinv });
+}
+
+struct PaddedSolve<'a> {
+    y: &'a [f64],
+    h: &'a [f64],
+    d: &'a [f64],
+    q: usize,
+    x: &'a mut [f64],
+    rows: usize,
+    rinv: &'a mut [f64],
+}
+
+impl WithSimd for PaddedSolve<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) {
+        let PaddedSolve { y, h, d, q, x, rows, rinv } = self;
+        let rinv = &mut rinv[..d.len()];
+        rinv.iter_mut().zip(d).for_each(|(r, d)| *r = 1.0 / d);
+        small_size!(q, padded_solve_const(y, h, rinv, x, rows), ())
+    }
+}
+
+#[inline(always)]
+fn padded_solve_const<const Q: usize>(
+    y: &[f64],
+    h: &[f64],
+    rinv: &[f64],
+    x: &mut [f64],
+    rows: usize,
+) {
+    let chunks = rows / 4;
+    let mut c0 = 0;
+    while c0 < chunks {
+        c0 += match chunks - c0 {
+            1 => padded_block::<Q, 1>(y, h, rinv, x, rows, c0),
+            2 => padded_block::<Q, 2>(y, h, rinv, x, rows, c0),
+            3 => padded_block::<Q, 3>(y, h, rinv, x, rows, c0),
+            _ => padded_block::<Q, 4>(y, h, rinv, x, rows, c0),
+        };
+    }
+}
+
+/// Rows `4 c0 .. 4 (c0 + B)` of [`lowrank_right_solve_lt_padded`] through all columns; returns
+/// `B`.
+#[inline(always)]
+fn padded_block<const Q: usize, const B: usize>(
+    y: &[f64],
+    h: &[f64],
+    rinv: &[f64],
+    x: &mut [f64],
+    rows: usize,
+    c0: usize,
+) -> usize {
+    let mut acc = [[[0.0f64; 4]; B]; Q];
+    for (i, &inv) in rinv.iter().enumerate() {
+        let yi: &[f64; Q] = y[i * Q..(i + 1) * Q].try_into().expect("y");
+        let hi: &[f64; Q] = h[i * Q..(i + 1) * Q].try_into().expect("h");
+        let xs = &mut x[i * rows + 4 * c0..i * rows + 4 * (c0 + B)];
+        for b in 0..B {
+            let xv: &mut [f64; 4] = (&mut xs[4 * b..4 * b + 4]).try_into().expect("chunk");
+            let mut v = *xv;
+            for k in 0..Q {
+                for e in 0..4 {
+                    v[e] = yi[k].mul_add(acc[k][b][e], v[e]);
+                }
+            }
+            for e in &mut v {
+                *e *= inv;
+            }
+            *xv = v;
+            for k in 0..Q {
+                for e in 0..4 {
+                    acc[k][b][e] = hi[k].mul_add(v[e], acc[k][b][e]);
+                }
+            }
+        }
+    }
+    B
+}
+
 /// `t ← L⁻¹ t` (forward: `t_i = (t_i + y_iᵀ a) / d_i`, `a += h_i t_i`) with `L` of
 /// [`lowrank_cholesky`]; `a`: `q` scratch.
 pub(crate) fn lowrank_solve_l(

@@ -6,7 +6,8 @@
 use super::Planar;
 use crate::error::{ModalError, Result};
 use crate::exact_joints::frame::{
-    gemv, gemv_t, lowrank_cholesky_prefix, lowrank_right_solve_lt, skew_apply,
+    gemv, gemv_t, lowrank_cholesky_prefix, lowrank_right_solve_lt, lowrank_right_solve_lt_padded,
+    skew_apply,
 };
 use crate::exact_joints::model::{u_left, u_right};
 use nalgebra::{Matrix4, Vector3, Vector4};
@@ -61,6 +62,10 @@ pub(crate) struct PlanarWs {
     /// `Zᵀ C` for the columns `C` of [`Planar::zcon`], row by row (`m × k`, row-major);
     /// `A C` (`r × k`).
     pub(super) ztc: Vec<f64>,
+    /// The rows of the frame's one right solve (`Ẑ`, `W`, `A_α Z`, `(Zᵀ C)ᵀ`; `rs × m`) and
+    /// the solve's `1 / d_i`.
+    pub(super) stk: Vec<f64>,
+    pub(super) rinv: Vec<f64>,
     pub(super) acz: Vec<f64>,
     pub(super) kap: Vec<f64>,
     pub(super) af1: Vec<f64>,
@@ -136,7 +141,9 @@ impl PlanarWs {
             ld: z(m),
             lh: z(r * m),
             lmm: z(r * r),
-            lacc: z((n + 4 * r + pl.kc) * r),
+            lacc: z(((n + 4 * r + pl.kc).div_ceil(4) * 4) * r),
+            stk: z(((n + 4 * r + pl.kc).div_ceil(4) * 4) * m),
+            rinv: z(m),
             paa: z(3 * r * r),
             w: z(r * m),
             z: z(n * m),
@@ -346,20 +353,30 @@ impl Planar {
             "null-space basis Z(ξ)",
             "the joint rotation is outside the range of the fields (ZᵀP Z0 singular)",
         )?;
-        ws.w[..r * m].copy_from_slice(&ws.h[..r * m]);
-        ws.z[..n * m].copy_from_slice(&self.z0);
-        // (Aᵀ H's columns as sums of A's rows, contiguous in `at`)
+        // Everything right-multiplied by L⁻ᵀ is stacked as the rows of one matrix (`rs × m`,
+        // rows padded to a multiple of four: the solve's vector chunks) and solved at once:
+        // Ẑ0 − AᵀH (n), W's H (r), A_α Ẑ0 − (A_α Aᵀ)H (r per α: A_α Z without a product with
+        // Z, A_α Ẑ0 a constant), and with the Jacobian (Ẑ0ᵀC − Hᵀ(A C))ᵀ for the constant
+        // columns C of `zcon` (kc; A C = Σ_α w_α A_α C from constants)
+        let alphas = if self.joints.iter().all(|j| j.a3_zero) { 2 } else { 3 };
+        let kc = if want { self.kc } else { 0 };
+        let (ow, oa, oc) = (n, n + r, n + r + alphas * r);
+        let rs = (oc + kc).div_ceil(4) * 4;
+        let stk = &mut ws.stk[..rs * m];
         for c in 0..m {
             let h = &ws.h[c * r..(c + 1) * r];
-            let zc = &mut ws.z[c * n..(c + 1) * n];
+            let col = &mut stk[c * rs..(c + 1) * rs];
+            // (Aᵀ H's columns as sums of A's rows, contiguous in `at`)
+            let zc = &mut col[..n];
+            zc.copy_from_slice(&self.z0[c * n..(c + 1) * n]);
             for (t, &ht) in h.iter().enumerate() {
                 let at = &ws.at[t * n..(t + 1) * n];
                 zc.iter_mut().zip(at).for_each(|(z, a)| *z -= ht * a);
             }
+            col[ow..ow + r].copy_from_slice(h);
+            col[oc + kc..].fill(0.0);
         }
-        // A A_αᵀ from the constant A_jα A_iβᵀ, and A_α Z = (A_α Ẑ0 − (A_α Aᵀ) H) L⁻ᵀ (no
-        // product with Z: A_α Ẑ0 is a constant; the rows join Ẑ's right solve)
-        let alphas = if self.joints.iter().all(|j| j.a3_zero) { 2 } else { 3 };
+        // A A_αᵀ from the constant A_jα A_iβᵀ
         for jr in &self.joints {
             let (rj, o) = if R > 0 { (R, 0) } else { (jr.rows, jr.offset) };
             let paa = &mut ws.paa[3 * r * o..3 * r * (o + rj)];
@@ -378,20 +395,17 @@ impl Planar {
                         }
                     }
                 }
-                let (az, az0) = (&mut ws.az[al], &jr.az0[al + 1]);
+                let az0 = &jr.az0[al + 1];
                 for c in 0..m {
                     let h = &ws.h[c * r..(c + 1) * r];
                     for t in 0..rj {
                         let pt = &paa[(al * rj + t) * r..(al * rj + t + 1) * r];
                         let d: f64 = pt.iter().zip(h).map(|(a, b)| a * b).sum();
-                        az[c * r + o + t] = az0[c * rj + t] - d;
+                        stk[c * rs + oa + al * r + o + t] = az0[c * rj + t] - d;
                     }
                 }
             }
         }
-        // with the Jacobian, (Zᵀ C)ᵀ = (Ẑ0ᵀC − Hᵀ(A C))ᵀ L⁻ᵀ for the constant columns C of
-        // `zcon` (A C = Σ_α w_α A_α C from constants): rows of the same right solve
-        let kc = if want { self.kc } else { 0 };
         if kc > 0 {
             let acz = &mut ws.acz[..r * kc];
             acz.fill(0.0);
@@ -411,22 +425,26 @@ impl Planar {
                 let h = &ws.h[i * r..(i + 1) * r];
                 for k in 0..kc {
                     let d: f64 = h.iter().zip(&acz[k * r..(k + 1) * r]).map(|(a, b)| a * b).sum();
-                    ws.ztc[i * kc + k] = self.z0con[i * kc + k] - d;
+                    stk[i * rs + oc + k] = self.z0con[i * kc + k] - d;
                 }
             }
         }
-        {
-            let [a1, a2, a3] = &mut ws.az;
-            let (a1, a2, a3) = (&mut a1[..r * m], &mut a2[..r * m], &mut a3[..r * m]);
-            let (w, zc) = (&mut ws.w[..r * m], &mut ws.ztc[..kc * m]);
-            let mut xs = [(&mut ws.z[..], n), (w, r), (zc, kc), (a1, r), (a2, r), (a3, r)];
-            let xs = &mut xs[..3 + alphas];
-            lowrank_right_solve_lt(&ws.y, &ws.lh, &ws.ld, r, xs, &mut ws.lacc);
+        if r <= 6 {
+            lowrank_right_solve_lt_padded(&ws.y, &ws.lh, &ws.ld, r, stk, rs, &mut ws.rinv);
+        } else {
+            lowrank_right_solve_lt(&ws.y, &ws.lh, &ws.ld, r, &mut [(&mut *stk, rs)], &mut ws.lacc);
         }
         for c in 0..m {
-            for i in 0..n {
-                ws.zt[i * m + c] = ws.z[c * n + i];
+            let col = &stk[c * rs..(c + 1) * rs];
+            ws.z[c * n..(c + 1) * n].copy_from_slice(&col[..n]);
+            for (i, &v) in col[..n].iter().enumerate() {
+                ws.zt[i * m + c] = v;
             }
+            ws.w[c * r..(c + 1) * r].copy_from_slice(&col[ow..ow + r]);
+            for al in 0..alphas {
+                ws.az[al][c * r..(c + 1) * r].copy_from_slice(&col[oa + al * r..oa + (al + 1) * r]);
+            }
+            ws.ztc[c * kc..(c + 1) * kc].copy_from_slice(&col[oc..oc + kc]);
         }
         Ok(())
     }
