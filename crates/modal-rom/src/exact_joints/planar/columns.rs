@@ -6,8 +6,9 @@
 //! (`K` is bilinear in its row sums).
 
 use super::eval::PlanarWs;
+use super::kernels::gemv_small;
 use super::Planar;
-use crate::exact_joints::frame::{gemv, gemv_small, gemv_t, matmul_nn, skew_apply};
+use crate::exact_joints::frame::{gemv, gemv_t, matmul_nn, skew_apply};
 use nalgebra::Vector4;
 
 impl Planar {

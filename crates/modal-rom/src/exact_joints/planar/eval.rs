@@ -3,12 +3,10 @@
 //! rows only: `A` (`r × n`), `G = (AAᵀ)⁻¹`, `C0 = AẐ0`, `S = I − C0ᵀGC0 = LLᵀ` (generator form),
 //! `H = GC0`, `W = HL⁻ᵀ`, `Ẑ = (Ẑ0 − AᵀH)L⁻ᵀ`.
 
+use super::kernels::{lowrank_cholesky_prefix, lowrank_right_solve_lt_padded};
 use super::Planar;
 use crate::error::{ModalError, Result};
-use crate::exact_joints::frame::{
-    gemv, gemv_t, lowrank_cholesky_prefix, lowrank_right_solve_lt, lowrank_right_solve_lt_padded,
-    skew_apply,
-};
+use crate::exact_joints::frame::{gemv, gemv_t, lowrank_right_solve_lt, skew_apply};
 use crate::exact_joints::model::{u_left, u_right};
 use nalgebra::{Matrix4, Vector3, Vector4};
 use std::cell::RefCell;

@@ -24,6 +24,7 @@
 mod columns;
 mod eval;
 mod jacobian;
+mod kernels;
 #[cfg(test)]
 mod tests;
 
