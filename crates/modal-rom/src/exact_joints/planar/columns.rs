@@ -6,6 +6,7 @@
 //! (`K` is bilinear in its row sums).
 
 use super::eval::PlanarWs;
+use super::kernels::gemv_small;
 use super::Planar;
 use crate::exact_joints::frame::{gemv, gemv_t, matmul_nn, skew_apply};
 use nalgebra::Vector4;
@@ -46,30 +47,22 @@ impl Planar {
         let r2 = 2 * r;
         let p = &x[..m];
         // A f1, G A f1, P f1, W p, Ȧ, ȦAᵀ, ȦAᵀG
-        gemv(&mut ws.af1, false, &ws.a, r, &ws.f1, 1.0);
-        gemv(&mut ws.gaf, false, &ws.g, r, &ws.af1, 1.0);
+        gemv_small(&mut ws.af1, false, &ws.a, r, &ws.f1, 1.0);
+        gemv_small(&mut ws.gaf, false, &ws.g, r, &ws.af1, 1.0);
         ws.pf1.copy_from_slice(&ws.f1);
         gemv_t(&mut ws.pf1, true, &ws.a, r, &ws.gaf, -1.0);
-        gemv(&mut ws.wp, false, &ws.w, r, p, 1.0);
+        gemv_small(&mut ws.wp, false, &ws.w, r, p, 1.0);
+        // ȦAᵀ (rows of each joint: only its own Ȧ rows are non-zero): Ȧ_j = Δω_j (−s A_j1 +
+        // c A_j2), so its rows are combinations of the frame's A_jα Aᵀ
         for (j, jr) in self.joints.iter().enumerate() {
             let [c, s, _] = ws.csr[j];
             let dw = ws.dw[j];
-            let rj = jr.rows;
+            let (rj, o) = (jr.rows, jr.offset);
+            let paa = &ws.paa[3 * r * o..3 * r * (o + rj)];
             for t in 0..rj {
-                let (a1, a2) = (&jr.at[1][t * n..(t + 1) * n], &jr.at[2][t * n..(t + 1) * n]);
-                let row = &mut ws.adt[(jr.offset + t) * n..(jr.offset + t + 1) * n];
-                for ((d, x), y) in row.iter_mut().zip(a1).zip(a2) {
-                    *d = dw * (-s * x + c * y);
-                }
-            }
-        }
-        // ȦAᵀ (rows of each joint: only its own Ȧ rows are non-zero), ȦAᵀG
-        for jr in &self.joints {
-            for t in jr.offset..jr.offset + jr.rows {
-                let ad = &ws.adt[t * n..(t + 1) * n];
+                let (p1, p2) = (&paa[t * r..(t + 1) * r], &paa[(rj + t) * r..(rj + t + 1) * r]);
                 for col in 0..r {
-                    let ac = &ws.at[col * n..(col + 1) * n];
-                    ws.adat[col * r + t] = ad.iter().zip(ac).map(|(x, y)| x * y).sum();
+                    ws.adat[col * r + o + t] = dw * (-s * p1[col] + c * p2[col]);
                 }
             }
         }
@@ -88,23 +81,22 @@ impl Planar {
             let (rj, o) = if R > 0 { (R, 0) } else { (jr.rows, jr.offset) };
             let [a, b] = ws.ab[j];
             let alphas = if jr.a3_zero { 2 } else { 3 };
-            // per α: A A_αᵀ, Ȧ A_αᵀ (r × r_j), A_α P f1 (r_j), A_αᵀ (W p)_j (n)
+            // per α: Ȧ A_αᵀ (r × r_j) from the constants A_jα A_kβᵀ, A_α P f1 (r_j),
+            // A_αᵀ (W p)_j (n); A A_αᵀ is the frame's
+            let aa = &ws.paa[3 * r * o..3 * r * (o + rj)];
             for al in 0..alphas {
                 let aal = &jr.a[al + 1];
                 for t in 0..rj {
-                    let y = &jr.at[al + 1][t * n..(t + 1) * n];
-                    for i in 0..r {
-                        let (ai, di) = (&ws.at[i * n..(i + 1) * n], &ws.adt[i * n..(i + 1) * n]);
-                        let (mut s1, mut s2) = (0.0, 0.0);
-                        for k in 0..n {
-                            s1 += ai[k] * y[k];
-                            s2 += di[k] * y[k];
+                    for (k, kr) in self.joints.iter().enumerate() {
+                        let [c, s, _] = ws.csr[k];
+                        let dw = ws.dw[k];
+                        for i in kr.offset..kr.offset + kr.rows {
+                            let e = |be: usize| jr.pa[((al * 4 + be) * rj + t) * r + i];
+                            ws.ada[(al * rj + t) * r + i] = dw * (-s * e(1) + c * e(2));
                         }
-                        ws.aa[(al * rj + t) * r + i] = s1;
-                        ws.ada[(al * rj + t) * r + i] = s2;
                     }
                 }
-                gemv(&mut ws.apf[al * rj..(al + 1) * rj], false, aal, rj, &ws.pf1, 1.0);
+                gemv_small(&mut ws.apf[al * rj..(al + 1) * rj], false, aal, rj, &ws.pf1, 1.0);
                 gemv_t(&mut ws.atw[al * n..(al + 1) * n], false, aal, rj, &ws.wp[o..o + rj], 1.0);
             }
             for ci in [0, self.nu] {
@@ -119,7 +111,7 @@ impl Planar {
                     }
                 };
                 // A A_cᵀ, Ȧ A_cᵀ (r × r_j), A_c P f1 (r_j)
-                comb(&ws.aa, r * rj, &mut ws.aac);
+                comb(aa, r * rj, &mut ws.aac);
                 comb(&ws.ada, r * rj, &mut ws.x1);
                 comb(&ws.apf, rj, &mut ws.dcp);
                 // V_c = A_c Z, ∂A_θ/∂ξ_c Z (r_j × m)
@@ -138,10 +130,8 @@ impl Planar {
                 // (i > l), −w_l·v_l (i = l) with w_l, v_l the columns of W_j, V_c, so Λᵀp and
                 // Λy take suffix and prefix sums of p_i w_i, p_i v_i (r_j entries each);
                 // Λᵀp: lp_l = −v_l·Σ_{i>l} p_i w_i − w_l·Σ_{i>l} p_i v_i − p_l w_l·v_l
-                let (sw, sv) = ws.rsum.split_at_mut(rj);
-                let sv = &mut sv[..rj];
-                sw.fill(0.0);
-                sv.fill(0.0);
+                let (mut sw, mut sv) = ([0.0f64; 6], [0.0f64; 6]);
+                let (sw, sv) = (&mut sw[..rj], &mut sv[..rj]);
                 for l in (0..m).rev() {
                     let (wl, vl) = (&ws.w[l * r + o..l * r + o + rj], &ws.vc[l * rj..(l + 1) * rj]);
                     let mut d = 0.0;
@@ -156,9 +146,9 @@ impl Planar {
                 }
                 // d = V_c p − A A_cᵀ (W p)_j, G d
                 let wpj = &ws.wp[o..o + rj];
-                gemv(&mut ws.dd, false, &ws.aac, r, wpj, -1.0);
-                gemv(&mut ws.dd[o..o + rj], true, &ws.vc, rj, p, 1.0);
-                gemv(&mut ws.gd, false, &ws.g, r, &ws.dd, 1.0);
+                gemv_small(&mut ws.dd, false, &ws.aac, r, wpj, -1.0);
+                gemv_small(&mut ws.dd[o..o + rj], true, &ws.vc, rj, p, 1.0);
+                gemv_small(&mut ws.gd, false, &ws.g, r, &ws.dd, 1.0);
                 // Z_c p = −AᵀG d − A_cᵀ (W p)_j − Z Λᵀ p
                 gemv_t(&mut ws.zcp, false, &ws.a, r, &ws.gd, -1.0);
                 for al in 0..alphas {
@@ -173,10 +163,8 @@ impl Planar {
                 gemv_t(&mut ws.colp, false, &ws.z[..n * m], n, &ws.tz[..n], 1.0);
                 // (Λ Zᵀf1 by prefix sums: (Λy)_i = −w_i·Σ_{l<i} y_l v_l − v_i·Σ_{l<i} y_l w_l
                 // − y_i w_i·v_i)
-                let (sw, sv) = ws.rsum.split_at_mut(rj);
-                let sv = &mut sv[..rj];
-                sw.fill(0.0);
-                sv.fill(0.0);
+                let (mut sw, mut sv) = ([0.0f64; 6], [0.0f64; 6]);
+                let (sw, sv) = (&mut sw[..rj], &mut sv[..rj]);
                 for (i, &y) in ws.ztf.iter().enumerate() {
                     let (wi, vi) = (&ws.w[i * r + o..i * r + o + rj], &ws.vc[i * rj..(i + 1) * rj]);
                     let mut d = 0.0;
@@ -241,7 +229,16 @@ impl Planar {
                     let (ro, rr) = if R > 0 { (0, R) } else { (ir.offset, ir.rows) };
                     ws.rowd[ro..ro + rr].fill(ws.ddw[i]);
                 }
-                ws.lsum[..4 * r * rj].fill(0.0);
+                // (the running sums in a local array when they fit: with the row counts known
+                // at compile time they stay in registers)
+                let mut local = [0.0f64; 144];
+                let lsum: &mut [f64] = if 4 * r * rj > local.len() {
+                    let l = &mut ws.lsum[..4 * r * rj];
+                    l.fill(0.0);
+                    l
+                } else {
+                    &mut local[..4 * r * rj]
+                };
                 for c in 0..m {
                     let (dv, dwm) =
                         (&mut ws.sa[c * r2..c * r2 + r], &mut ws.sb[c * r2 + r..(c + 1) * r2]);
@@ -252,7 +249,7 @@ impl Planar {
                     let vth = &ws.vth[c * r..(c + 1) * r];
                     // −(XΛᵀ)_c = Σ_{l<c} X_l (v_lᵀ w_c + w_lᵀ v_c) + X_c w_c·v_c (X = V, W) by
                     // the running sums Σ_{l<c} X_l v_lᵀ, Σ_{l<c} X_l w_lᵀ (r × r_j each)
-                    let (pv, rest) = ws.lsum.split_at_mut(r * rj);
+                    let (pv, rest) = lsum.split_at_mut(r * rj);
                     let (qv, rest) = rest.split_at_mut(r * rj);
                     let (pw, qw) = rest.split_at_mut(r * rj);
                     for i in 0..r {

@@ -3,11 +3,10 @@
 //! rows only: `A` (`r × n`), `G = (AAᵀ)⁻¹`, `C0 = AẐ0`, `S = I − C0ᵀGC0 = LLᵀ` (generator form),
 //! `H = GC0`, `W = HL⁻ᵀ`, `Ẑ = (Ẑ0 − AᵀH)L⁻ᵀ`.
 
+use super::kernels::{lowrank_cholesky_prefix, lowrank_right_solve_lt_padded};
 use super::Planar;
 use crate::error::{ModalError, Result};
-use crate::exact_joints::frame::{
-    gemv, gemv_t, lowrank_cholesky, lowrank_right_solve_lt, matmul_nn, skew_apply,
-};
+use crate::exact_joints::frame::{gemv, gemv_t, lowrank_right_solve_lt, skew_apply};
 use crate::exact_joints::model::{u_left, u_right};
 use nalgebra::{Matrix4, Vector3, Vector4};
 use std::cell::RefCell;
@@ -17,9 +16,8 @@ use std::cell::RefCell;
 pub(crate) struct PlanarWs {
     key: Vec<usize>,
     pub(super) a: Vec<f64>,
-    /// `A` and `Ȧ` row by row (`r` rows of `n`, each contiguous).
+    /// `A` row by row (`r` rows of `n`, each contiguous).
     pub(super) at: Vec<f64>,
-    pub(super) adt: Vec<f64>,
     pub(super) gram: Vec<f64>,
     pub(super) linv: Vec<f64>,
     pub(super) g: Vec<f64>,
@@ -42,6 +40,8 @@ pub(crate) struct PlanarWs {
     pub(super) amb: Vec<f64>,
     pub(super) ztf: Vec<f64>,
     pub(super) kp: Vec<f64>,
+    /// Per joint (from `3 r o_j`): `A A_αᵀ` (`r × r_j` for `α = 1…3`, column `(α − 1) r_j + t`).
+    pub(super) paa: Vec<f64>,
     /// `A_α Z` (`r × m`), `α = 1, 2, 3`; `V_θ = A_θ Z` and `V = ȦZ` (`r × m`).
     pub(super) az: [Vec<f64>; 3],
     pub(super) vth: Vec<f64>,
@@ -57,7 +57,14 @@ pub(crate) struct PlanarWs {
     pub(super) tz: Vec<f64>,
     /// `J blockdiag(Z, Z2)` (`(n + nb) × max(m, m2)`).
     pub(super) tzm: Vec<f64>,
-    pub(super) dz: Vec<f64>,
+    /// `Zᵀ C` for the columns `C` of [`Planar::zcon`], row by row (`m × k`, row-major);
+    /// `A C` (`r × k`).
+    pub(super) ztc: Vec<f64>,
+    /// The rows of the frame's one right solve (`Ẑ`, `W`, `A_α Z`, `(Zᵀ C)ᵀ`; `rs × m`) and
+    /// the solve's `1 / d_i`.
+    pub(super) stk: Vec<f64>,
+    pub(super) rinv: Vec<f64>,
+    pub(super) acz: Vec<f64>,
     pub(super) kap: Vec<f64>,
     pub(super) af1: Vec<f64>,
     pub(super) gaf: Vec<f64>,
@@ -67,8 +74,8 @@ pub(crate) struct PlanarWs {
     pub(super) adag: Vec<f64>,
     pub(super) vc: Vec<f64>,
     pub(super) v2c: Vec<f64>,
-    /// Running sums of the columns' `Λ` products (`2 r_j`, `4 r r_j`).
-    pub(super) rsum: Vec<f64>,
+    /// Running sums of the columns' `Λ` products (`4 r r_j`) when they do not fit the local
+    /// array.
     pub(super) lsum: Vec<f64>,
     /// Per row: `δ_i Z_c p` of the row's joint (`r`).
     pub(super) rowd: Vec<f64>,
@@ -83,9 +90,8 @@ pub(crate) struct PlanarWs {
     pub(super) gaac: Vec<f64>,
     pub(super) dkp: Vec<f64>,
     pub(super) ddw: Vec<f64>,
-    /// Per joint `α = 1…3`: `A A_αᵀ`, `Ȧ A_αᵀ` (`r × r_j`), `A_α P f1` (`r_j`), `A_αᵀ (W p)_j`
-    /// (`n`); the stacked `[∂V; V]`, `[W; ∂W]` (`2r × m`) of the columns' `∂(Kp)`.
-    pub(super) aa: Vec<f64>,
+    /// Per joint `α = 1…3`: `Ȧ A_αᵀ` (`r × r_j`), `A_α P f1` (`r_j`), `A_αᵀ (W p)_j` (`n`);
+    /// the stacked `[∂V; V]`, `[W; ∂W]` (`2r × m`) of the columns' `∂(Kp)`.
     pub(super) ada: Vec<f64>,
     pub(super) apf: Vec<f64>,
     pub(super) atw: Vec<f64>,
@@ -124,7 +130,6 @@ impl PlanarWs {
             key,
             a: z(r * n),
             at: z(r * n),
-            adt: z(r * n),
             gram: z(r * r),
             linv: z(r * r),
             g: z(r * r),
@@ -134,7 +139,10 @@ impl PlanarWs {
             ld: z(m),
             lh: z(r * m),
             lmm: z(r * r),
-            lacc: z(n.max(r) * r),
+            lacc: z(((n + 4 * r + pl.kc).div_ceil(4) * 4) * r),
+            stk: z(((n + 4 * r + pl.kc).div_ceil(4) * 4) * m),
+            rinv: z(m),
+            paa: z(3 * r * r),
             w: z(r * m),
             z: z(n * m),
             zt: z(n * m),
@@ -157,7 +165,8 @@ impl PlanarWs {
             rtmp: z(2 * r),
             tz: z(n + nb),
             tzm: z((n + nb) * m.max(pl.m2)),
-            dz: z(nj * m),
+            ztc: z(pl.kc * m),
+            acz: z(pl.kc * r),
             kap: z(m),
             af1: z(r),
             gaf: z(r),
@@ -167,7 +176,6 @@ impl PlanarWs {
             adag: z(r * r),
             vc: z(rx * m),
             v2c: z(rx * m),
-            rsum: z(2 * rx),
             lsum: z(4 * r * rx),
             rowd: z(r),
             lp: z(m),
@@ -181,7 +189,6 @@ impl PlanarWs {
             gaac: z(r * rx),
             dkp: z(m),
             ddw: z(nj),
-            aa: z(3 * r * rx),
             ada: z(3 * r * rx),
             apf: z(3 * rx),
             atw: z(3 * n),
@@ -229,7 +236,13 @@ impl Planar {
 
     /// The frame `Ẑ(ξ)` and its factors into `ws` for the joint quaternions at `offsets`.
     #[inline(always)]
-    fn frame<const R: usize>(&self, ws: &mut PlanarWs, x: &[f64], offsets: &[usize]) -> Result<()> {
+    fn frame<const R: usize>(
+        &self,
+        ws: &mut PlanarWs,
+        x: &[f64],
+        offsets: &[usize],
+        want: bool,
+    ) -> Result<()> {
         let (n, m) = (self.n, self.m);
         let r = if R > 0 { R } else { self.r };
         ws.a[..r * n].fill(0.0);
@@ -326,7 +339,7 @@ impl Planar {
                 ws.h[c * r + i] = h;
             }
         }
-        lowrank_cholesky(
+        lowrank_cholesky_prefix(
             &ws.y,
             r,
             m,
@@ -338,23 +351,98 @@ impl Planar {
             "null-space basis Z(ξ)",
             "the joint rotation is outside the range of the fields (ZᵀP Z0 singular)",
         )?;
-        ws.w[..r * m].copy_from_slice(&ws.h[..r * m]);
-        lowrank_right_solve_lt(&ws.y, &ws.lh, &ws.ld, r, &mut [(&mut ws.w[..], r)], &mut ws.lacc);
-        ws.z[..n * m].copy_from_slice(&self.z0);
-        // (Aᵀ H's columns as sums of A's rows, contiguous in `at`)
+        // Everything right-multiplied by L⁻ᵀ is stacked as the rows of one matrix (`rs × m`,
+        // rows padded to a multiple of four: the solve's vector chunks) and solved at once:
+        // Ẑ0 − AᵀH (n), W's H (r), A_α Ẑ0 − (A_α Aᵀ)H (r per α: A_α Z without a product with
+        // Z, A_α Ẑ0 a constant), and with the Jacobian (Ẑ0ᵀC − Hᵀ(A C))ᵀ for the constant
+        // columns C of `zcon` (kc; A C = Σ_α w_α A_α C from constants)
+        let alphas = if self.joints.iter().all(|j| j.a3_zero) { 2 } else { 3 };
+        let kc = if want { self.kc } else { 0 };
+        let (ow, oa, oc) = (n, n + r, n + r + alphas * r);
+        let rs = (oc + kc).div_ceil(4) * 4;
+        let stk = &mut ws.stk[..rs * m];
         for c in 0..m {
             let h = &ws.h[c * r..(c + 1) * r];
-            let zc = &mut ws.z[c * n..(c + 1) * n];
+            let col = &mut stk[c * rs..(c + 1) * rs];
+            // (Aᵀ H's columns as sums of A's rows, contiguous in `at`)
+            let zc = &mut col[..n];
+            zc.copy_from_slice(&self.z0[c * n..(c + 1) * n]);
             for (t, &ht) in h.iter().enumerate() {
                 let at = &ws.at[t * n..(t + 1) * n];
                 zc.iter_mut().zip(at).for_each(|(z, a)| *z -= ht * a);
             }
+            col[ow..ow + r].copy_from_slice(h);
+            col[oc + kc..].fill(0.0);
         }
-        lowrank_right_solve_lt(&ws.y, &ws.lh, &ws.ld, r, &mut [(&mut ws.z[..], n)], &mut ws.lacc);
-        for c in 0..m {
-            for i in 0..n {
-                ws.zt[i * m + c] = ws.z[c * n + i];
+        // A A_αᵀ from the constant A_jα A_iβᵀ
+        for jr in &self.joints {
+            let (rj, o) = if R > 0 { (R, 0) } else { (jr.rows, jr.offset) };
+            let paa = &mut ws.paa[3 * r * o..3 * r * (o + rj)];
+            for al in 0..alphas {
+                for t in 0..rj {
+                    for (k, kr) in self.joints.iter().enumerate() {
+                        let [c, s, rho] = ws.csr[k];
+                        let (kn, ko) = if R > 0 { (R, 0) } else { (kr.rows, kr.offset) };
+                        for i in ko..ko + kn {
+                            let e = |be: usize| jr.pa[((al * 4 + be) * rj + t) * r + i];
+                            let mut v = e(0) + c * e(1) + s * e(2);
+                            if !kr.a3_zero {
+                                v += rho * e(3);
+                            }
+                            paa[(al * rj + t) * r + i] = v;
+                        }
+                    }
+                }
+                let az0 = &jr.az0[al + 1];
+                for c in 0..m {
+                    let h = &ws.h[c * r..(c + 1) * r];
+                    for t in 0..rj {
+                        let pt = &paa[(al * rj + t) * r..(al * rj + t + 1) * r];
+                        let d: f64 = pt.iter().zip(h).map(|(a, b)| a * b).sum();
+                        stk[c * rs + oa + al * r + o + t] = az0[c * rj + t] - d;
+                    }
+                }
             }
+        }
+        if kc > 0 {
+            let acz = &mut ws.acz[..r * kc];
+            acz.fill(0.0);
+            for (j, jr) in self.joints.iter().enumerate() {
+                let (rj, o) = if R > 0 { (R, 0) } else { (jr.rows, jr.offset) };
+                let [c, s, rho] = ws.csr[j];
+                let wgt = [1.0, c, s, rho];
+                for (al, &wa) in wgt.iter().enumerate() {
+                    for k in 0..kc {
+                        let src = &jr.acon[al][k * rj..(k + 1) * rj];
+                        let dst = &mut acz[k * r + o..k * r + o + rj];
+                        dst.iter_mut().zip(src).for_each(|(d, v)| *d += wa * v);
+                    }
+                }
+            }
+            for i in 0..m {
+                let h = &ws.h[i * r..(i + 1) * r];
+                for k in 0..kc {
+                    let d: f64 = h.iter().zip(&acz[k * r..(k + 1) * r]).map(|(a, b)| a * b).sum();
+                    stk[i * rs + oc + k] = self.z0con[i * kc + k] - d;
+                }
+            }
+        }
+        if r <= 6 {
+            lowrank_right_solve_lt_padded(&ws.y, &ws.lh, &ws.ld, r, stk, rs, &mut ws.rinv);
+        } else {
+            lowrank_right_solve_lt(&ws.y, &ws.lh, &ws.ld, r, &mut [(&mut *stk, rs)], &mut ws.lacc);
+        }
+        for c in 0..m {
+            let col = &stk[c * rs..(c + 1) * rs];
+            ws.z[c * n..(c + 1) * n].copy_from_slice(&col[..n]);
+            for (i, &v) in col[..n].iter().enumerate() {
+                ws.zt[i * m + c] = v;
+            }
+            ws.w[c * r..(c + 1) * r].copy_from_slice(&col[ow..ow + r]);
+            for al in 0..alphas {
+                ws.az[al][c * r..(c + 1) * r].copy_from_slice(&col[oa + al * r..oa + (al + 1) * r]);
+            }
+            ws.ztc[c * kc..(c + 1) * kc].copy_from_slice(&col[oc..oc + kc]);
         }
         Ok(())
     }
@@ -398,7 +486,8 @@ impl Planar {
         let r = if R > 0 { R } else { self.r };
         let nb = self.ops.w.ncols();
         ws.ns = f.len();
-        self.frame::<R>(ws, x, offsets)?;
+        let want = jac.is_some();
+        self.frame::<R>(ws, x, offsets, want)?;
         let (p, p2) = (&x[..m], &x[m..m + m2]);
         mv(&mut ws.q1, &ws.z, n, p);
         if self.z2_identity {
@@ -406,20 +495,10 @@ impl Planar {
         } else {
             mv(&mut ws.q2, &self.z2, nb, p2);
         }
-        let want = jac.is_some();
         let jf = if want { Some(&mut ws.jf[..]) } else { None };
         self.ops.eval(&ws.q1, &ws.q2, u, &mut ws.f1, &mut ws.f2, jf, &mut ws.amb);
         mtv(&mut ws.ztf, &ws.z[..n * m], &ws.f1);
-        // joint rates, ξ̇_j, V = ȦZ = Δω A_θ Z
-        for (al, az) in ws.az.iter_mut().enumerate() {
-            if al == 2 && (!want || self.joints.iter().all(|j| j.a3_zero)) {
-                continue;
-            }
-            for jr in &self.joints {
-                let (rj, o) = if R > 0 { (R, 0) } else { (jr.rows, jr.offset) };
-                matmul_nn(&mut az[o..], r, &jr.a[al + 1], rj, &ws.z, n, n, m);
-            }
-        }
+        // joint rates, ξ̇_j, V = ȦZ = Δω A_θ Z (`A_α Z` from the frame)
         for (j, jr) in self.joints.iter().enumerate() {
             let dot = |row: &[f64]| row.iter().zip(&ws.q1).map(|(a, b)| a * b).sum::<f64>();
             let (wa, wb) = (dot(&jr.wa), dot(&jr.wb));

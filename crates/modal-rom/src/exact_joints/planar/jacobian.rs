@@ -16,13 +16,8 @@
 
 use super::eval::PlanarWs;
 use super::Planar;
-use crate::exact_joints::frame::{gemv_t, matmul_nn, matmul_tn, skew_apply};
+use crate::exact_joints::frame::{matmul_nn, matmul_tn, skew_apply};
 use nalgebra::Vector4;
-
-/// `y = aᵀ x` (`a`: `x.len() × y.len()`, column-major).
-fn mtv(y: &mut [f64], a: &[f64], x: &[f64]) {
-    gemv_t(y, false, a, x.len(), x, 1.0);
-}
 
 impl Planar {
     /// The Jacobians into `jx` (`ns × ns`) and `ju` (`ns × nu`) after [`Planar::eval`]
@@ -84,12 +79,14 @@ impl Planar {
                 *c += (0..r).map(|t| vi[t] * wl[t]).sum::<f64>();
             }
         }
+        // Zᵀ δ_j, Zᵀ (root rate row), Zᵀ B_u: the frame's `ztc` (row by row, `kc` per row)
+        let kc = self.kc;
         // Ξ (joint rows: ½ (δ_j Z)_k (−b, a n)) and −κΞ with κ_θj = K(V_θj, W_j) p
         let p = &x[..m];
         for (j, jr) in self.joints.iter().enumerate() {
             let (rj, o) = (jr.rows, jr.offset);
-            let dz = &mut ws.dz[j * m..(j + 1) * m];
-            mtv(dz, &ws.z[..n * m], &jr.delta);
+            let dz = &mut ws.lp[..m];
+            dz.iter_mut().enumerate().for_each(|(i, d)| *d = ws.ztc[i * kc + j]);
             let [a, b] = ws.ab[j];
             let oj = offsets[j];
             for (k, &d) in dz.iter().enumerate() {
@@ -115,12 +112,12 @@ impl Planar {
                 }
             }
         }
-        if let (Some((o, w)), Some(t)) = (root, self.root.as_ref()) {
+        if let (Some((o, w)), Some(_)) = (root, self.root.as_ref()) {
             let xr = Vector4::from_column_slice(&x[o..o + 4]);
             let u1 = self.u_n(1.0, false) * xr;
-            let tz = &mut ws.lp;
-            mtv(tz, &ws.z[..n * m], t);
-            for (k, &d) in tz.iter().enumerate() {
+            let nj = self.joints.len();
+            for k in 0..m {
+                let d = ws.ztc[k * kc + nj];
                 for i in 0..4 {
                     jx[k * ns + o + i] = d * u1[i];
                 }
@@ -132,8 +129,11 @@ impl Planar {
                 }
             }
         }
+        let o = self.joints.len() + usize::from(self.root.is_some());
         for k in 0..nu {
-            gemv_t(&mut ju[k * ns..k * ns + m], false, zm, n, self.ops.b_u.col_as_slice(k), 1.0);
+            for i in 0..m {
+                ju[k * ns + i] = ws.ztc[i * kc + o + k];
+            }
         }
         if !self.joints.is_empty() {
             self.joint_columns(ws, x, offsets, root.map(|(o, _)| o), jx);

@@ -24,6 +24,7 @@
 mod columns;
 mod eval;
 mod jacobian;
+mod kernels;
 #[cfg(test)]
 mod tests;
 
@@ -48,6 +49,12 @@ pub(crate) struct PlanarJoint {
     at: [Vec<f64>; 4],
     /// `A_jα Ẑ0` (`r_j × m`), set with the coordinates.
     az0: [Vec<f64>; 4],
+    /// `A_jα A_iβᵀ` for `α = 1…3`, `β = 0…3` over the rows `i` of all joints: entry
+    /// `((α − 1)·4 + β)·r_j·r + t·r + i` is `A_jα[t, ·] · A_{k(i)β}[i, ·]` (`k(i)` the joint of
+    /// row `i`), so that `A A_αᵀ` and `Ȧ A_αᵀ` are combinations of constants (theory.md §10.9).
+    pa: Vec<f64>,
+    /// `A_jα C` (`r_j × k`) for the columns `C` of [`Planar::zcon`].
+    acon: [Vec<f64>; 4],
     /// Whether `A_j3 = 0`.
     a3_zero: bool,
     /// Rows of `ω_a`, `ω_b` (`n` each).
@@ -71,6 +78,12 @@ pub(crate) struct Planar {
     r: usize,
     /// Root node's rate row (`n`) when the root is carried.
     root: Option<Vec<f64>>,
+    /// The constant vectors `C` the Jacobian multiplies by `Zᵀ` (`n × k`, column-major): the
+    /// joints' `δ_j`, the root's rate row, the input columns `B_u`; `k`, and `Ẑ0ᵀC` row by
+    /// row (`m × k`, set with the coordinates).
+    zcon: Vec<f64>,
+    kc: usize,
+    z0con: Vec<f64>,
     /// `Ẑ0 = NᵀZ0` (`n × m`), `Z2` (`nb × m2`), column-major.
     z0: Vec<f64>,
     z2: Vec<f64>,
@@ -107,6 +120,10 @@ impl Planar {
         let (rate_c, axis) = rate_comps[0];
         let na = basis.n1();
         // rows of joints: no mixed R_pn coefficient
+        // (a joint's running sums are local arrays of up to six rows)
+        if cons.joints.iter().any(|j| j.rows > 6) {
+            return None;
+        }
         for j in &cons.joints {
             for p in 0..3 {
                 for q in 0..3 {
@@ -205,6 +222,8 @@ impl Planar {
                 a,
                 at,
                 az0: Default::default(),
+                pa: Vec::new(),
+                acon: Default::default(),
                 a3_zero,
                 wa,
                 wb,
@@ -212,12 +231,52 @@ impl Planar {
             });
             r += rj;
         }
+        for j in 0..joints.len() {
+            let rj = joints[j].rows;
+            let mut pa = vec![0.0; 12 * rj * r];
+            for al in 0..3 {
+                for be in 0..4 {
+                    for t in 0..rj {
+                        let x = &joints[j].at[al + 1][t * n..(t + 1) * n];
+                        for k in &joints {
+                            for il in 0..k.rows {
+                                let y = &k.at[be][il * n..(il + 1) * n];
+                                let d = x.iter().zip(y).map(|(a, b)| a * b).sum();
+                                pa[((al * 4 + be) * rj + t) * r + k.offset + il] = d;
+                            }
+                        }
+                    }
+                }
+            }
+            joints[j].pa = pa;
+        }
         let root = cons.root.map(|(b, nd, _)| {
             let i = layout.x1_index(b, nd, rate_c);
             (0..n).map(|c| (0..na).map(|a| basis.phi1[(i, a)] * reduce[(a, c)]).sum()).collect()
         });
+        let mut zcon: Vec<f64> = joints.iter().flat_map(|j| j.delta.iter().copied()).collect();
+        zcon.extend(root.iter().flatten());
+        zcon.extend((0..ops.b_u.ncols()).flat_map(|k| ops.b_u.col_as_slice(k).iter().copied()));
+        let kc = zcon.len() / n.max(1);
+        for j in &mut joints {
+            let rj = j.rows;
+            j.acon = std::array::from_fn(|al| {
+                let mut v = vec![0.0; rj * kc];
+                for k in 0..kc {
+                    for t in 0..rj {
+                        let row = &j.at[al][t * n..(t + 1) * n];
+                        v[k * rj + t] =
+                            row.iter().zip(&zcon[k * n..(k + 1) * n]).map(|(a, b)| a * b).sum();
+                    }
+                }
+                v
+            });
+        }
         Some(Planar {
             nu: 1 + axis,
+            zcon,
+            kc,
+            z0con: Vec::new(),
             n,
             reduce,
             ops,
@@ -254,6 +313,14 @@ impl Planar {
                 *az = flat(&(am * &z0r));
             }
         }
+        let kc = self.kc;
+        self.z0con = (0..self.m)
+            .flat_map(|i| (0..kc).map(move |k| (i, k)))
+            .map(|(i, k)| {
+                let col = &self.z0[i * n..(i + 1) * n];
+                col.iter().zip(&self.zcon[k * n..(k + 1) * n]).map(|(a, b)| a * b).sum()
+            })
+            .collect();
         self.key = self.dims_key();
     }
 
