@@ -241,7 +241,9 @@ impl ControllerSettings {
     /// `scenes/paper-3d-mpc.toml`, real time: one SQP iteration per sample (RTI) with the merit
     /// line search and a Levenberg–Marquardt term 1e-3, without the relaxed retry, the linear
     /// MPC fallback and the plan joint-angle check (all three lean on the model linearised at
-    /// the reference angle; a failed sample applies the NMPC's own iterate). The shooting
+    /// the reference angle; a failed sample applies the NMPC's own iterate). Each later
+    /// sample's warm start has its first two intervals re-simulated from the measured state
+    /// ([`Self::rollout_intervals`] = 2), which takes the FE range from ω0 = 1.0 to 1.375. The shooting
     /// intervals use the implicit midpoint rule with 4 substeps: Lawson RK4 takes its exact
     /// linear part at the reference angle, and with the joints bent the remainder carries
     /// elastic frequencies beyond the stability limit of its substeps; the implicit midpoint
@@ -262,6 +264,7 @@ impl ControllerSettings {
             retry_relaxation: None,
             fallback_to_lmpc: false,
             plan_joint_limit_deg: None,
+            rollout_intervals: 2,
             ..Self::real_time(true)
         }
     }

@@ -484,7 +484,6 @@ fn shipped_mpc_scenes_match_the_mpc_presets() {
                 real_time_iteration: false,
                 max_iterations: 10,
                 first_sample_iterations: Some(40),
-                rollout_intervals: 2,
                 link_elastic_modes: Some(24),
                 integrator: ocp_transcription::IntegratorSettings::new(
                     ocp_transcription::IntegratorKind::ImplicitMidpoint,
