@@ -213,8 +213,8 @@ pub(crate) fn lowrank_cholesky(
     }
 }
 
-/// [`lowrank_cholesky`] under the run-time dispatch, `q ≤ 6` as a constant (`M` and `g` in
-/// registers; the same sums in the same order). `false` when a pivot fails.
+/// [`lowrank_cholesky`] under the run-time dispatch: `q ≤ 6` as a constant in the prefix-sum
+/// form ([`lowrank_cholesky_const`]), larger `q` by the recurrence. `false` when a pivot fails.
 struct LowrankCholesky<'a> {
     y: &'a [f64],
     q: usize,
@@ -240,6 +240,12 @@ impl WithSimd for LowrankCholesky<'_> {
     }
 }
 
+/// [`lowrank_cholesky`] for `q = Q ≤ 6`, with the elimination's recurrence reduced to prefix
+/// sums: by Sherman–Morrison the `M` of step `j` is `N_j⁻¹` with `N_j = I − Σ_{i<j} y_i y_iᵀ`
+/// (`q × q`), so `g = N_j⁻¹ y_j` (a `q × q` `LDLᵀ` solve), `d_j² = 1 − y_jᵀ g`,
+/// `h_j = g / d_j`. The only dependence from one column to the next is the update of `N`, so
+/// the divisions and square roots of different columns overlap (the same factor to round-off
+/// as [`lowrank_cholesky_imp`]).
 #[inline(always)]
 fn lowrank_cholesky_const<const Q: usize>(
     y: &[f64],
@@ -248,12 +254,65 @@ fn lowrank_cholesky_const<const Q: usize>(
     h: &mut [f64],
     tol: f64,
 ) -> bool {
-    let (mut mm, mut g) = ([0.0; 36], [0.0; Q]);
-    lowrank_cholesky_imp(y, Q, m, d, h, &mut mm[..Q * Q], &mut g, tol)
+    let mut nn = [[0.0f64; Q]; Q];
+    for (k, row) in nn.iter_mut().enumerate() {
+        row[k] = 1.0;
+    }
+    for j in 0..m {
+        let yj: &[f64; Q] = y[j * Q..(j + 1) * Q].try_into().expect("column");
+        // LDLᵀ of N_j (lower triangle of `l`, pivots in `dd`), then g = N_j⁻¹ y_j
+        // (pivots kept as reciprocals: one division per pivot)
+        let (mut l, mut dd, mut rd) = ([[0.0f64; Q]; Q], [0.0f64; Q], [0.0f64; Q]);
+        for k in 0..Q {
+            let mut dk = nn[k][k];
+            for i in 0..k {
+                dk -= l[k][i] * l[k][i] * dd[i];
+            }
+            dd[k] = dk;
+            rd[k] = 1.0 / dk;
+            for r in k + 1..Q {
+                let mut v = nn[r][k];
+                for i in 0..k {
+                    v -= l[r][i] * l[k][i] * dd[i];
+                }
+                l[r][k] = v * rd[k];
+            }
+        }
+        let mut g = *yj;
+        for k in 0..Q {
+            for i in 0..k {
+                g[k] -= l[k][i] * g[i];
+            }
+        }
+        for k in 0..Q {
+            g[k] *= rd[k];
+        }
+        for k in (0..Q).rev() {
+            for r in k + 1..Q {
+                g[k] -= l[r][k] * g[r];
+            }
+        }
+        let d2 = 1.0 - (0..Q).map(|k| yj[k] * g[k]).sum::<f64>();
+        if d2.is_nan() || d2 <= tol {
+            return false;
+        }
+        let dj = d2.sqrt();
+        d[j] = dj;
+        let rj = 1.0 / dj;
+        for k in 0..Q {
+            h[j * Q + k] = g[k] * rj;
+        }
+        for a in 0..Q {
+            for b in 0..Q {
+                nn[a][b] -= yj[a] * yj[b];
+            }
+        }
+    }
+    true
 }
 
-/// The elimination of [`lowrank_cholesky`]; `M q`-products as [`gemv`]'s plain loops (`q² <
-/// 64` there too), so every `q` gives the same bits.
+/// The elimination of [`lowrank_cholesky`] for `q > 6`; `M q`-products as [`gemv`]'s plain
+/// loops below 64 entries.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn lowrank_cholesky_imp(

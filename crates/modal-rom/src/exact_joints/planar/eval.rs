@@ -3,7 +3,7 @@
 //! rows only: `A` (`r × n`), `G = (AAᵀ)⁻¹`, `C0 = AẐ0`, `S = I − C0ᵀGC0 = LLᵀ` (generator form),
 //! `H = GC0`, `W = HL⁻ᵀ`, `Ẑ = (Ẑ0 − AᵀH)L⁻ᵀ`.
 
-use super::kernels::{lowrank_cholesky_prefix, lowrank_right_solve_lt_padded};
+use super::kernels::lowrank_right_solve_lt_padded;
 use super::Planar;
 use crate::error::{ModalError, Result};
 use crate::exact_joints::frame::{gemv, gemv_t, lowrank_right_solve_lt, skew_apply};
@@ -339,7 +339,7 @@ impl Planar {
                 ws.h[c * r + i] = h;
             }
         }
-        lowrank_cholesky_prefix(
+        crate::exact_joints::frame::lowrank_cholesky(
             &ws.y,
             r,
             m,
