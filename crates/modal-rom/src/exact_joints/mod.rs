@@ -23,6 +23,7 @@ mod jacobian;
 mod model;
 mod planar;
 mod rows;
+mod unit_rotation;
 
 #[cfg(test)]
 mod tests;

@@ -424,10 +424,15 @@ impl ExactJointsRom {
         x
     }
 
-    fn joint_xi(&self, x: &[f64]) -> Vec<Vector4<f64>> {
-        (0..self.n_joints())
-            .map(|j| Vector4::from_column_slice(&x[self.joint_offset(j)..self.joint_offset(j) + 4]))
-            .collect()
+    /// The joint quaternions of `x`, scaled to unit length (the rows' rotations).
+    fn joint_xi(&self, x: &[f64]) -> Result<Vec<Vector4<f64>>> {
+        let (mut xh, mut norm) = (Vec::new(), Vec::new());
+        self.unit_state(x, &mut xh, &mut norm)?;
+        Ok((0..self.n_joints())
+            .map(|j| {
+                Vector4::from_column_slice(&xh[self.joint_offset(j)..self.joint_offset(j) + 4])
+            })
+            .collect())
     }
 
     /// `A(ξ)` (`r × na`): support rows, then each joint's `C_j(ξ_j) E_j`.
@@ -461,8 +466,10 @@ impl ExactJointsRom {
     /// `Z(ξ)` (`na × m`) at the joint rotations of `x` (theory.md §10.4).
     fn null_basis(&self, x: &[f64]) -> Result<Mat<f64>> {
         let (na, m) = (self.basis.n1(), self.n_p());
+        let (mut xh, mut norm) = (Vec::new(), Vec::new());
+        self.unit_state(x, &mut xh, &mut norm)?;
         with_workspace(self, |ws| {
-            self.frame_into(ws, x, true)?;
+            self.frame_into(ws, &xh, true)?;
             Ok(Mat::from_fn(na, m, |i, j| ws.z[j * na + i]))
         })
     }
@@ -473,10 +480,7 @@ impl ExactJointsRom {
             return Err(shape("output", (self.n_state(), 1), (out.len(), 1)));
         }
         self.check(x, u)?;
-        if let Some(done) = self.planar_eval(x, u, out, None) {
-            return done;
-        }
-        with_workspace(self, |ws| self.eval_into(ws, x, u, out, None))
+        self.evaluate(x, u, out, None, true)
     }
 
     /// Right-hand side and exact Jacobians `∂f/∂x` (n × n) and `∂f/∂u` (n × inputs), both
@@ -501,10 +505,7 @@ impl ExactJointsRom {
             return Err(shape("Jacobian ∂f/∂u", (n, nu), (ju.len(), 1)));
         }
         self.check(x, u)?;
-        if let Some(done) = self.planar_eval(x, u, f, Some((&mut *jx, &mut *ju))) {
-            return done;
-        }
-        with_workspace(self, |ws| self.eval_into(ws, x, u, f, Some((jx, ju))))
+        self.evaluate(x, u, f, Some((jx, ju)), true)
     }
 
     /// Energy `½|p|² + ½|p2|²`.
@@ -523,7 +524,7 @@ impl ExactJointsRom {
     /// `max |A(ξ) q1|`: the compatibility residual of the current velocities (round-off).
     pub fn compatibility_residual(&self, x: &[f64]) -> Result<f64> {
         let q1 = self.link_velocities(x)?;
-        let a = self.rows_full(&self.joint_xi(x));
+        let a = self.rows_full(&self.joint_xi(x)?);
         Ok((0..a.nrows())
             .map(|i| (0..a.ncols()).map(|j| a[(i, j)] * q1[j]).sum::<f64>())
             .fold(0.0f64, |m, v| m.max(v.abs())))

@@ -171,8 +171,11 @@ fn reduces_to_the_paper_model_at_the_reference_rotation() {
 /// factors while the Jacobian forms it), away from the reference rotation.
 #[test]
 fn jacobian_matches_finite_differences() {
-    for (rom, axis) in [(undamped_2d(), [0.0, 1.0, 0.0]), (damped_3d(), [0.2, 1.0, -0.6])] {
-        let x = state(rom, 0.71, 1.3, axis, 0.3);
+    let cases = [(undamped_2d(), [0.0, 1.0, 0.0]), (damped_3d(), [0.2, 1.0, -0.6])];
+    for ((rom, axis), norm) in cases.into_iter().flat_map(|c| [(c, 1.0), (c, 1.15)]) {
+        let mut x = state(rom, 0.71, 1.3, axis, 0.3);
+        let o = rom.joint_offset(0);
+        x[o..o + 4].iter_mut().for_each(|v| *v *= norm);
         let n = rom.n_state();
         let nu = rom.n_inputs();
         let u: Vec<f64> = (0..nu).map(|i| 0.3 * (i as f64 + 1.0)).collect();
@@ -208,13 +211,58 @@ fn jacobian_matches_finite_differences() {
                 worst = worst.max((fd - ju[c * n + r]).abs() / scale);
             }
         }
-        eprintln!("n = {n}: max |J − FD| / max|J| = {worst:.2e}");
+        eprintln!("n = {n}, |ξ| = {norm}: max |J − FD| / max|J| = {worst:.2e}");
         assert!(worst < 1e-7, "Jacobian vs FD: {worst:e}");
     }
 }
 
+/// A zero joint quaternion is no rotation: an error naming it, not a NaN.
+#[test]
+fn a_zero_joint_quaternion_is_an_error() {
+    let rom = undamped_2d();
+    let mut x = state(rom, 0.3, 0.4, [0.0, 1.0, 0.0], 0.5);
+    let o = rom.joint_offset(0);
+    x[o..o + 4].fill(0.0);
+    let mut f = vec![0.0; rom.n_state()];
+    let e = rom.rhs(&x, &vec![0.0; rom.n_inputs()], &mut f).unwrap_err().to_string();
+    assert!(e.contains("joint quaternion 0"), "{e}");
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(24))]
+    /// The rows read a joint quaternion through its unit rotation (theory.md §10.3): scaling
+    /// `ξ_j` by `λ` leaves every rate but `ξ̇_j` unchanged and scales `ξ̇_j` by `λ`, and the
+    /// Jacobian's radial column `(∂f/∂ξ_j) ξ_j` is `ξ̇_j` in joint `j`'s rows and zero elsewhere;
+    /// 2D (planar evaluation) and 3D (general).
+    #[test]
+    fn joint_quaternion_norm_scales_its_own_rate(
+        spatial in any::<bool>(),
+        seed in 0.1f64..10.0,
+        angle in -2.5f64..2.5,
+        lambda in 0.5f64..2.0,
+    ) {
+        let (rom, axis) =
+            if spatial { (damped_3d(), [0.2, 1.0, -0.6]) } else { (undamped_2d(), [0.0, 1.0, 0.0]) };
+        let x = state(rom, seed, angle, axis, 0.7);
+        let o = rom.joint_offset(0);
+        let mut xs = x.clone();
+        xs[o..o + 4].iter_mut().for_each(|v| *v *= lambda);
+        let (n, nu) = (rom.n_state(), rom.n_inputs());
+        let u: Vec<f64> = (0..nu).map(|i| 0.2 * (i as f64 + 1.0)).collect();
+        let (mut f, mut fs) = (vec![0.0; n], vec![0.0; n]);
+        let (mut jx, mut ju) = (vec![0.0; n * n], vec![0.0; n * nu]);
+        rom.rhs(&x, &u, &mut f).unwrap();
+        rom.rhs_and_jacobian(&xs, &u, &mut fs, &mut jx, &mut ju).unwrap();
+        let size = max_abs(&f);
+        for i in 0..n {
+            let want = if (o..o + 4).contains(&i) { lambda * f[i] } else { f[i] };
+            prop_assert!((fs[i] - want).abs() <= 1e-12 * size, "row {i}: {} vs {want}", fs[i]);
+            let radial: f64 = (0..4).map(|c| jx[(o + c) * n + i] * xs[o + c]).sum();
+            let want = if (o..o + 4).contains(&i) { fs[i] } else { 0.0 };
+            prop_assert!((radial - want).abs() <= 1e-12 * max_abs(&jx), "radial row {i}: {radial}");
+        }
+    }
+
     /// Energy neutrality (`pᵀṗ + p2ᵀṗ2 = 0` without damping and input) and compatibility
     /// (`A(ξ) Z(ξ) p = 0`) at any state and joint rotation.
     #[test]

@@ -1,6 +1,7 @@
 //! The in-plane joint-quaternion columns of the planar Jacobian (formulas in
 //! [`super::jacobian`]): per joint, the pieces linear in `A_α` (`A A_αᵀ`, `Ȧ A_αᵀ`, `A_α P f1`,
-//! `A_αᵀ (W p)_j`) once, each column `c` combining them with `∂w_α/∂ξ_c` (`w = (1, c, s, ρ)`);
+//! `A_αᵀ (W p)_j`, `α = 1, 2`), combined with `∂w_α/∂t` (`w = (1, c, s, ρ)`) into the one column
+//! along the tangent `t`;
 //! `Λ_c` (`m × m`, rank `2r_j`) applied by running sums of its generators, never formed; and
 //! `∂(Kp) = K(∂V, W)p + K(V, ∂W)p` as one skew application on the stacked `[∂V; V]`, `[W; ∂W]`
 //! (`K` is bilinear in its row sums).
@@ -80,7 +81,8 @@ impl Planar {
         for (j, jr) in self.joints.iter().enumerate() {
             let (rj, o) = if R > 0 { (R, 0) } else { (jr.rows, jr.offset) };
             let [a, b] = ws.ab[j];
-            let alphas = if jr.a3_zero { 2 } else { 3 };
+            // along the tangent (−b, a) `∂ρ = 0`: A_3 drops out
+            let alphas = 2;
             // per α: Ȧ A_αᵀ (r × r_j) from the constants A_jα A_kβᵀ, A_α P f1 (r_j),
             // A_αᵀ (W p)_j (n); A A_αᵀ is the frame's
             let aa = &ws.paa[3 * r * o..3 * r * (o + rj)];
@@ -99,12 +101,11 @@ impl Planar {
                 gemv_small(&mut ws.apf[al * rj..(al + 1) * rj], false, aal, rj, &ws.pf1, 1.0);
                 gemv_t(&mut ws.atw[al * n..(al + 1) * n], false, aal, rj, &ws.wp[o..o + rj], 1.0);
             }
-            for ci in [0, self.nu] {
-                let (dwc, d2) = if ci == 0 {
-                    ([2.0 * a, 2.0 * b, 2.0 * a], [-2.0 * b, 2.0 * a])
-                } else {
-                    ([-2.0 * b, 2.0 * a, 2.0 * b], [-2.0 * a, -2.0 * b])
-                };
+            {
+                // the derivative along t = (−b, a): ∂w_α/∂ξ (w = (c, s, ρ)) and ∂A_θ/∂ξ
+                // (module docs) combined, `−b ∂_a + a ∂_b`
+                let dwc = [-4.0 * a * b, 2.0 * (a * a - b * b)];
+                let d2 = [2.0 * (b * b - a * a), -4.0 * a * b];
                 let comb = |v: &[f64], len: usize, out: &mut [f64]| {
                     for (e, y) in out[..len].iter_mut().enumerate() {
                         *y = (0..alphas).map(|al| dwc[al] * v[al * len + e]).sum();
@@ -118,11 +119,7 @@ impl Planar {
                 for col in 0..m {
                     for t in 0..rj {
                         let i = col * r + o + t;
-                        let mut vc = dwc[0] * ws.az[0][i] + dwc[1] * ws.az[1][i];
-                        if alphas == 3 {
-                            vc += dwc[2] * ws.az[2][i];
-                        }
-                        ws.vc[col * rj + t] = vc;
+                        ws.vc[col * rj + t] = dwc[0] * ws.az[0][i] + dwc[1] * ws.az[1][i];
                         ws.v2c[col * rj + t] = d2[0] * ws.az[0][i] + d2[1] * ws.az[1][i];
                     }
                 }
@@ -183,7 +180,7 @@ impl Planar {
                     *c -= (0..rj).map(|t| vi[t] * gaf[t] + wi[t] * dcp[t]).sum::<f64>();
                 }
                 // p2 rows (Z2ᵀJ21 Z_c p), ξ̇ rows, root rows
-                let col = offsets[j] + ci;
+                let col = offsets[j];
                 let jc = &mut jx[col * ns..(col + 1) * ns];
                 if self.z2_identity {
                     jc[m..m + m2].copy_from_slice(&ws.tz[n..nf]);
@@ -198,7 +195,7 @@ impl Planar {
                     v[0] = -0.5 * bi * d;
                     v[self.nu] = 0.5 * ai * d;
                     if i == j {
-                        v += ws.mj[j].column(ci);
+                        v += ws.mj[j].column(0) * -b + ws.mj[j].column(self.nu) * a;
                     }
                     let oi = offsets[i];
                     jc[oi..oi + 4].copy_from_slice(v.as_slice());
@@ -286,6 +283,12 @@ impl Planar {
                 skew_apply(&ws.sa, &ws.sb, r2, p, &mut ws.dkp, &mut ws.rtmp);
                 let jc = &mut jx[col * ns..col * ns + m];
                 jc.iter_mut().zip(ws.colp.iter().zip(&ws.dkp)).for_each(|(j, (c, k))| *j = c - k);
+                // the column g = ∂f̂/∂t into the in-plane columns as g tᵀ (`∂f̂/∂x̂ Π`)
+                let (ca, cb) = jx[col * ns..].split_at_mut(self.nu * ns);
+                for (ga, gb) in ca[..ns].iter_mut().zip(&mut cb[..ns]) {
+                    *gb = a * *ga;
+                    *ga *= -b;
+                }
             }
         }
     }

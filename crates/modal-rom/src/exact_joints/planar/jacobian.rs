@@ -1,18 +1,19 @@
 //! Exact Jacobian of the planar evaluation (theory.md §10.5, §10.9): the `(p, p2, u)` columns
 //! as in [`crate::exact_joints::jacobian`] with the `−κΞ` term one rank-one term per joint, and
-//! per joint the two in-plane quaternion columns `c ∈ {a, b}` with `A_c = ∂A/∂ξ_jc` (joint
-//! `j`'s rows only), `V_c = A_cZ`, `Λ_c = Φ(−(W_jᵀV_c + V_cᵀW_j))`:
+//! per joint the in-plane quaternion columns from the one derivative `g` along the tangent
+//! `c = t = (−b, a)` (written `g tᵀ`) with `A_c = ∂A/∂t` (joint `j`'s rows only), `V_c = A_cZ`,
+//! `Λ_c = Φ(−(W_jᵀV_c + V_cᵀW_j))`:
 //!
 //! ```text
 //!   Z_c p   = −AᵀG(V_c p − A A_cᵀ W p) − A_cᵀ W p − Z Λ_cᵀ p
 //!   Z_cᵀ f1 = −V_cᵀ G A f1 − Wᵀ A_c P f1 − Λ_c Zᵀ f1
 //!   ∂V      = ∂Ȧ Z − ȦAᵀG V_c − (ȦA_cᵀ − ȦAᵀG A A_cᵀ) W − V Λ_cᵀ
 //!   ∂W      = G V_c − G A A_cᵀ W − W Λ_cᵀ
-//!   ∂Ȧ_i   = (δ_i Z_c p) A_iθ + [i = j] Δω_j ∂A_jθ/∂ξ_jc
+//!   ∂Ȧ_i   = (δ_i Z_c p) A_iθ + [i = j] Δω_j ∂A_jθ/∂t
 //! ```
 //!
-//! (`∂A_θ/∂a = −2b A_1 + 2a A_2`, `∂A_θ/∂b = −2a A_1 − 2b A_2`); the out-of-plane columns
-//! hold `U(ω_b) − Ū(ω_a)`'s columns in joint `j`'s rows only.
+//! (`∂A/∂t = −4ab A_1 + 2(a² − b²) A_2`, `∂A_θ/∂t = −2(a² − b²) A_1 − 4ab A_2`); the
+//! out-of-plane columns hold `U(ω_b) − Ū(ω_a)`'s columns in joint `j`'s rows only.
 
 use super::eval::PlanarWs;
 use super::Planar;

@@ -5,9 +5,9 @@
 //! A model is planar when its layout has the three in-plane components (two velocities, the
 //! rate about the plane's normal `n`) and every joint's rows depend on `R(ξ_j)` only through
 //! its in-plane block and `R_nn` (no mixed `R_pn`). A state is planar when every joint
-//! quaternion is `ξ_j = (a_j, b_j n)` (its out-of-plane components exactly zero); the state is
-//! not normalised, so `R(ξ_j) = c I_plane + s ñ + ρ n nᵀ` with `c = a² − b²`, `s = 2ab`,
-//! `ρ = a² + b²` (eq. 9 in its homogeneous form). Then:
+//! quaternion is `ξ_j = (a_j, b_j n)` (its out-of-plane components exactly zero); the evaluation
+//! runs at unit joint quaternions ([`super::unit_rotation`]), where `R(ξ_j) = c I_plane + s ñ +
+//! ρ n nᵀ` with `c = a² − b²`, `s = 2ab`, `ρ = a² + b²` (eq. 9 in its homogeneous form). Then:
 //!
 //! * the support rows are constant and each supported on one link: the fields are reduced
 //!   once to `N = blockdiag(null S_link)` (orthonormal), where every support row vanishes, so
@@ -16,7 +16,9 @@
 //! * each joint's rows are `A_j = A_j0 + c A_j1 + s A_j2 + ρ A_j3` with four constant
 //!   matrices on the reduced fields, `Ȧ_j = Δω_j A_jθ` (`A_jθ = −s A_j1 + c A_j2`,
 //!   `Δω_j = ω_b − ω_a`), and `ξ̇_j = ½Δω_j (−b, a n)`;
-//! * the Jacobian's `ξ_j` columns move only along `a` and `b`: the out-of-plane columns hold
+//! * the Jacobian's `ξ_j` columns move only along `a` and `b`, and only the tangent
+//!   `t = (−b, a)` is needed (the columns are `∂f/∂x̂ Π`, [`super::unit_rotation`]): one column
+//!   `g`, written as `g tᵀ`; the out-of-plane columns hold
 //!   `ξ̇_j`'s own dependence on `ξ_j` (`∂A/∂ξ_jc = 0`, `∂²A/∂ξ_jc∂ξ_jd = 0` for the in-plane
 //!   `d`), and the `−κΞ` term of the `p` columns is one rank-one term per joint,
 //!   `(δ_j Z)ᵀ ⊗ K(A_jθ Z, W_j) p` (`δ_j` the rows of `Δω_j`).
@@ -352,7 +354,7 @@ impl crate::exact_joints::ExactJointsRom {
     }
 
     /// The general evaluation (also for planar models): right-hand side and, with `jac`, the
-    /// exact Jacobians.
+    /// exact Jacobians, at any joint quaternion norm.
     #[cfg(test)]
     pub(crate) fn eval_general(
         &self,
@@ -361,7 +363,7 @@ impl crate::exact_joints::ExactJointsRom {
         f: &mut [f64],
         jac: Option<(&mut [f64], &mut [f64])>,
     ) -> crate::error::Result<()> {
-        crate::exact_joints::eval::with_workspace(self, |ws| self.eval_into(ws, x, u, f, jac))
+        self.evaluate(x, u, f, jac, false)
     }
 
     /// Whether the planar evaluation is available for this model.
