@@ -29,6 +29,49 @@ fn cpu_report(label: &str, calls: usize, mut f: impl FnMut()) {
     eprintln!("{label}: thread CPU {:.3e} s/call over {calls} calls", (c1 - c0) / calls as f64);
 }
 
+/// Thread CPU per call of each evaluation of `calls` in short blocks taken in turn: `ROUNDS`
+/// rounds, each running one block of every evaluation (a twentieth of its line's calls). A burst
+/// of load on a shared machine then lands in a few blocks of every evaluation rather than in
+/// the whole figure of one; prints the lower quartile and the median over the blocks and the
+/// exact-to-paper ratios at both.
+fn interleaved_report(name: &str, calls: &mut [Call<'_>]) {
+    const ROUNDS: usize = 200;
+    let mut t = vec![Vec::with_capacity(ROUNDS); calls.len()];
+    for _ in 0..ROUNDS {
+        for (k, (_, n, f)) in calls.iter_mut().enumerate() {
+            let block = (*n / 20).max(1);
+            let Some(c0) = ocp_transcription::thread_cpu_time() else { return };
+            for _ in 0..block {
+                f();
+            }
+            let Some(c1) = ocp_transcription::thread_cpu_time() else { return };
+            t[k].push((c1 - c0) / block as f64);
+        }
+    }
+    let at = |v: &mut Vec<f64>, q: f64| {
+        v.sort_by(f64::total_cmp);
+        v[((v.len() - 1) as f64 * q).round() as usize]
+    };
+    let stats: Vec<[f64; 2]> = t.iter_mut().map(|v| [at(v, 0.25), at(v, 0.5)]).collect();
+    for ((what, _, _), [q1, med]) in calls.iter().zip(&stats) {
+        eprintln!(
+            "{name}/{what}: interleaved, {ROUNDS} blocks: lower quartile {:.3} µs, median {:.3} µs",
+            q1 * 1e6,
+            med * 1e6
+        );
+    }
+    for (exact, paper) in [(0, 1), (2, 3)] {
+        let (e, p) = (stats[exact], stats[paper]);
+        eprintln!(
+            "{name}: {} / {}: {:.3} (lower quartiles), {:.3} (medians)",
+            calls[exact].0,
+            calls[paper].0,
+            e[0] / p[0],
+            e[1] / p[1]
+        );
+    }
+}
+
 /// The paper's 2D or 3D two-link sample (`elements` per link, modes `selection`) and its inputs.
 fn sample(
     spatial: bool,
@@ -290,14 +333,18 @@ fn cpu_lines(opts: &CpuOnly) {
         if let Some(path) = &opts.dump {
             dump(&pair, &format!("{path}.{name}"));
         }
-        for (what, calls, mut f) in pair.calls() {
+        let mut calls = pair.calls();
+        for (what, n, f) in &mut calls {
             match opts.profile {
-                Some(n) if what == "exact_rhs_and_jacobian" => {
-                    cpu_report(&format!("{name}/{what}"), n, &mut f)
+                Some(n) if *what == "exact_rhs_and_jacobian" => {
+                    cpu_report(&format!("{name}/{what}"), n, f)
                 }
                 Some(_) => {}
-                None => cpu_report(&format!("{name}/{what}"), calls, &mut f),
+                None => cpu_report(&format!("{name}/{what}"), *n, f),
             }
+        }
+        if opts.profile.is_none() {
+            interleaved_report(name, &mut calls);
         }
     }
 }

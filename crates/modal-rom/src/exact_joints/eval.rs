@@ -19,6 +19,7 @@ use crate::exact_joints::frame::{
 use crate::exact_joints::model::{u_left, u_right, ExactJointsRom};
 use nalgebra::{Matrix4, Vector3, Vector4};
 use std::cell::RefCell;
+use std::thread::LocalKey;
 
 /// Reused buffers of one evaluation (sized by the model's dimensions).
 #[derive(Debug, Default)]
@@ -101,15 +102,26 @@ thread_local! {
     static WORKSPACE: RefCell<Workspace> = RefCell::new(Workspace::default());
 }
 
-/// Runs `f` with this thread's workspace sized for `rom`.
-pub(crate) fn with_workspace<T>(rom: &ExactJointsRom, f: impl FnOnce(&mut Workspace) -> T) -> T {
-    WORKSPACE.with(|ws| {
+/// Runs `f` with this thread's buffers in `cell`, rebuilt by `make` unless `fits` says they
+/// are sized for the model at hand (the evaluations' reused workspaces).
+pub(crate) fn with_buffers<W: 'static, T>(
+    cell: &'static LocalKey<RefCell<W>>,
+    fits: impl FnOnce(&W) -> bool,
+    make: impl FnOnce() -> W,
+    f: impl FnOnce(&mut W) -> T,
+) -> T {
+    cell.with(|ws| {
         let mut ws = ws.borrow_mut();
-        if !rom.dims_match(&ws.key) {
-            *ws = Workspace::new(rom);
+        if !fits(&ws) {
+            *ws = make();
         }
         f(&mut ws)
     })
+}
+
+/// Runs `f` with this thread's workspace sized for `rom`.
+pub(crate) fn with_workspace<T>(rom: &ExactJointsRom, f: impl FnOnce(&mut Workspace) -> T) -> T {
+    with_buffers(&WORKSPACE, |ws| rom.dims_match(&ws.key), || Workspace::new(rom), f)
 }
 
 fn zeros(n: usize) -> Vec<f64> {

@@ -12,7 +12,7 @@
 //! ([`super::eval`], [`super::planar`]) run at `x̂`; this module maps their results to `x`.
 
 use crate::error::{invalid, Result};
-use crate::exact_joints::eval::with_workspace;
+use crate::exact_joints::eval::{with_buffers, with_workspace};
 use crate::exact_joints::model::ExactJointsRom;
 use std::cell::RefCell;
 
@@ -74,34 +74,40 @@ impl ExactJointsRom {
         mut jac: Option<(&mut [f64], &mut [f64])>,
         planar: bool,
     ) -> Result<()> {
-        UNIT.with(|cell| {
-            let mut cell = cell.borrow_mut();
-            let UnitState { x: xh, norm } = &mut *cell;
-            self.unit_state(x, xh, norm)?;
-            let planar_done =
-                if planar { self.planar_eval(xh, u, f, reborrow(&mut jac)) } else { None };
-            // the planar evaluation's quaternion columns are `∂f̂/∂x̂ Π` already
-            let projected = match planar_done {
-                Some(done) => {
-                    done?;
-                    true
+        with_buffers(
+            &UNIT,
+            |_| true,
+            UnitState::default,
+            |cell| {
+                let UnitState { x: xh, norm } = cell;
+                self.unit_state(x, xh, norm)?;
+                let planar_done =
+                    if planar { self.planar_eval(xh, u, f, reborrow(&mut jac)) } else { None };
+                // the planar evaluation's quaternion columns are `∂f̂/∂x̂ Π` already
+                let projected = match planar_done {
+                    Some(done) => {
+                        done?;
+                        true
+                    }
+                    None => {
+                        with_workspace(self, |ws| {
+                            self.eval_into(ws, xh, u, f, reborrow(&mut jac))
+                        })?;
+                        false
+                    }
+                };
+                if let Some((jx, ju)) = jac {
+                    self.unit_jacobian(xh, norm, f, jx, ju, projected);
                 }
-                None => {
-                    with_workspace(self, |ws| self.eval_into(ws, xh, u, f, reborrow(&mut jac)))?;
-                    false
+                for (j, &s) in norm.iter().enumerate() {
+                    if s != 1.0 {
+                        let o = self.joint_offset(j);
+                        f[o..o + 4].iter_mut().for_each(|v| *v *= s);
+                    }
                 }
-            };
-            if let Some((jx, ju)) = jac {
-                self.unit_jacobian(xh, norm, f, jx, ju, projected);
-            }
-            for (j, &s) in norm.iter().enumerate() {
-                if s != 1.0 {
-                    let o = self.joint_offset(j);
-                    f[o..o + 4].iter_mut().for_each(|v| *v *= s);
-                }
-            }
-            Ok(())
-        })
+                Ok(())
+            },
+        )
     }
 
     /// `∂f̂/∂x̂` (in `jx`, `ju`) to `∂f/∂x`, `∂f/∂u` (module docs); `f` holds `f̂`, `projected`:

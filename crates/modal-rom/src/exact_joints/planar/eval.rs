@@ -6,6 +6,7 @@
 use super::kernels::lowrank_right_solve_lt_padded;
 use super::Planar;
 use crate::error::{ModalError, Result};
+use crate::exact_joints::eval::with_buffers;
 use crate::exact_joints::frame::{gemv, gemv_t, lowrank_right_solve_lt, skew_apply};
 use crate::exact_joints::model::{u_left, u_right};
 use nalgebra::{Matrix4, Vector3, Vector4};
@@ -107,13 +108,7 @@ thread_local! {
 
 /// Runs `f` with this thread's planar workspace sized for `pl`.
 pub(crate) fn with_planar_workspace<T>(pl: &Planar, f: impl FnOnce(&mut PlanarWs) -> T) -> T {
-    WS.with(|ws| {
-        let mut ws = ws.borrow_mut();
-        if ws.key != pl.key {
-            *ws = PlanarWs::new(pl, pl.key.clone());
-        }
-        f(&mut ws)
-    })
+    with_buffers(&WS, |ws| ws.key == pl.key, || PlanarWs::new(pl, pl.key.clone()), f)
 }
 
 fn z(n: usize) -> Vec<f64> {
