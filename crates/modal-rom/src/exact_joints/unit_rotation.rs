@@ -56,8 +56,7 @@ impl ExactJointsRom {
                 ));
             }
             if s != 1.0 {
-                let inv = 1.0 / s;
-                xh[o..o + 4].iter_mut().for_each(|v| *v *= inv);
+                xh[o..o + 4].iter_mut().for_each(|v| *v /= s);
             }
             norm.push(s);
         }
@@ -134,17 +133,16 @@ impl ExactJointsRom {
             let (c1, tail) = tail.split_at_mut(ns);
             let (c2, c3) = tail.split_at_mut(ns);
             let c3 = &mut c3[..ns];
-            let inv = 1.0 / s;
             for i in 0..ns {
                 let d = if projected {
                     0.0
                 } else {
                     c0[i] * xi[0] + c1[i] * xi[1] + c2[i] * xi[2] + c3[i] * xi[3]
                 };
-                c0[i] = (c0[i] - d * xi[0]) * inv;
-                c1[i] = (c1[i] - d * xi[1]) * inv;
-                c2[i] = (c2[i] - d * xi[2]) * inv;
-                c3[i] = (c3[i] - d * xi[3]) * inv;
+                c0[i] = (c0[i] - d * xi[0]) / s;
+                c1[i] = (c1[i] - d * xi[1]) / s;
+                c2[i] = (c2[i] - d * xi[2]) / s;
+                c3[i] = (c3[i] - d * xi[3]) / s;
             }
         }
         let nu = self.n_inputs();
