@@ -328,12 +328,12 @@ fn exact_joints_3d() -> CaseOutcome {
     exact_joints_3d_scene("paper-3d-mpc.toml", text, EXACT_JOINTS_3D_OMEGAS)
 }
 
-/// The largest ω0 per plant with `scenes/paper-3d-mpc-full-range.toml` (the full SQP with a
-/// Levenberg–Marquardt term on 24 elastic modes per link, implicit midpoint × 8, a 5 s horizon
-/// of 20 intervals, 40 more SQP iterations on the first sample, the later samples' first two
-/// intervals re-simulated from the measured state; docs/mpc.md, "The later samples' warm
-/// start": ✓ FE and ROM 0.25…1.5), the same assertions as `mpc/3d-exact-joints`. Two loops,
-/// ≈ 2–3 min CPU.
+/// The largest ω0 per plant with `scenes/paper-3d-mpc-full-range.toml` (the full SQP, up to 20
+/// iterations per sample with a Levenberg–Marquardt term, on 24 elastic modes per link,
+/// implicit midpoint × 8, a 5 s horizon of 20 intervals, 40 more SQP iterations on the first
+/// sample, the later samples' first two intervals re-simulated from the measured state;
+/// docs/mpc.md, "Unit rotations": ✓ FE and ROM 0.25…1.5), the same assertions as
+/// `mpc/3d-exact-joints`. Two loops, ≈ 5 min CPU.
 fn exact_joints_3d_full_range() -> CaseOutcome {
     let text = include_str!("../../scenes/paper-3d-mpc-full-range.toml");
     let omegas: &[(PlantKind, &[f64])] = &[(PlantKind::Fe, &[1.5]), (PlantKind::Rom, &[1.5])];
