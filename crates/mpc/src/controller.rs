@@ -243,7 +243,7 @@ impl ControllerSettings {
     /// MPC fallback and the plan joint-angle check (all three lean on the model linearised at
     /// the reference angle; a failed sample applies the NMPC's own iterate). Each later
     /// sample's warm start has its first two intervals re-simulated from the measured state
-    /// ([`Self::rollout_intervals`] = 2): measured on the FE plant, ✓ at ω0 = 0.25…1.375 with
+    /// ([`Self::rollout_intervals`] = 2): measured on the FE plant, ✓ at ω0 = 0.25…1.5 with
     /// it and 0.25…1.0 without (docs/mpc.md, "3D sweep"). The shooting
     /// intervals use the implicit midpoint rule with 4 substeps: Lawson RK4 takes its exact
     /// linear part at the reference angle, and with the joints bent the remainder carries
