@@ -477,12 +477,12 @@ fn shipped_mpc_scenes_match_the_mpc_presets() {
             assert_eq!(c.controller, mpc::ControllerSettings::exact_joints());
         }
         if file == "paper-3d-mpc-full-range.toml" {
-            // the full SQP with the LM term on 24 elastic modes per link, × 8, 40 first-sample
-            // iterations, two intervals re-simulated per later sample (docs/mpc.md, "The later
-            // samples' warm start")
+            // the full SQP (≤ 20 iterations) with the LM term on 24 elastic modes per link, × 8,
+            // 40 first-sample iterations, two intervals re-simulated per later sample
+            // (docs/mpc.md, "The later samples' warm start", "Unit rotations")
             let full = mpc::ControllerSettings {
                 real_time_iteration: false,
-                max_iterations: 10,
+                max_iterations: 20,
                 first_sample_iterations: Some(40),
                 link_elastic_modes: Some(24),
                 integrator: ocp_transcription::IntegratorSettings::new(
