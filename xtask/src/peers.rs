@@ -137,8 +137,11 @@ fn settings(variant: &str, p: &Problem) -> Result<SqpSettings> {
 }
 
 fn named_settings(variant: &str, p: &Problem) -> Result<SqpSettings> {
+    // solved to convergence: the interval maps to round-off, whatever the scene's real-time
+    // Newton tolerance
+    let integrator = SqpSettings::converge(p.controller.integrator.clone()).integrator;
     let base = SqpSettings {
-        integrator: p.controller.integrator.clone(),
+        integrator,
         max_iterations: 60,
         kkt_tolerance: 1e-8,
         ..SqpSettings::default()

@@ -197,7 +197,7 @@ pub use closed_loop::{
 };
 pub use controller::{
     Controller, ControllerKind, ControllerSettings, InitialGuess, SampleReport, SolveTiming,
-    Strategy, DEFAULT_PLAN_JOINT_LIMIT,
+    Strategy, DEFAULT_PLAN_JOINT_LIMIT, REAL_TIME_NEWTON_TOLERANCE,
 };
 pub use dynamics::RomDynamics;
 pub use error::{MpcError, Result};

@@ -198,6 +198,7 @@ fn controller_of(ctx: &Ctx<'_>, spec: &SceneSpec) -> Result<mpc::ControllerSetti
     set(&mut c.link_elastic_modes, cs.link_elastic_modes.map(Some));
     set(&mut c.integrator.kind, cs.integrator);
     set(&mut c.integrator.substeps, cs.substeps);
+    set(&mut c.integrator.newton_tolerance, cs.newton_tolerance);
     set(&mut c.parallel_intervals, cs.parallel_intervals);
     c.validate().or_else(|e| ctx.library(spec, Owner::Controller, e))?;
     Ok(c)

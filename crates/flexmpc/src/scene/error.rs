@@ -134,6 +134,7 @@ const KEYS: &[(&str, &str, &str)] = &[
     ("controller", "retry_relaxation", "controller.retry_relaxation"),
     ("controller", "plan_joint_limit_deg", "controller.plan_joint_limit_deg"),
     ("controller", "integrator.substeps", "controller.substeps"),
+    ("controller", "integrator.newton_tolerance", "controller.newton_tolerance"),
     ("controller", "kind", "controller.kind"),
     ("controller", "link_elastic_modes", "controller.link_elastic_modes"),
     ("scenario", "mpc.kx1", "controller.weights.kx1"),

@@ -305,6 +305,10 @@ pub struct ControllerSpec {
     pub integrator: Option<ocp_transcription::IntegratorKind>,
     /// Integrator substeps per shooting interval `τp/Nc` (≥ 1).
     pub substeps: Option<usize>,
+    /// Newton tolerance of the implicit midpoint rule in the shooting intervals, on
+    /// `‖r‖∞ / (1 + ‖m‖∞)`, in (0, 1e-2] (default that of
+    /// [`ocp_transcription::IntegratorSettings`]).
+    pub newton_tolerance: Option<f64>,
     /// Weights of the cost (34)–(36) and the input bound: the library's own settings
     /// ([`mpc::CostWeights`], the paper's values by default).
     pub weights: Option<Spanned<mpc::CostWeights>>,

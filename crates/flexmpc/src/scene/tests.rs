@@ -253,6 +253,13 @@ controllers = ["nmpc"]
     check("substeps = 16", "substeps = 0", "substeps = 0", "controller.substeps", "at least 1");
     check(
         "substeps = 16",
+        "substeps = 16\nnewton_tolerance = 0.5",
+        "newton_tolerance = 0.5",
+        "controller.newton_tolerance",
+        "(0, 1e-2]",
+    );
+    check(
+        "substeps = 16",
         "substeps = 16\nplan_joint_limit_deg = 200.0",
         "plan_joint_limit_deg = 200.0",
         "controller.plan_joint_limit_deg",

@@ -274,9 +274,14 @@ impl SqpSettings {
     /// A full SQP to the KKT tolerance 1e-8 (at most 60 iterations) with the
     /// [second-order-corrected merit line search](Globalisation::merit_soc), QP recovery, the
     /// Hessian [`HessianApproximation::GaussNewtonThenExact`] switching at
-    /// [`CONVERGE_SWITCH_KKT`] and `integrator`: the settings that solve one problem to
-    /// convergence, whatever a real-time loop uses.
+    /// [`CONVERGE_SWITCH_KKT`] and `integrator` with its implicit-midpoint Newton tolerance at
+    /// most the default 1e-13 (a real-time loop may stop its Newton iterations earlier; a KKT
+    /// residual of 1e-8 needs interval maps exact to round-off): the settings that solve one
+    /// problem to convergence, whatever a real-time loop uses.
     pub fn converge(integrator: IntegratorSettings) -> Self {
+        let newton_tolerance =
+            integrator.newton_tolerance.min(IntegratorSettings::default().newton_tolerance);
+        let integrator = IntegratorSettings { newton_tolerance, ..integrator };
         Self {
             mode: SqpMode::Sqp,
             hessian: HessianApproximation::GaussNewtonThenExact { switch_kkt: CONVERGE_SWITCH_KKT },

@@ -143,3 +143,18 @@ fn switch_threshold_is_validated() {
     SqpSettings::converge(IntegratorSettings::default()).validate().unwrap();
     SqpSettings::converge_filter(IntegratorSettings::default()).validate().unwrap();
 }
+
+/// A converged solve takes the interval maps to round-off: `SqpSettings::converge` tightens a
+/// real-time Newton tolerance to the default and keeps a tighter one.
+#[test]
+fn converge_tightens_a_loose_newton_tolerance() {
+    let loose = IntegratorSettings {
+        newton_tolerance: 1e-8,
+        ..IntegratorSettings::new(IntegratorKind::ImplicitMidpoint, 4)
+    };
+    let default = IntegratorSettings::default().newton_tolerance;
+    assert_eq!(SqpSettings::converge(loose.clone()).integrator.newton_tolerance, default);
+    assert_eq!(SqpSettings::converge_filter(loose).integrator.newton_tolerance, default);
+    let tight = IntegratorSettings { newton_tolerance: 1e-15, ..IntegratorSettings::default() };
+    assert_eq!(SqpSettings::converge(tight).integrator.newton_tolerance, 1e-15);
+}
