@@ -37,13 +37,16 @@ pub const SUMMARY_KEYS: [&str; 8] = [
 ];
 
 /// Keys of a per-sample report that hold its measured solve times ([`mpc::SampleReport`]'s
-/// `solve_time` and [`mpc::SolveTiming`]).
-pub const SAMPLE_KEYS: [&str; 5] = [
+/// `solve_time` and [`mpc::SolveTiming`]) and its work counts (reproducible when the
+/// intervals run serially, but a parallel line-search trial that fails stops after a number
+/// of intervals that depends on the threads' timing).
+pub const SAMPLE_KEYS: [&str; 6] = [
     "solve_time",
     "solve_cpu_all_threads",
     "solve_wall_time",
     "solve_threads",
     "solve_cpu_per_thread",
+    "evaluations",
 ];
 
 /// A sample time rounded to 1 ns, so that `0.6000000000000001` prints as `0.6`.
@@ -87,7 +90,7 @@ pub fn samples_without_timings(r: &RunResult) -> Value {
 
 /// The measured timings of one run: wall time, median and worst solve time in each measure,
 /// and each sample's `(t, solve_time_s, cpu_all_threads_s, cpu_per_thread_s, wall_s,
-/// iterations)`.
+/// iterations)` with its work counts.
 pub fn run_json(r: &RunResult) -> Value {
     let s = &r.summary;
     let samples: Vec<Value> = r
@@ -101,6 +104,9 @@ pub fn run_json(r: &RunResult) -> Value {
                 "cpu_per_thread_s": x.timing.solve_cpu_per_thread,
                 "wall_s": x.timing.solve_wall_time,
                 "iterations": x.iterations,
+                "rhs_evaluations": x.evaluations.rhs,
+                "jacobian_evaluations": x.evaluations.jacobians,
+                "factorisations": x.evaluations.factorisations,
             })
         })
         .collect();
@@ -132,7 +138,10 @@ fn header(sampling: f64) -> Map<String, Value> {
                process (with parallel_intervals the rayon pool's idle spinning counts, and in \
                a sweep the runs going on at the same time); cpu_per_thread_s is \
                cpu_all_threads_s / solve_threads when the intervals run in parallel, else \
-               solve_time_s; wall_s the wall-clock time. The plot shows cpu_per_thread_s."
+               solve_time_s; wall_s the wall-clock time. The plot shows cpu_per_thread_s. \
+               rhs_evaluations, jacobian_evaluations and factorisations count the sample's \
+               model evaluations and Newton-matrix factorisations: its work in units that are \
+               the same on any machine."
         ),
     );
     m.insert("sampling_s".into(), json!(sampling));
@@ -168,7 +177,8 @@ fn solve_series(r: &RunResult) -> Vec<(f64, f64)> {
 }
 
 /// `flexmpc mpc`: writes `timings.json`, `timings.csv` (`t, solve_time_s, iterations,
-/// cpu_all_threads_s, cpu_per_thread_s, wall_s` per sample) and `solve_times.svg` (solve time per sample against `τs` and the 50 ms goal) into
+/// cpu_all_threads_s, cpu_per_thread_s, wall_s` and the work counts `rhs_evaluations,
+/// jacobian_evaluations, factorisations` per sample) and `solve_times.svg` (solve time per sample against `τs` and the 50 ms goal) into
 /// `out`; returns their paths.
 pub fn write_run(r: &RunResult, sampling: f64, out: &Path) -> Result<Vec<PathBuf>> {
     let mut v = header(sampling);
@@ -180,17 +190,24 @@ pub fn write_run(r: &RunResult, sampling: f64, out: &Path) -> Result<Vec<PathBuf
         .with_context(|| format!("writing {}", json_path.display()))?;
     let csv_path = out.join(FILES[1]);
     let mut f = create(&csv_path)?;
-    writeln!(f, "t,solve_time_s,iterations,cpu_all_threads_s,cpu_per_thread_s,wall_s")?;
+    writeln!(
+        f,
+        "t,solve_time_s,iterations,cpu_all_threads_s,cpu_per_thread_s,wall_s,rhs_evaluations,\
+         jacobian_evaluations,factorisations"
+    )?;
     for s in &r.samples {
         writeln!(
             f,
-            "{},{:.6e},{},{:.6e},{:.6e},{:.6e}",
+            "{},{:.6e},{},{:.6e},{:.6e},{:.6e},{},{},{}",
             round_t(s.t),
             s.solve_time,
             s.iterations,
             s.timing.solve_cpu_all_threads,
             s.timing.solve_cpu_per_thread,
-            s.timing.solve_wall_time
+            s.timing.solve_wall_time,
+            s.evaluations.rhs,
+            s.evaluations.jacobians,
+            s.evaluations.factorisations
         )?;
     }
     f.flush()?;

@@ -170,8 +170,9 @@ pub struct RunResult {
 }
 
 impl RunResult {
-    /// A copy with every wall-clock timing zeroed (for reproducibility checks: two runs of
-    /// the same scenario are identical apart from timings).
+    /// A copy with every wall-clock timing and work count zeroed (for reproducibility
+    /// checks: two runs of the same scenario are identical apart from timings; the work
+    /// counts of a parallel line-search trial that fails depend on the threads' timing).
     pub fn without_timings(&self) -> Self {
         let mut r = self.clone();
         r.wall_time_s = 0.0;
@@ -185,6 +186,7 @@ impl RunResult {
         for s in &mut r.samples {
             s.solve_time = 0.0;
             s.timing = SolveTiming::default();
+            s.evaluations = Default::default();
         }
         r
     }

@@ -431,6 +431,11 @@ pub struct SampleReport {
     /// NMPC attempts of this sample that converged (or were acceptable) but were rejected
     /// because their plan left [`ControllerSettings::plan_joint_limit_deg`].
     pub joint_limit_rejections: usize,
+    /// Model evaluations and Newton-matrix factorisations of the whole sample (every attempt,
+    /// the warm start's rollout included): its work in units that do not depend on the
+    /// machine or its load, next to [`SampleReport::solve_time`].
+    #[serde(default)]
+    pub evaluations: ocp_transcription::Evaluations,
 }
 
 /// One sample's solve (all attempts) measured three ways besides the calling thread's CPU
@@ -716,6 +721,7 @@ impl<D: Dynamics + Clone> Controller<D> {
             ocp_transcription::thread_cpu_time(),
             ocp_transcription::process_cpu_time(),
         );
+        let evaluations0 = self.evaluations();
         self.apply_schedule(start)?;
         let report = match self.settings.kind {
             ControllerKind::Lmpc => {
@@ -758,7 +764,8 @@ impl<D: Dynamics + Clone> Controller<D> {
                 solve_cpu_per_thread: solve_time,
             }
         };
-        Ok(SampleReport { solve_time, timing, ..report })
+        let evaluations = self.evaluations() - evaluations0;
+        Ok(SampleReport { solve_time, timing, evaluations, ..report })
     }
 
     fn step_nmpc(&mut self, t: f64, start: f64, x0: &[f64], shift: f64) -> Result<SampleReport> {
@@ -882,6 +889,7 @@ impl<D: Dynamics + Clone> Controller<D> {
                 self.nmpc.as_ref().and_then(|n| self.plan_angle(n))
             },
             joint_limit_rejections: rejections,
+            evaluations: Default::default(),
         })
     }
 
@@ -909,6 +917,7 @@ impl<D: Dynamics + Clone> Controller<D> {
             plan_start: start,
             plan_joint_angle_deg: self.plan_angle(&self.lmpc),
             joint_limit_rejections: 0,
+            evaluations: Default::default(),
         }
     }
 
@@ -938,7 +947,17 @@ impl<D: Dynamics + Clone> Controller<D> {
             plan_start: start,
             plan_joint_angle_deg,
             joint_limit_rejections,
+            evaluations: Default::default(),
         }
+    }
+
+    /// Model evaluations and factorisations of all this controller's solvers so far.
+    fn evaluations(&self) -> ocp_transcription::Evaluations {
+        [self.nmpc.as_ref(), self.initial.as_ref(), self.relaxed.as_ref(), Some(&self.lmpc)]
+            .into_iter()
+            .flatten()
+            .map(|s| s.evaluations())
+            .sum()
     }
 }
 

@@ -81,8 +81,8 @@ pub use clock::{process_cpu_time, thread_cpu_time, thread_cpu_timed};
 pub use dynamics::Dynamics;
 pub use error::{OcpError, Result};
 pub use integrator::{
-    interval_error, AdaptiveSubsteps, Integrator, IntegratorKind, IntegratorSettings, LinearPart,
-    MidpointRecord, SIMPLIFIED_NEWTON_MAX_RATE,
+    interval_error, AdaptiveSubsteps, Evaluations, Integrator, IntegratorKind, IntegratorSettings,
+    LinearPart, MidpointRecord, SIMPLIFIED_NEWTON_MAX_RATE,
 };
 pub use ocp::Ocp;
 pub use qp::QpForm;

@@ -55,6 +55,7 @@ impl Integrator {
             Self::pow_t_vec(&self.lawson, Pow::E1, &mut self.lbar, &self.t, 1.0, true);
             // Hessian contributions of the four stages of this substep
             for j in 0..4 {
+                self.evaluations.hessians += 1;
                 model.weighted_hessian(&self.tape_x[base + j], u, &self.kbar[j], &mut self.whess);
                 if !all_finite(self.whess.as_slice()) {
                     return Err(OcpError::NonFiniteDynamics { stage: "hessian" });
@@ -91,6 +92,7 @@ impl Integrator {
         base: usize,
         j: usize,
     ) -> Result<()> {
+        self.evaluations.jacobians += 1;
         model.jacobians(&self.tape_x[base + j], u, &mut self.fx, &mut self.fu);
         if let Some(lw) = &self.lawson {
             self.fx -= &lw.l;

@@ -139,6 +139,54 @@ pub struct Integrator {
     shat: DMatrix<f64>,
     zz: DMatrix<f64>,
     calls: usize,
+    evaluations: Evaluations,
+}
+
+/// Work done by an integrator (or a solver's integrators) so far, counted per model call: a
+/// machine-independent measure of cost next to the clocks (the same inputs give the same
+/// counts, whatever the machine or its load).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct Evaluations {
+    /// Right-hand sides `f(x, u)` (or the remainder `f − Lx`) evaluated alone.
+    pub rhs: usize,
+    /// Jacobians `∂f/∂x`, `∂f/∂u` (with or without the right-hand side at the same point).
+    pub jacobians: usize,
+    /// Weighted second derivatives `∇²(wᵀf)` (exact Hessians of explicit methods).
+    pub hessians: usize,
+    /// LU factorisations of an implicit midpoint Newton matrix `I − h/2 ∂f/∂x`.
+    pub factorisations: usize,
+}
+
+impl std::ops::Add for Evaluations {
+    type Output = Self;
+    fn add(self, o: Self) -> Self {
+        Self {
+            rhs: self.rhs + o.rhs,
+            jacobians: self.jacobians + o.jacobians,
+            hessians: self.hessians + o.hessians,
+            factorisations: self.factorisations + o.factorisations,
+        }
+    }
+}
+
+impl std::ops::Sub for Evaluations {
+    type Output = Self;
+    /// The work between two readings (`later − earlier`, saturating at zero).
+    fn sub(self, o: Self) -> Self {
+        Self {
+            rhs: self.rhs.saturating_sub(o.rhs),
+            jacobians: self.jacobians.saturating_sub(o.jacobians),
+            hessians: self.hessians.saturating_sub(o.hessians),
+            factorisations: self.factorisations.saturating_sub(o.factorisations),
+        }
+    }
+}
+
+impl std::iter::Sum for Evaluations {
+    fn sum<I: Iterator<Item = Self>>(iter: I) -> Self {
+        iter.fold(Self::default(), |a, b| a + b)
+    }
 }
 
 impl std::fmt::Debug for Integrator {
@@ -266,6 +314,7 @@ impl Integrator {
             shat: DMatrix::zeros(0, 0),
             zz: DMatrix::zeros(0, 0),
             calls: 0,
+            evaluations: Evaluations::default(),
         })
     }
 
@@ -322,6 +371,7 @@ impl Integrator {
         let mut rho_u = 0.0_f64;
         let mut rho_l = 0.0_f64;
         for (p, point) in std::iter::once(x).chain(x_next).enumerate() {
+            self.evaluations.jacobians += 1;
             model.jacobians(point, u, &mut self.fx, &mut self.fu);
             if let Some(lw) = &self.lawson {
                 self.fx -= &lw.l;
@@ -370,6 +420,10 @@ impl Integrator {
     /// Number of interval integrations performed so far.
     pub fn calls(&self) -> usize {
         self.calls
+    }
+    /// Model evaluations and factorisations performed so far ([`Evaluations`]).
+    pub fn evaluations(&self) -> Evaluations {
+        self.evaluations
     }
 
     /// Allocates the tape used by [`Integrator::adjoint_hessian`] (explicit methods only).

@@ -40,6 +40,11 @@ impl Integrator {
         // a trial without sensitivities: the model's own `g = f − Lx` when it has one
         let remainder = remainder
             || (!sens && self.model_linear_part && model.remainder(&self.xs, u, &mut self.k[j]));
+        if sens {
+            self.evaluations.jacobians += 1;
+        } else {
+            self.evaluations.rhs += 1;
+        }
         if !remainder {
             if sens {
                 model.rhs_and_jacobians(&self.xs, u, &mut self.k[j], &mut self.fx, &mut self.fu);
@@ -140,6 +145,7 @@ impl Integrator {
 
     /// Factorises `lu = I − h/2 fx` in place.
     pub(super) fn factor_newton(&mut self) -> Result<()> {
+        self.evaluations.factorisations += 1;
         let nx = self.nx;
         self.newton_factored = false;
         self.lu.copy_from(&self.fx);
@@ -216,6 +222,7 @@ impl Integrator {
             self.predict_midpoint(record, j, u);
         } else if !self.simplified_newton {
             self.xs.copy_from_slice(&self.x);
+            self.evaluations.rhs += 1;
             model.rhs(&self.x, u, &mut self.k[0]);
             if !all_finite(&self.k[0]) {
                 return Err(OcpError::NonFiniteDynamics { stage: "rhs" });
@@ -248,6 +255,7 @@ impl Integrator {
                     && (self.refresh_after_first_step && it == 1
                         || sens && predicted <= self.newton_tolerance * (1.0 + norm_inf(&self.xs)));
                 if jacobians_here {
+                    self.evaluations.jacobians += 1;
                     model.rhs_and_jacobians(
                         &self.xs,
                         u,
@@ -256,6 +264,7 @@ impl Integrator {
                         &mut self.fu,
                     );
                 } else {
+                    self.evaluations.rhs += 1;
                     model.rhs(&self.xs, u, &mut self.k[0]);
                 }
                 if !all_finite(&self.k[0]) {
@@ -303,6 +312,7 @@ impl Integrator {
             }
             if refresh {
                 if !jacobians_here {
+                    self.evaluations.jacobians += 1;
                     model.jacobians(&self.xs, u, &mut self.fx, &mut self.fu);
                 }
                 if !all_finite(self.fx.as_slice()) {
@@ -324,6 +334,7 @@ impl Integrator {
         }
         if sens {
             if !jacobians_here {
+                self.evaluations.jacobians += 1;
                 model.jacobians(&self.xs, u, &mut self.fx, &mut self.fu);
             }
             if !all_finite(self.fx.as_slice()) || !all_finite(self.fu.as_slice()) {

@@ -301,6 +301,12 @@ impl<D: Dynamics> SqpSolver<D> {
     pub fn stats(&self) -> &SqpStats {
         &self.stats
     }
+    /// Model evaluations and factorisations of all this solver's integrations so far (every
+    /// solve, the warm-start rollouts and linearisations included); the difference of two
+    /// readings is the work between them.
+    pub fn evaluations(&self) -> crate::Evaluations {
+        self.integrators.iter().map(|i| i.evaluations()).sum()
+    }
     /// Iteration log of the last solve.
     pub fn log(&self) -> &[IterationLog] {
         &self.log

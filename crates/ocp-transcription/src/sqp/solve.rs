@@ -61,6 +61,7 @@ impl<D: Dynamics> SqpSolver<D> {
         }
         let start = Instant::now();
         let calls0 = self.integrator_calls();
+        let evaluations0 = self.evaluations();
         self.stats = SqpStats::default();
         if let Globalisation::MeritLineSearch { adaptive_penalty: true, .. } =
             self.settings.globalisation
@@ -170,6 +171,7 @@ impl<D: Dynamics> SqpSolver<D> {
         }
         self.stats.status = status;
         self.stats.integrator_calls = self.integrator_calls() - calls0;
+        self.stats.evaluations = self.evaluations() - evaluations0;
         self.stats.time_total = start.elapsed().as_secs_f64();
         Ok(self.stats)
     }

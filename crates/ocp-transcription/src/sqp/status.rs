@@ -46,6 +46,8 @@ pub struct SqpStats {
     pub qp_iterations: usize,
     /// Interval integrations (with or without sensitivities, line-search trials included).
     pub integrator_calls: usize,
+    /// Model evaluations and Newton-matrix factorisations in those integrations.
+    pub evaluations: crate::Evaluations,
     /// Hessian regularisations (exact Hessian only).
     pub regularisations: usize,
     /// Iterations of [`HessianApproximation::GaussNewtonThenExact`](crate::HessianApproximation::GaussNewtonThenExact)
@@ -86,6 +88,7 @@ impl Default for SqpStats {
             iterations: 0,
             qp_iterations: 0,
             integrator_calls: 0,
+            evaluations: crate::Evaluations::default(),
             regularisations: 0,
             gauss_newton_fallbacks: 0,
             second_order_corrections: 0,

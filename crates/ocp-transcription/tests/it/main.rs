@@ -1,6 +1,7 @@
 //! Integration tests of `ocp-transcription` (one binary).
 
 mod adaptive;
+mod evaluations;
 mod globalisation;
 mod hessian;
 mod integrators;
