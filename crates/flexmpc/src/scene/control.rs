@@ -199,6 +199,19 @@ fn controller_of(ctx: &Ctx<'_>, spec: &SceneSpec) -> Result<mpc::ControllerSetti
     set(&mut c.integrator.kind, cs.integrator);
     set(&mut c.integrator.substeps, cs.substeps);
     set(&mut c.integrator.newton_tolerance, cs.newton_tolerance);
+    if cs.newton_tolerance.is_some()
+        && c.integrator.kind != ocp_transcription::IntegratorKind::ImplicitMidpoint
+    {
+        return ctx.err(
+            span.clone(),
+            "controller.newton_tolerance",
+            format!(
+                "needs integrator = \"implicit-midpoint\" (the explicit {:?} takes no Newton \
+                 iterations)",
+                c.integrator.kind
+            ),
+        );
+    }
     set(&mut c.parallel_intervals, cs.parallel_intervals);
     c.validate().or_else(|e| ctx.library(spec, Owner::Controller, e))?;
     Ok(c)

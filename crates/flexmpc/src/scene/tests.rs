@@ -253,10 +253,17 @@ controllers = ["nmpc"]
     check("substeps = 16", "substeps = 0", "substeps = 0", "controller.substeps", "at least 1");
     check(
         "substeps = 16",
-        "substeps = 16\nnewton_tolerance = 0.5",
+        "substeps = 16\nintegrator = \"implicit-midpoint\"\nnewton_tolerance = 0.5",
         "newton_tolerance = 0.5",
         "controller.newton_tolerance",
         "(0, 1e-2]",
+    );
+    check(
+        "substeps = 16",
+        "substeps = 16\nnewton_tolerance = 1e-8",
+        "newton_tolerance = 1e-8",
+        "controller.newton_tolerance",
+        "implicit-midpoint",
     );
     check(
         "substeps = 16",
