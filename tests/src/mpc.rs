@@ -341,7 +341,8 @@ fn exact_joints_3d_full_range() -> CaseOutcome {
 }
 
 /// Closed loops of a 3D exact-joints scene at `omegas` per plant: the criterion and
-/// `V(7.5)/V(0)` asserted, samples not accepted, elbow angle and solve times reported.
+/// `V(7.5)/V(0)` asserted, samples not accepted, elbow angle, solve times and the model
+/// evaluations per sample reported.
 fn exact_joints_3d_scene(name: &str, text: &str, omegas: &[(PlantKind, &[f64])]) -> CaseOutcome {
     let scene = flexmpc::scene::load_str(std::path::Path::new(name), text).map_err(err)?;
     let control = scene.control.as_ref().ok_or("the scene has no [scenario]")?;
@@ -388,6 +389,23 @@ fn exact_joints_3d_scene(name: &str, text: &str, omegas: &[(PlantKind, &[f64])])
                     t,
                     f64::INFINITY,
                 ));
+            }
+            // the work per sample, the same on any machine
+            type Pick = fn(&ocp_transcription::Evaluations) -> usize;
+            let picks: [(&str, Pick); 2] =
+                [("right-hand sides", |e| e.rhs), ("Jacobians", |e| e.jacobians)];
+            for (what, pick) in picks {
+                let counts: Vec<f64> =
+                    r.samples.iter().map(|x| pick(&x.evaluations) as f64).collect();
+                let mean = counts.iter().sum::<f64>() / counts.len().max(1) as f64;
+                let most = counts.iter().copied().fold(0.0, f64::max);
+                for (stat, v) in [("mean", mean), ("largest", most)] {
+                    out.push(Metric::at_most(
+                        format!("{name} plant ω0={w}: {what} per sample, {stat} (count, report)"),
+                        v,
+                        f64::INFINITY,
+                    ));
+                }
             }
         }
     }
