@@ -138,6 +138,24 @@ pub fn run_mpc(
     out: &Path,
     opts: OutputOptions,
 ) -> Result<MpcOutput> {
+    run_mpc_repeated(scene, overrides, out, opts, 1)
+}
+
+/// [`run_mpc`] with the closed loop run `repeat ≥ 1` times: every output is the first run's
+/// (the others must agree with it apart from their timings, else an error), and each
+/// sample's measured times are the smallest over the runs
+/// ([`mpc::RunResult::keep_fastest`]): the cost of the sample's work on this machine with the
+/// interference of other processes filtered out (`flexmpc mpc --repeat N`).
+pub fn run_mpc_repeated(
+    scene: &Scene,
+    overrides: &Overrides,
+    out: &Path,
+    opts: OutputOptions,
+    repeat: usize,
+) -> Result<MpcOutput> {
+    if repeat == 0 {
+        bail!("--repeat: must be at least 1, got 0");
+    }
     let control = control_of(scene, overrides)?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let bar = progress_bar(None, opts.quiet, "modes and reduced model");
@@ -150,8 +168,15 @@ pub fn run_mpc(
         control.scenario.duration,
         control.plant.name()
     ));
-    let result = mpc::run(&setup, control.omega0, &control.controller, control.plant)
-        .with_context(|| format!("closed loop of {}", scene.file.display()))?;
+    let run = || {
+        mpc::run(&setup, control.omega0, &control.controller, control.plant)
+            .with_context(|| format!("closed loop of {}", scene.file.display()))
+    };
+    let mut result = run()?;
+    for k in 1..repeat {
+        bar.set_message(format!("closed loop, repetition {} of {repeat}", k + 1));
+        result.keep_fastest(&run()?).with_context(|| format!("repetition {}", k + 1))?;
+    }
     bar.set_message("report");
     let csv = out.join("timeseries.csv");
     write_timeseries(&result, &csv)?;

@@ -124,6 +124,12 @@ enum Command {
         /// Duration of the loop (s; default: `[scenario] duration`).
         #[arg(long)]
         duration: Option<f64>,
+        /// Run the loop N times and keep each sample's smallest measured solve time: the
+        /// same work every time (the runs must agree apart from their timings), so the
+        /// smallest is its cost without the interference of other processes (timings on a
+        /// shared machine). Every other output is the first run's.
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+        repeat: u32,
     },
     /// The first sample's optimal control problem alone: optimal cost, controls, iterations,
     /// solve time; `--export DIR` also writes the whole problem for other solvers.
@@ -632,7 +638,7 @@ fn run(cli: &Cli) -> Result<()> {
                 );
             }
         }
-        Some(Command::Mpc { scene, controller, model, plant, omega0, duration }) => {
+        Some(Command::Mpc { scene, controller, model, plant, omega0, duration, repeat }) => {
             let s = scene::load(scene)?;
             let ov = Overrides {
                 controller: kind_of(controller.as_deref())?,
@@ -643,7 +649,8 @@ fn run(cli: &Cli) -> Result<()> {
             };
             let out = mpc_out(cli, scene, &control::control_of(&s, &ov)?);
             check_modal_size(&s)?;
-            let o = control::run_mpc(&s, &ov, &out, output_options(cli))?;
+            let o =
+                control::run_mpc_repeated(&s, &ov, &out, output_options(cli), *repeat as usize)?;
             write_vtk(cli, &s, &o)?;
             print_mpc(&o, cli)?;
         }

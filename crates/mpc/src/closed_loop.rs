@@ -190,6 +190,52 @@ impl RunResult {
         }
         r
     }
+
+    /// Folds a repetition of the same closed loop into this one: each sample keeps the
+    /// smallest of the two measurements of every solve time (thread CPU, all threads' CPU per
+    /// thread, wall), and the summary's worst and median follow. The work of a sample is the
+    /// same in every repetition, so its smallest time is the best estimate of that work's cost
+    /// on the machine, with the interference of other processes filtered out.
+    ///
+    /// `Err` naming the first difference when `other` is not the same loop apart from its
+    /// timings (a loop that is not reproducible, or another scenario).
+    pub fn keep_fastest(&mut self, other: &RunResult) -> Result<()> {
+        let (a, b) = (self.without_timings(), other.without_timings());
+        if a != b {
+            let what = if a.summary != b.summary {
+                "summary".to_string()
+            } else if let Some(k) = (0..a.samples.len().max(b.samples.len()))
+                .find(|&k| a.samples.get(k) != b.samples.get(k))
+            {
+                format!("sample {k}")
+            } else {
+                "time series".to_string()
+            };
+            return Err(invalid(
+                "repeated closed loop",
+                what,
+                "differs from the first run apart from its timings (the loop must be reproducible)",
+            ));
+        }
+        self.wall_time_s = self.wall_time_s.min(other.wall_time_s);
+        for (s, o) in self.samples.iter_mut().zip(&other.samples) {
+            s.solve_time = s.solve_time.min(o.solve_time);
+            s.timing.solve_cpu_all_threads =
+                s.timing.solve_cpu_all_threads.min(o.timing.solve_cpu_all_threads);
+            s.timing.solve_cpu_per_thread =
+                s.timing.solve_cpu_per_thread.min(o.timing.solve_cpu_per_thread);
+            s.timing.solve_wall_time = s.timing.solve_wall_time.min(o.timing.solve_wall_time);
+        }
+        let samples = &self.samples;
+        let sm = &mut self.summary;
+        (sm.solve_time_worst_s, sm.solve_time_median_s) =
+            worst_median(samples.iter().map(|s| s.solve_time));
+        (sm.solve_cpu_per_thread_worst_s, sm.solve_cpu_per_thread_median_s) =
+            worst_median(samples.iter().map(|s| s.timing.solve_cpu_per_thread));
+        (sm.solve_wall_worst_s, sm.solve_wall_median_s) =
+            worst_median(samples.iter().map(|s| s.timing.solve_wall_time));
+        Ok(())
+    }
 }
 
 /// A plan in force: the start time of its first control interval and its controls.

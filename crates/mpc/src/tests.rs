@@ -269,6 +269,36 @@ fn lmpc_loop_on_the_rom_stops_the_rotation_deterministically() {
     assert!(a.records.iter().all(|r| r.u.iter().all(|u| u.abs() <= 5.0)));
 }
 
+/// A repetition folds in sample by sample: the smaller time of each measure, the summary's
+/// worst and median from them; a repetition that differs apart from its timings is refused.
+#[test]
+fn keep_fastest_takes_each_samples_smaller_time() {
+    let setup = setup_2d();
+    let c = ControllerSettings::of(ControllerKind::Lmpc);
+    let mut a = run(setup, 0.5, &c, PlantKind::Rom).unwrap();
+    let mut b = a.clone();
+    let n = a.samples.len();
+    for (k, (sa, sb)) in a.samples.iter_mut().zip(&mut b.samples).enumerate() {
+        // a: 1, 2, …, n ms; b: the odd samples 0.5 ms faster, the even ones 0.5 ms slower
+        sa.solve_time = (k + 1) as f64 * 1e-3;
+        sb.solve_time = sa.solve_time + if k % 2 == 1 { -0.5e-3 } else { 0.5e-3 };
+        sa.timing.solve_wall_time = 1.0;
+        sb.timing.solve_wall_time = 0.5;
+    }
+    let expected: Vec<f64> =
+        a.samples.iter().zip(&b.samples).map(|(x, y)| x.solve_time.min(y.solve_time)).collect();
+    a.keep_fastest(&b).unwrap();
+    let got: Vec<f64> = a.samples.iter().map(|s| s.solve_time).collect();
+    assert_eq!(got, expected);
+    assert!(a.samples.iter().all(|s| s.timing.solve_wall_time == 0.5));
+    assert_eq!(a.summary.solve_time_worst_s, expected.iter().copied().fold(0.0, f64::max));
+    assert!(a.summary.solve_time_median_s > 0.0 && a.summary.solve_time_median_s < n as f64 * 1e-3);
+    let mut other = b.clone();
+    other.samples[3].u[0] += 1e-12;
+    let e = a.keep_fastest(&other).unwrap_err().to_string();
+    assert!(e.contains("sample 3"), "{e}");
+}
+
 /// Two seconds of NMPC on the FE plant (coarse mesh): every sample solved by the first SQP
 /// attempt at a moderate disturbance, inputs within bounds, and the rotation slowed down.
 #[test]

@@ -152,6 +152,43 @@ fn mpc_short_run_writes_csv_solver_log_and_report() {
     }
 }
 
+/// `flexmpc mpc --repeat 2`: the same outputs as one run (the repetition agrees apart from
+/// its timings), each sample's times the smaller of the two measurements, and the work counts
+/// per sample in `timings.csv`; `--repeat 0` is refused.
+#[test]
+fn mpc_repeat_keeps_the_outputs_and_the_fastest_times() {
+    let (scene, out) = small_2d_scene("repeat");
+    let run = |dir: &str, repeat: &str| {
+        let o = flexmpc()
+            .args(["--json", "mpc"])
+            .arg(&scene)
+            .args(["--duration", "0.4", "--repeat", repeat, "--out"])
+            .arg(out.join(dir))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "stderr: {}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_slice::<serde_json::Value>(&o.stdout).expect("stdout is only JSON")
+    };
+    let (one, two) = (run("one", "1"), run("two", "2"));
+    for f in ["summary.json", "samples.json", "timeseries.csv"] {
+        let read = |d: &str| std::fs::read(out.join(d).join(f)).unwrap();
+        assert_eq!(read("one"), read("two"), "{f}");
+    }
+    assert_eq!(one["v_ratio_final"], two["v_ratio_final"]);
+    let csv = std::fs::read_to_string(out.join("two/timings.csv")).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let (rhs, jac) = (col("rhs_evaluations"), col("jacobian_evaluations"));
+    for line in csv.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        let count = |i: usize| f[i].parse::<usize>().unwrap();
+        assert!(count(rhs) + count(jac) > 0, "a sample evaluates the model: {line}");
+    }
+    let o = flexmpc().args(["mpc"]).arg(&scene).args(["--repeat", "0"]).output().unwrap();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--repeat"));
+}
+
 /// `flexmpc mpc --model exact-joints` on the paper's 2D scene (2 × 8 elements, 1 s): the
 /// NMPC on the exact-joints model runs on the FE plant, writes its summary into a folder of
 /// its own (`nmpc-exact-fe-w1`, next to the paper model's `nmpc-fe-w1`), and slows the spin;
