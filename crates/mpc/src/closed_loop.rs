@@ -226,14 +226,12 @@ impl RunResult {
                 s.timing.solve_cpu_per_thread.min(o.timing.solve_cpu_per_thread);
             s.timing.solve_wall_time = s.timing.solve_wall_time.min(o.timing.solve_wall_time);
         }
-        let samples = &self.samples;
         let sm = &mut self.summary;
-        (sm.solve_time_worst_s, sm.solve_time_median_s) =
-            worst_median(samples.iter().map(|s| s.solve_time));
-        (sm.solve_cpu_per_thread_worst_s, sm.solve_cpu_per_thread_median_s) =
-            worst_median(samples.iter().map(|s| s.timing.solve_cpu_per_thread));
-        (sm.solve_wall_worst_s, sm.solve_wall_median_s) =
-            worst_median(samples.iter().map(|s| s.timing.solve_wall_time));
+        [
+            (sm.solve_time_worst_s, sm.solve_time_median_s),
+            (sm.solve_cpu_per_thread_worst_s, sm.solve_cpu_per_thread_median_s),
+            (sm.solve_wall_worst_s, sm.solve_wall_median_s),
+        ] = solve_time_stats(&self.samples);
         Ok(())
     }
 }
@@ -652,6 +650,16 @@ fn worst_median(times: impl Iterator<Item = f64>) -> (f64, f64) {
     (times.last().copied().unwrap_or(0.0), median)
 }
 
+/// Worst and median per-sample solve time in each measure: the calling thread's CPU, the CPU
+/// per thread, the wall clock.
+fn solve_time_stats(samples: &[SampleReport]) -> [(f64, f64); 3] {
+    [
+        worst_median(samples.iter().map(|s| s.solve_time)),
+        worst_median(samples.iter().map(|s| s.timing.solve_cpu_per_thread)),
+        worst_median(samples.iter().map(|s| s.timing.solve_wall_time)),
+    ]
+}
+
 fn summarise(
     setup: &Setup,
     omega0: f64,
@@ -681,10 +689,8 @@ fn summarise(
     let root = setup.root_joint;
     let max_orient = records.iter().map(|r| r.joint_angles[root].abs()).fold(0.0, f64::max);
     let orient = last.joint_angles[root].abs();
-    let (worst, median) = worst_median(samples.iter().map(|s| s.solve_time));
-    let (per_thread_worst, per_thread_median) =
-        worst_median(samples.iter().map(|s| s.timing.solve_cpu_per_thread));
-    let (wall_worst, wall_median) = worst_median(samples.iter().map(|s| s.timing.solve_wall_time));
+    let [(worst, median), (per_thread_worst, per_thread_median), (wall_worst, wall_median)] =
+        solve_time_stats(samples);
     let completed = error.is_none();
     let peak = records.iter().map(|r| r.energy).fold(0.0, f64::max);
     let energy_ratio_final = if peak > 0.0 { last.energy / peak } else { 0.0 };

@@ -257,9 +257,10 @@ impl ControllerSettings {
     /// residual 1e-8 ([`REAL_TIME_NEWTON_TOLERANCE`]) instead of the library's 1e-13: the
     /// substeps' own error is orders of magnitude larger, and the defects and merit
     /// differences the iteration decides on are of order one (about 11 % less thread CPU per
-    /// sample, the same stabilised ranges; 1e-6 lost the edges of both, docs/mpc.md). Stabilises the paper's 3D spin to ω0 = 1 on the FE
-    /// plant within the sampling time; the full SQP (`real_time_iteration = false`,
-    /// 16 substeps, no Levenberg–Marquardt term) reaches ω0 = 1.125 at seconds per sample
+    /// sample, the same stabilised ranges; 1e-6 lost the edges of both, docs/mpc.md).
+    /// Stabilises the paper's 3D spin to ω0 = 1 on the FE plant within the sampling time; the
+    /// full SQP (`real_time_iteration = false`, 16 substeps, no Levenberg–Marquardt term)
+    /// reaches ω0 = 1.125 at seconds per sample
     /// (docs/mpc.md, "The exact-joints model in the closed loop", for the measured ranges and
     /// times).
     pub fn exact_joints() -> Self {
