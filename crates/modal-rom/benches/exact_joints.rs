@@ -29,6 +29,15 @@ fn cpu_report(label: &str, calls: usize, mut f: impl FnMut()) {
     eprintln!("{label}: thread CPU {:.3e} s/call over {calls} calls", (c1 - c0) / calls as f64);
 }
 
+/// `calls` calls of `f` and nothing else: no clock is read, so that the loop also runs under
+/// `valgrind --tool=callgrind` (whose instruction counts do not depend on the machine's load;
+/// the vDSO clock of the thread-CPU lines does not start under valgrind).
+fn profile_loop(calls: usize, mut f: impl FnMut()) {
+    for _ in 0..calls {
+        f();
+    }
+}
+
 /// Thread CPU per call of each evaluation of `calls` in short blocks taken in turn: `ROUNDS`
 /// rounds, each running one block of every evaluation (a twentieth of its line's calls). A burst
 /// of load on a shared machine then lands in a few blocks of every evaluation rather than in
@@ -253,14 +262,16 @@ const PAIRS: [(&str, bool, Option<usize>); 4] = [
 /// The bench's own arguments (without them: criterion, with criterion's arguments).
 const USAGE: &str = "\
 usage: cargo bench -p modal-rom --bench exact_joints -- [CRITERION ARGS]
-       cargo bench -p modal-rom --bench exact_joints -- --cpu [--pair NAME] [--profile CALLS]
+       cargo bench -p modal-rom --bench exact_joints -- --cpu [--pair NAME] [--profile CALLS [--paper]]
 
   (no --cpu)        thread-CPU lines of every pairing, then the criterion benches
   --cpu             the thread-CPU lines only (no criterion)
   --pair NAME       with --cpu: this pairing only (2d_rigid+4, 3d_rigid+16, 2d_paper_basis,
                     3d_paper_basis)
   --profile CALLS   with --cpu: only a loop of CALLS exact-joints rhs + Jacobian calls (for
-                    `perf record`)
+                    `perf record`, or `valgrind --tool=callgrind`: instruction counts, the
+                    same whatever the machine's load)
+  --paper           with --profile: the loop calls the paper model's rhs + Jacobian instead
   --dump PATH       with --cpu: also write the exact-joints rhs (alone and with the
                     Jacobians), ∂f/∂x and ∂f/∂u of each selected pairing to PATH.NAME, one
                     value per line (to compare two builds' results)";
@@ -270,6 +281,8 @@ usage: cargo bench -p modal-rom --bench exact_joints -- [CRITERION ARGS]
 struct CpuOnly {
     pair: Option<String>,
     profile: Option<usize>,
+    /// The profile loop calls the paper model.
+    paper: bool,
     dump: Option<String>,
 }
 
@@ -297,9 +310,13 @@ fn parse(args: &[String]) -> Result<Option<CpuOnly>, String> {
                     })?;
                 opts.profile = Some(n);
             }
+            "--paper" => opts.paper = true,
             "--dump" => opts.dump = Some(value("--dump")?),
             _ => {}
         }
+    }
+    if opts.paper && opts.profile.is_none() {
+        return Err("`--paper` goes with `--profile`".into());
     }
     match (cpu, opts.pair.is_some() || opts.profile.is_some() || opts.dump.is_some()) {
         (false, false) => Ok(None),
@@ -336,8 +353,15 @@ fn cpu_lines(opts: &CpuOnly) {
         let mut calls = pair.calls();
         for (what, n, f) in &mut calls {
             match opts.profile {
-                Some(n) if *what == "exact_rhs_and_jacobian" => {
-                    cpu_report(&format!("{name}/{what}"), n, f)
+                Some(n)
+                    if *what
+                        == if opts.paper {
+                            "paper_rhs_and_jacobian"
+                        } else {
+                            "exact_rhs_and_jacobian"
+                        } =>
+                {
+                    profile_loop(n, f)
                 }
                 Some(_) => {}
                 None => cpu_report(&format!("{name}/{what}"), *n, f),
