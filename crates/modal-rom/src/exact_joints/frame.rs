@@ -584,6 +584,8 @@ impl WithSimd for RowBlockMatvec<'_> {
         let rows = out.len();
         let mut r0 = 0;
         r0 = row_blocks::<32>(out, add, g, x, alpha, rows, r0);
+        r0 = row_blocks::<16>(out, add, g, x, alpha, rows, r0);
+        r0 = row_blocks::<8>(out, add, g, x, alpha, rows, r0);
         r0 = row_blocks::<4>(out, add, g, x, alpha, rows, r0);
         row_blocks::<1>(out, add, g, x, alpha, rows, r0);
     }
