@@ -351,18 +351,10 @@ fn cpu_lines(opts: &CpuOnly) {
             dump(&pair, &format!("{path}.{name}"));
         }
         let mut calls = pair.calls();
+        let profiled = if opts.paper { "paper_rhs_and_jacobian" } else { "exact_rhs_and_jacobian" };
         for (what, n, f) in &mut calls {
             match opts.profile {
-                Some(n)
-                    if *what
-                        == if opts.paper {
-                            "paper_rhs_and_jacobian"
-                        } else {
-                            "exact_rhs_and_jacobian"
-                        } =>
-                {
-                    profile_loop(n, f)
-                }
+                Some(n) if *what == profiled => profile_loop(n, f),
                 Some(_) => {}
                 None => cpu_report(&format!("{name}/{what}"), *n, f),
             }
