@@ -488,7 +488,12 @@ fn shipped_mpc_scenes_match_the_mpc_presets() {
             assert_eq!(c.controller, mpc::ControllerSettings::real_time_spatial());
         }
         if file == "paper-3d-mpc.toml" {
-            assert_eq!(c.controller, mpc::ControllerSettings::exact_joints());
+            // the real-time preset with the shooting intervals on the thread pool
+            let parallel = mpc::ControllerSettings {
+                parallel_intervals: true,
+                ..mpc::ControllerSettings::exact_joints()
+            };
+            assert_eq!(c.controller, parallel);
         }
         if file == "paper-3d-mpc-full-range.toml" {
             // the full SQP (≤ 20 iterations) with the LM term on 24 elastic modes per link, × 8,
