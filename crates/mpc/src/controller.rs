@@ -437,6 +437,11 @@ pub struct SampleReport {
     /// machine or its load, next to [`SampleReport::solve_time`].
     #[serde(default)]
     pub evaluations: ocp_transcription::Evaluations,
+    /// Line-search trial passes of the whole sample (every attempt): one per trial step
+    /// integrated over the shooting intervals, so a sample whose full step was rejected shows
+    /// one more than its iterations. The same for any thread count.
+    #[serde(default)]
+    pub line_search_trials: usize,
 }
 
 /// One sample's solve (all attempts) measured three ways besides the calling thread's CPU
@@ -722,7 +727,7 @@ impl<D: Dynamics + Clone> Controller<D> {
             ocp_transcription::thread_cpu_time(),
             ocp_transcription::process_cpu_time(),
         );
-        let evaluations0 = self.evaluations();
+        let (evaluations0, trials0) = (self.evaluations(), self.line_search_trials());
         self.apply_schedule(start)?;
         let report = match self.settings.kind {
             ControllerKind::Lmpc => {
@@ -766,7 +771,8 @@ impl<D: Dynamics + Clone> Controller<D> {
             }
         };
         let evaluations = self.evaluations() - evaluations0;
-        Ok(SampleReport { solve_time, timing, evaluations, ..report })
+        let line_search_trials = self.line_search_trials() - trials0;
+        Ok(SampleReport { solve_time, timing, evaluations, line_search_trials, ..report })
     }
 
     fn step_nmpc(&mut self, t: f64, start: f64, x0: &[f64], shift: f64) -> Result<SampleReport> {
@@ -891,6 +897,7 @@ impl<D: Dynamics + Clone> Controller<D> {
             },
             joint_limit_rejections: rejections,
             evaluations: Default::default(),
+            line_search_trials: 0,
         })
     }
 
@@ -919,6 +926,7 @@ impl<D: Dynamics + Clone> Controller<D> {
             plan_joint_angle_deg: self.plan_angle(&self.lmpc),
             joint_limit_rejections: 0,
             evaluations: Default::default(),
+            line_search_trials: 0,
         }
     }
 
@@ -949,16 +957,25 @@ impl<D: Dynamics + Clone> Controller<D> {
             plan_joint_angle_deg,
             joint_limit_rejections,
             evaluations: Default::default(),
+            line_search_trials: 0,
         }
+    }
+
+    /// This controller's solvers.
+    fn solvers(&self) -> impl Iterator<Item = &SqpSolver<D>> + '_ {
+        [self.nmpc.as_ref(), self.initial.as_ref(), self.relaxed.as_ref(), Some(&self.lmpc)]
+            .into_iter()
+            .flatten()
     }
 
     /// Model evaluations and factorisations of all this controller's solvers so far.
     fn evaluations(&self) -> ocp_transcription::Evaluations {
-        [self.nmpc.as_ref(), self.initial.as_ref(), self.relaxed.as_ref(), Some(&self.lmpc)]
-            .into_iter()
-            .flatten()
-            .map(|s| s.evaluations())
-            .sum()
+        self.solvers().map(|s| s.evaluations()).sum()
+    }
+
+    /// Line-search trial passes of all this controller's solvers so far.
+    fn line_search_trials(&self) -> usize {
+        self.solvers().map(|s| s.line_search_trials()).sum()
     }
 }
 

@@ -828,6 +828,10 @@ fn parallel_intervals_give_the_same_closed_loop_for_any_thread_count() {
     assert!(a.summary.error.is_none(), "{:?}", a.summary);
     assert_eq!(a.samples.len(), 10);
     assert!(a.samples.iter().any(|s| s.iterations > 1), "{:?}", a.samples);
+    // the merit line search integrates at least one trial step per SQP step
+    for s in a.samples.iter().filter(|s| s.strategy == crate::Strategy::Sqp) {
+        assert!(s.line_search_trials >= s.iterations.max(1), "{s:?}");
+    }
     assert_eq!(a.without_timings(), b.without_timings());
     assert_eq!(a.without_timings(), c.without_timings());
     for (r, threads) in [(&a, 1), (&b, 1), (&c, 2)] {

@@ -74,6 +74,8 @@ pub struct SqpSolver<D: Dynamics> {
     log: Vec<IterationLog>,
     stats: SqpStats,
     merit_nu: f64,
+    /// Line-search trial passes of all solves so far ([`SqpSolver::line_search_trials`]).
+    trials: usize,
     /// [`HessianApproximation::GaussNewtonThenExact`]: the switch to the exact Hessian was made
     /// in this solve.
     exact_phase: bool,
@@ -194,6 +196,7 @@ impl<D: Dynamics> SqpSolver<D> {
             log: Vec::with_capacity(settings.max_iterations + 1),
             stats: SqpStats::default(),
             merit_nu: 0.0,
+            trials: 0,
             exact_phase: false,
             inertia_delta: 0.0,
             applied_delta: 0.0,
@@ -306,6 +309,13 @@ impl<D: Dynamics> SqpSolver<D> {
     /// readings is the work between them.
     pub fn evaluations(&self) -> crate::Evaluations {
         self.integrators.iter().map(|i| i.evaluations()).sum()
+    }
+    /// Line-search trial passes of all this solver's solves so far: each integrates the
+    /// shooting intervals at one trial step (a rejected one possibly stopped early), so a
+    /// sample whose full step is rejected shows one more; the difference of two readings is
+    /// the count between them.
+    pub fn line_search_trials(&self) -> usize {
+        self.trials
     }
     /// Iteration log of the last solve.
     pub fn log(&self) -> &[IterationLog] {

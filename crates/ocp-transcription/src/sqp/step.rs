@@ -199,6 +199,7 @@ impl<D: Dynamics> SqpSolver<D> {
     /// `trial_phi` and the shift buffers then hold the trial only up to that interval.
     pub(super) fn trial_at(&mut self, t: f64, reject_above: Option<f64>) -> Option<(f64, f64)> {
         let n = self.n;
+        self.trials += 1;
         for k in 0..=n {
             self.shift_s[k].copy_from(&self.s[k]);
             self.shift_s[k].axpy(t, &self.step.ds[k], 1.0);
