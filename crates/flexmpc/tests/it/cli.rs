@@ -134,7 +134,7 @@ fn mpc_short_run_writes_csv_solver_log_and_report() {
     let samples = samples.as_array().unwrap();
     assert_eq!(samples.len(), 5, "one solve per τs = 0.2 s over 1 s");
     for s in samples {
-        for k in ["t", "status", "strategy", "iterations", "u"] {
+        for k in ["t", "status", "strategy", "iterations", "line_search_trials", "u"] {
             assert!(s.get(k).is_some(), "sample lacks `{k}`: {s}");
         }
         assert!(s.get("solve_time").is_none(), "measured times go to timings.json: {s}");
