@@ -117,3 +117,34 @@ fn solver_counts_match_the_model_calls() {
         assert!(stats.evaluations.jacobians > 0, "{stats:?}");
     }
 }
+
+/// The line-search trial count: at least one trial pass per step of a line search, none with
+/// full steps; a running total over the solver's solves.
+#[test]
+fn line_search_trials_count_the_trial_passes() {
+    let full = SqpSettings {
+        globalisation: ocp_transcription::Globalisation::FullStep,
+        ..SqpSettings::converge(IntegratorSettings::new(IntegratorKind::Rk4, 2))
+    };
+    for (settings, searched) in [
+        (SqpSettings::converge(IntegratorSettings::new(IntegratorKind::Rk4, 2)), true),
+        (full, false),
+    ] {
+        let model = Counted::default();
+        let mut solver = SqpSolver::new(&model, swing_up_ocp(), settings).unwrap();
+        let x0 = [0.0, 0.5, 0.0, 0.0];
+        solver.initialize_constant(&x0, &[0.0]).unwrap();
+        assert_eq!(solver.line_search_trials(), 0);
+        let stats = solver.solve(&x0).unwrap();
+        let first = solver.line_search_trials();
+        assert!(stats.iterations > 0, "{stats:?}");
+        if searched {
+            assert!(first >= stats.iterations, "{first} trials, {stats:?}");
+            // a second solve from the converged plan adds to the running total
+            solver.solve(&x0).unwrap();
+            assert!(solver.line_search_trials() >= first, "{}", solver.line_search_trials());
+        } else {
+            assert_eq!(first, 0, "{stats:?}");
+        }
+    }
+}
