@@ -74,6 +74,33 @@ pub struct LinkBasis {
     pub(crate) d: Mat<f64>,
 }
 
+impl LinkBasis {
+    /// The fields `Φ1 N` for a reduction `N` (`na × n`, orthonormal columns, block-diagonal
+    /// by link: [`crate::exact_joints::rows::Constraints::support_reduction`]); the force
+    /// fields unchanged.
+    pub(crate) fn reduced(&self, reduce: &Mat<f64>) -> LinkBasis {
+        let mut cols1 = Vec::new();
+        let mut o = 0;
+        for &(c0, c1) in &self.cols1 {
+            let k = (0..reduce.ncols())
+                .filter(|&j| (c0..c1).any(|i| reduce[(i, j)] != 0.0))
+                .count();
+            cols1.push((o, o + k));
+            o += k;
+        }
+        LinkBasis {
+            layout: self.layout.clone(),
+            phi1: &self.phi1 * reduce,
+            phi2: self.phi2.clone(),
+            cols1,
+            cols2: self.cols2.clone(),
+            b1: self.b1.clone(),
+            b2: self.b2.clone(),
+            d: self.d.clone(),
+        }
+    }
+}
+
 /// `B`-orthonormal basis of the columns of `f` (rows `r0..r1` of the block `b`), by the
 /// eigenvectors of the Gram matrix, largest first, eigenvalues below `tol · max` dropped;
 /// sign fixed so that the largest |entry| of each column is positive.

@@ -122,9 +122,9 @@ impl ExactJointsRom {
         inputs: &[Input],
     ) -> Result<Self> {
         let nb = basis.n2();
-        let mut rom = Self::assemble(structure, basis, damping, inputs)?;
-        let a0 = rom.rows_full(&rom.reference_joints());
-        let na = rom.basis.n1();
+        let na = basis.n1();
+        let cons = Constraints::new(structure, &basis)?;
+        let a0 = cons.rows_at_reference(na);
         let frame = if a0.nrows() == 0 {
             Mat::identity(na, na)
         } else {
@@ -149,10 +149,27 @@ impl ExactJointsRom {
                 cols.push(v.iter().map(|x| x / n).collect());
             }
         }
-        rom.z0 = Mat::from_fn(na, cols.len(), |i, j| cols[j][i]);
-        rom.z2 = Mat::identity(nb, nb);
-        rom.finish();
-        Ok(rom)
+        let z0 = Mat::from_fn(na, cols.len(), |i, j| cols[j][i]);
+        Self::on_fields(structure, basis, &cons, damping, inputs, (z0, Mat::identity(nb, nb)), true)
+    }
+
+    /// [`ExactJointsRom::new`] without the support reduction: the support rows stay rows of
+    /// `A` (the general evaluation's path for supports that touch two links).
+    #[cfg(test)]
+    pub(crate) fn new_keeping_support_rows(
+        structure: &Structure,
+        basis: LinkBasis,
+        damping: Option<&Mat<f64>>,
+        inputs: &[Input],
+    ) -> Result<Self> {
+        let reduced = Self::new(structure, basis.clone(), damping, inputs)?;
+        let cons = Constraints::new(structure, &basis)?;
+        let z0 = match cons.support_reduction(&basis.cols1) {
+            Some(n) => &n * &reduced.z0,
+            None => reduced.z0.clone(),
+        };
+        let z2 = reduced.z2.clone();
+        Self::on_fields(structure, basis, &cons, damping, inputs, (z0, z2), false)
     }
 
     /// The model with given orthonormal reduced coordinates `z0` (`na × m`, `A(ξ̄) z0 = 0`)
@@ -183,9 +200,8 @@ impl ExactJointsRom {
                 return Err(invalid(name, err, "columns must be orthonormal (|ZᵀZ − I| ≤ 1e-8)"));
             }
         }
-        let mut rom = Self::assemble(structure, basis, damping, inputs)?;
-        let a0 = rom.rows_full(&rom.reference_joints());
-        let c = &a0 * &z0;
+        let cons = Constraints::new(structure, &basis)?;
+        let c = cons.rows_at_reference(na) * &z0;
         let viol = (0..c.nrows())
             .flat_map(|i| (0..c.ncols()).map(move |j| (i, j)))
             .fold(0.0f64, |m, (i, j)| m.max(c[(i, j)].abs()));
@@ -196,6 +212,33 @@ impl ExactJointsRom {
                 "must satisfy the rows at the reference: |A(ξ̄) Z0| ≤ 1e-8",
             ));
         }
+        Self::on_fields(structure, basis, &cons, damping, inputs, (z0, z2), true)
+    }
+
+    /// The model with coordinates `z0`, `z2` on `basis`, whose rows are `cons`. With
+    /// `reduce`, where the support rows are each supported on one link (a support's rows are
+    /// the values at one node), the fields are first reduced to
+    /// `N = blockdiag_link(null S_link)` (orthonormal, `q1 = N q̂1`): every support row then
+    /// vanishes on them, only the joint rows remain, and `Z0 → NᵀZ0` (the same coordinates
+    /// `p`, since `S Z0 = 0` puts `Z0` in the range of `N`; theory.md §10.4).
+    fn on_fields(
+        structure: &Structure,
+        basis: LinkBasis,
+        cons: &Constraints,
+        damping: Option<&Mat<f64>>,
+        inputs: &[Input],
+        (z0, z2): (Mat<f64>, Mat<f64>),
+        reduce: bool,
+    ) -> Result<Self> {
+        let n = if reduce { cons.support_reduction(&basis.cols1) } else { None };
+        let (basis, z0) = match n {
+            Some(n) => {
+                let z0 = n.transpose() * &z0;
+                (basis.reduced(&n), z0)
+            }
+            None => (basis, z0),
+        };
+        let mut rom = Self::assemble(structure, basis, damping, inputs)?;
         rom.z0 = z0;
         rom.z2 = z2;
         rom.finish();
@@ -242,7 +285,7 @@ impl ExactJointsRom {
             })
             .collect();
         let ss = flat(&(&cons.support * cons.support.transpose()));
-        let planar = Planar::new(&basis, &cons, &rate_comps, damping, inputs).map(Box::new);
+        let planar = Planar::new(&basis, &cons, &rate_comps, &ops).map(Box::new);
         Ok(ExactJointsRom {
             ops,
             z0: Mat::zeros(basis.n1(), 0),
@@ -435,18 +478,6 @@ impl ExactJointsRom {
             .collect())
     }
 
-    /// `A(ξ)` (`r × na`): support rows, then each joint's `C_j(ξ_j) E_j`.
-    fn rows_full(&self, xis: &[Vector4<f64>]) -> Mat<f64> {
-        let na = self.basis.n1();
-        let mut a = Mat::<f64>::zeros(self.cons.n_rows(), na);
-        let rs = self.cons.support.nrows();
-        a.as_mut().subrows_mut(0, rs).copy_from(&self.cons.support);
-        for (j, jr) in self.cons.joints.iter().enumerate() {
-            a.as_mut().subrows_mut(self.row_offsets[j], jr.rows).copy_from(jr.rows_at(&xis[j]));
-        }
-        a
-    }
-
     fn check(&self, x: &[f64], u: &[f64]) -> Result<()> {
         if x.len() != self.n_state() {
             return Err(shape("state x", (self.n_state(), 1), (x.len(), 1)));
@@ -524,7 +555,7 @@ impl ExactJointsRom {
     /// `max |A(ξ) q1|`: the compatibility residual of the current velocities (round-off).
     pub fn compatibility_residual(&self, x: &[f64]) -> Result<f64> {
         let q1 = self.link_velocities(x)?;
-        let a = self.rows_full(&self.joint_xi(x)?);
+        let a = self.cons.rows_full(&self.joint_xi(x)?, self.basis.n1());
         Ok((0..a.nrows())
             .map(|i| (0..a.ncols()).map(|j| a[(i, j)] * q1[j]).sum::<f64>())
             .fold(0.0f64, |m, v| m.max(v.abs())))

@@ -309,6 +309,74 @@ impl Constraints {
     pub fn n_rows(&self) -> usize {
         self.support.nrows() + self.joints.iter().map(|j| j.rows).sum::<usize>()
     }
+
+    /// `A(ξ)` (`r × na`) at joint rotations `xis` (one per joint): support rows, then each
+    /// joint's `C_j(ξ_j) E_j`.
+    pub fn rows_full(&self, xis: &[Vector4<f64>], na: usize) -> Mat<f64> {
+        let mut a = Mat::<f64>::zeros(self.n_rows(), na);
+        let mut o = self.support.nrows();
+        a.as_mut().subrows_mut(0, o).copy_from(&self.support);
+        for (j, xi) in self.joints.iter().zip(xis) {
+            a.as_mut().subrows_mut(o, j.rows).copy_from(j.rows_at(xi));
+            o += j.rows;
+        }
+        a
+    }
+
+    /// `A(ξ̄)` at the joints' reference rotations.
+    pub fn rows_at_reference(&self, na: usize) -> Mat<f64> {
+        let xis: Vec<_> = self.joints.iter().map(|j| j.reference).collect();
+        self.rows_full(&xis, na)
+    }
+
+    /// `N = blockdiag_link(null S_link)` (`na × n`, orthonormal columns) for the support rows
+    /// `S` on fields whose links occupy the column ranges `links`, or `None` when there are
+    /// no support rows or one of them touches two links. Every support row vanishes on the
+    /// reduced fields `Φ1 N`.
+    pub fn support_reduction(&self, links: &[(usize, usize)]) -> Option<Mat<f64>> {
+        let s = &self.support;
+        if s.nrows() == 0 {
+            return None;
+        }
+        let na = s.ncols();
+        let link_of = |c: usize| links.iter().position(|r| c >= r.0 && c < r.1);
+        for i in 0..s.nrows() {
+            let mut touched = (0..na).filter(|&c| s[(i, c)] != 0.0).map(link_of);
+            if let Some(first) = touched.next() {
+                if touched.any(|l| l != first) {
+                    return None;
+                }
+            }
+        }
+        let mut blocks: Vec<Mat<f64>> = Vec::new();
+        for &(c0, c1) in links {
+            let kl = c1 - c0;
+            let mut p = Mat::<f64>::identity(kl, kl);
+            for i in 0..s.nrows() {
+                for a in 0..kl {
+                    for b in 0..kl {
+                        p[(a, b)] -= s[(i, c0 + a)] * s[(i, c0 + b)];
+                    }
+                }
+            }
+            let eig = p.self_adjoint_eigen(faer::Side::Lower).ok()?;
+            let ev = eig.S().column_vector();
+            let keep: Vec<usize> = (0..kl).filter(|&e| ev[e] > 0.5).collect();
+            blocks.push(Mat::from_fn(kl, keep.len(), |a, b| eig.U()[(a, keep[b])]));
+        }
+        let n: usize = blocks.iter().map(|b| b.ncols()).sum();
+        let mut reduce = Mat::<f64>::zeros(na, n);
+        let mut o = 0;
+        for (&(c0, _), b) in links.iter().zip(&blocks) {
+            for j in 0..b.ncols() {
+                for i in 0..b.nrows() {
+                    reduce[(c0 + i, o + j)] = b[(i, j)];
+                }
+            }
+            o += b.ncols();
+        }
+        Some(reduce)
+    }
 }
 
 /// [`JointRows::coefficients`], compiled for the processor's vector instructions by pulp's

@@ -23,6 +23,7 @@ fn multi_angle(
     damped: bool,
     angles: &[f64],
     elastic: usize,
+    keep_support_rows: bool,
 ) -> ExactJointsRom {
     let section = match (spatial, damped) {
         (false, true) => Section::paper_2d(),
@@ -55,17 +56,22 @@ fn multi_angle(
         samples::inputs_2d(&structure, &model).unwrap()
     };
     let damping = damped.then_some(&model.damping);
-    from_fields(&structure, &model, &refs, &LinkBasisSettings::default(), damping, &inputs).unwrap()
+    let basis = LinkBasis::from_fields(&model, &refs, &LinkBasisSettings::default()).unwrap();
+    if keep_support_rows {
+        ExactJointsRom::new_keeping_support_rows(&structure, basis, damping, &inputs).unwrap()
+    } else {
+        ExactJointsRom::new(&structure, basis, damping, &inputs).unwrap()
+    }
 }
 
 fn undamped_2d() -> &'static ExactJointsRom {
     static ROM: OnceLock<ExactJointsRom> = OnceLock::new();
-    ROM.get_or_init(|| multi_angle(false, 6, false, &[0.0, 0.8, 1.6], 3))
+    ROM.get_or_init(|| multi_angle(false, 6, false, &[0.0, 0.8, 1.6], 3, false))
 }
 
 fn damped_3d() -> &'static ExactJointsRom {
     static ROM: OnceLock<ExactJointsRom> = OnceLock::new();
-    ROM.get_or_init(|| multi_angle(true, 4, true, &[0.0, 0.8], 2))
+    ROM.get_or_init(|| multi_angle(true, 4, true, &[0.0, 0.8], 2, false))
 }
 
 /// A state with velocities `p`, forces `p2` from `seed`, the elbow turned by `angle` about
@@ -216,6 +222,48 @@ fn jacobian_matches_finite_differences() {
     }
 }
 
+/// The support rows are constant: reducing the fields to their null space once (the model's
+/// construction) gives the same model as keeping them as rows of `A(ξ)`, in the same
+/// coordinates `p` (theory.md §10.4). 2D: the reduced model's planar evaluation against the
+/// unreduced one's general evaluation; 3D: both general.
+#[test]
+fn support_reduction_gives_the_same_model() {
+    let cases = [
+        (undamped_2d(), multi_angle(false, 6, false, &[0.0, 0.8, 1.6], 3, true), [0.0, 1.0, 0.0]),
+        (damped_3d(), multi_angle(true, 4, true, &[0.0, 0.8], 2, true), [0.2, 1.0, -0.6]),
+    ];
+    for (reduced, kept, axis) in &cases {
+        assert_eq!(reduced.cons.support.nrows(), 0);
+        assert!(kept.cons.support.nrows() > 0);
+        assert!(reduced.basis().n1() < kept.basis().n1());
+        let (n, nu) = (kept.n_state(), kept.n_inputs());
+        assert_eq!((reduced.n_state(), reduced.n_inputs()), (n, nu));
+        let mut worst = [0.0f64; 3];
+        for (seed, angle) in [(0.37, 0.0), (0.71, 1.3), (1.9, -2.4)] {
+            let x = state(kept, seed, angle, *axis, 0.3);
+            let u: Vec<f64> = (0..nu).map(|i| 0.3 * (i as f64 + 1.0)).collect();
+            let mut out: [_; 2] =
+                std::array::from_fn(|_| (vec![0.0; n], vec![0.0; n * n], vec![0.0; n * nu]));
+            for (rom, (f, jx, ju)) in [reduced, kept].into_iter().zip(&mut out) {
+                rom.rhs_and_jacobian(&x, &u, f, jx, ju).unwrap();
+            }
+            let [(f0, jx0, ju0), (f1, jx1, ju1)] = &out;
+            for (w, (a, b)) in worst.iter_mut().zip([(f0, f1), (jx0, jx1), (ju0, ju1)]) {
+                let d = a.iter().zip(b).fold(0.0f64, |m, (p, q)| m.max((p - q).abs()));
+                *w = w.max(d / max_abs(b).max(1e-300));
+            }
+        }
+        eprintln!(
+            "n = {n}, fields {} → {}, rows {} → {}: rhs / ∂f/∂x / ∂f/∂u {worst:?}",
+            kept.basis().n1(),
+            reduced.basis().n1(),
+            kept.cons.n_rows(),
+            reduced.cons.n_rows()
+        );
+        assert!(worst.iter().all(|&w| w < 1e-12), "{worst:?}");
+    }
+}
+
 /// A zero joint quaternion is no rotation: an error naming it, not a NaN.
 #[test]
 fn a_zero_joint_quaternion_is_an_error() {
@@ -284,7 +332,7 @@ proptest! {
 /// The 3D model is energy neutral too (universal joints, elbow turned about a skew axis).
 #[test]
 fn energy_neutral_3d() {
-    let rom = multi_angle(true, 4, false, &[0.0, 0.8], 2);
+    let rom = multi_angle(true, 4, false, &[0.0, 0.8], 2, false);
     for (seed, angle) in [(0.3, 0.4), (1.7, 1.4), (2.2, -2.0)] {
         let x = state(&rom, seed, angle, [0.3, 1.0, 0.5], 1.0);
         let mut f = vec![0.0; rom.n_state()];

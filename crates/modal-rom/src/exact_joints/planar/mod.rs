@@ -9,10 +9,8 @@
 //! runs at unit joint quaternions ([`super::unit_rotation`]), where `R(ξ_j) = c I_plane + s ñ +
 //! ρ n nᵀ` with `c = a² − b²`, `s = 2ab`, `ρ = a² + b²` (eq. 9 in its homogeneous form). Then:
 //!
-//! * the support rows are constant and each supported on one link: the fields are reduced
-//!   once to `N = blockdiag(null S_link)` (orthonormal), where every support row vanishes, so
-//!   only the joint rows remain and the link fields shrink (`q1 = N q̂`, `Ẑ = NᵀZ`, the
-//!   Galerkin operators on `Φ1 N` are `NᵀΣN`, `Nᵀ W`, …);
+//! * the model's fields are already reduced by the support rows (theory.md §10.3), so only
+//!   the joint rows remain;
 //! * each joint's rows are `A_j = A_j0 + c A_j1 + s A_j2 + ρ A_j3` with four constant
 //!   matrices on the reduced fields, `Ȧ_j = Δω_j A_jθ` (`A_jθ = −s A_j1 + c A_j2`,
 //!   `Δω_j = ω_b − ω_a`), and `ξ̇_j = ½Δω_j (−b, a n)`;
@@ -34,8 +32,7 @@ pub(crate) use eval::with_planar_workspace;
 
 use crate::exact_joints::ambient::{AmbientOps, LinkBasis};
 use crate::exact_joints::rows::Constraints;
-use crate::rom::Input;
-use faer::{Mat, Side};
+use faer::Mat;
 use intrinsic_beam::operators::tilde;
 use nalgebra::Vector3;
 
@@ -71,9 +68,8 @@ pub(crate) struct PlanarJoint {
 pub(crate) struct Planar {
     /// Quaternion index of the normal's component (`1 + axis`).
     nu: usize,
-    /// Reduced fields `n` and the reduction `N` (`na × n`, column-major).
+    /// Fields `n`.
     n: usize,
-    reduce: Mat<f64>,
     ops: AmbientOps,
     joints: Vec<PlanarJoint>,
     /// Total joint rows.
@@ -111,8 +107,7 @@ impl Planar {
         basis: &LinkBasis,
         cons: &Constraints,
         rate_comps: &[(usize, usize)],
-        damping: Option<&Mat<f64>>,
-        inputs: &[Input],
+        ops: &AmbientOps,
     ) -> Option<Self> {
         let layout = &basis.layout;
         let k = layout.k();
@@ -135,63 +130,18 @@ impl Planar {
                 }
             }
         }
-        // support rows each on one link; N = blockdiag(null S_link)
-        let links = &basis.cols1;
-        let link_of = |c: usize| links.iter().position(|r| c >= r.0 && c < r.1);
-        let s = &cons.support;
-        for i in 0..s.nrows() {
-            let mut touched = (0..na).filter(|&c| s[(i, c)] != 0.0).map(link_of);
-            if let Some(first) = touched.next() {
-                if touched.any(|l| l != first) {
-                    return None;
-                }
-            }
+        // the model's fields are reduced by its support rows wherever they are each on one
+        // link (`ExactJointsRom::new`): only the joint rows remain
+        if cons.support.nrows() != 0 {
+            return None;
         }
-        let mut blocks: Vec<Mat<f64>> = Vec::new();
-        for &(c0, c1) in links {
-            let kl = c1 - c0;
-            let mut p = Mat::<f64>::identity(kl, kl);
-            for i in 0..s.nrows() {
-                for a in 0..kl {
-                    for b in 0..kl {
-                        p[(a, b)] -= s[(i, c0 + a)] * s[(i, c0 + b)];
-                    }
-                }
-            }
-            let eig = p.self_adjoint_eigen(Side::Lower).ok()?;
-            let ev = eig.S().column_vector();
-            let keep: Vec<usize> = (0..kl).filter(|&e| ev[e] > 0.5).collect();
-            blocks.push(Mat::from_fn(kl, keep.len(), |a, b| eig.U()[(a, keep[b])]));
-        }
-        let n: usize = blocks.iter().map(|b| b.ncols()).sum();
-        let mut reduce = Mat::<f64>::zeros(na, n);
-        let mut cols1 = Vec::new();
-        let mut o = 0;
-        for (&(c0, _), b) in links.iter().zip(&blocks) {
-            for j in 0..b.ncols() {
-                for i in 0..b.nrows() {
-                    reduce[(c0 + i, o + j)] = b[(i, j)];
-                }
-            }
-            cols1.push((o, o + b.ncols()));
-            o += b.ncols();
-        }
-        let reduced = LinkBasis {
-            layout: basis.layout.clone(),
-            phi1: &basis.phi1 * &reduce,
-            phi2: basis.phi2.clone(),
-            cols1,
-            cols2: basis.cols2.clone(),
-            b1: basis.b1.clone(),
-            b2: basis.b2.clone(),
-            d: basis.d.clone(),
-        };
-        let ops = AmbientOps::new(&reduced, damping, inputs).ok()?;
+        let n = na;
+        let ops = ops.clone();
         let nt = tilde(&Vector3::ith(axis, 1.0));
         let mut joints = Vec::new();
         let mut r = 0;
         for j in &cons.joints {
-            let en = &j.e * &reduce;
+            let en = &j.e;
             let (rj, kk) = (j.rows, j.e.nrows());
             let cm = |c: &[f64]| Mat::from_fn(rj, kk, |i, col| c[col * rj + i]);
             let mut c1 = vec![0.0; rj * kk];
@@ -207,7 +157,7 @@ impl Planar {
                 }
             }
             let c3 = &j.c_pq[4 * axis];
-            let a = [&j.c_c[..], &c1[..], &c2[..], &c3[..]].map(|c| flat(&(cm(c) * &en)));
+            let a = [&j.c_c[..], &c1[..], &c2[..], &c3[..]].map(|c| flat(&(cm(c) * en)));
             let a3_zero = a[3].iter().all(|&v| v == 0.0);
             let at = std::array::from_fn(|al| {
                 (0..rj)
@@ -254,7 +204,7 @@ impl Planar {
         }
         let root = cons.root.map(|(b, nd, _)| {
             let i = layout.x1_index(b, nd, rate_c);
-            (0..n).map(|c| (0..na).map(|a| basis.phi1[(i, a)] * reduce[(a, c)]).sum()).collect()
+            (0..n).map(|c| basis.phi1[(i, c)]).collect()
         });
         let mut zcon: Vec<f64> = joints.iter().flat_map(|j| j.delta.iter().copied()).collect();
         zcon.extend(root.iter().flatten());
@@ -280,7 +230,6 @@ impl Planar {
             kc,
             z0con: Vec::new(),
             n,
-            reduce,
             ops,
             joints,
             r,
@@ -298,7 +247,7 @@ impl Planar {
 
     /// Sets the reduced coordinates `Z0` (`na × m`, `S Z0 = 0`) and `Z2`.
     pub(crate) fn set_coordinates(&mut self, z0: &Mat<f64>, z2: &Mat<f64>, z2_identity: bool) {
-        let z0r = self.reduce.transpose() * z0;
+        let z0r = z0;
         self.m = z0.ncols();
         self.m2 = z2.ncols();
         self.z0 = flat(&z0r);
@@ -312,7 +261,7 @@ impl Planar {
             let rj = j.rows;
             for (az, a) in j.az0.iter_mut().zip(&j.a) {
                 let am = Mat::from_fn(rj, n, |i, c| a[c * rj + i]);
-                *az = flat(&(am * &z0r));
+                *az = flat(&(am * z0r));
             }
         }
         let kc = self.kc;
