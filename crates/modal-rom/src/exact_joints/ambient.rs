@@ -82,9 +82,8 @@ impl LinkBasis {
         let mut cols1 = Vec::new();
         let mut o = 0;
         for &(c0, c1) in &self.cols1 {
-            let k = (0..reduce.ncols())
-                .filter(|&j| (c0..c1).any(|i| reduce[(i, j)] != 0.0))
-                .count();
+            let k =
+                (0..reduce.ncols()).filter(|&j| (c0..c1).any(|i| reduce[(i, j)] != 0.0)).count();
             cols1.push((o, o + k));
             o += k;
         }
