@@ -247,10 +247,9 @@ impl Planar {
 
     /// Sets the reduced coordinates `Z0` (`na × m`, `S Z0 = 0`) and `Z2`.
     pub(crate) fn set_coordinates(&mut self, z0: &Mat<f64>, z2: &Mat<f64>, z2_identity: bool) {
-        let z0r = z0;
         self.m = z0.ncols();
         self.m2 = z2.ncols();
-        self.z0 = flat(&z0r);
+        self.z0 = flat(z0);
         self.z2 = flat(z2);
         self.z2_identity = z2_identity;
         let root = usize::from(self.root.is_some());
@@ -261,7 +260,7 @@ impl Planar {
             let rj = j.rows;
             for (az, a) in j.az0.iter_mut().zip(&j.a) {
                 let am = Mat::from_fn(rj, n, |i, c| a[c * rj + i]);
-                *az = flat(&(am * z0r));
+                *az = flat(&(am * z0));
             }
         }
         let kc = self.kc;
