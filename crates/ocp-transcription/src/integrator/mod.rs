@@ -604,8 +604,10 @@ impl Integrator {
         if sens && !all_finite(self.s.as_slice()) {
             return Err(OcpError::NonFiniteDynamics { stage: "sensitivity" });
         }
-        if let Warm::Record(record) = warm {
-            self.finish_record(record, u);
+        match warm {
+            Warm::Record { record, .. } => self.finish_record(record, u),
+            Warm::Start(record) => self.finish_path(record, x0, u),
+            Warm::Cold => {}
         }
         Ok(())
     }

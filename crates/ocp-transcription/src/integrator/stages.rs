@@ -218,8 +218,14 @@ impl Integrator {
         // Full Newton: the explicit half step `m = x + h/2 f(x)` (one more evaluation). From a
         // record: its first-order predictor and Newton matrix (`warm_start`)
         let mut known_slope = false;
+        // a midpoint converged in an earlier integration from the same data: its residual is
+        // evaluated with the Jacobians (one evaluation when it passes)
+        let mut reuse = false;
         if let Warm::Start(record) = warm {
             self.predict_midpoint(record, j, u);
+        } else if let Warm::Record { record, reuse: true } = warm {
+            self.xs.copy_from_slice(Self::path_midpoint(record, j));
+            reuse = true;
         } else if !self.simplified_newton {
             self.xs.copy_from_slice(&self.x);
             self.evaluations.rhs += 1;
@@ -251,9 +257,11 @@ impl Integrator {
                 // step (`IntegratorSettings::refresh_after_first_step`), and, with
                 // sensitivities, where the last contraction repeated passes the test (they
                 // are needed at the converged midpoint; when the test fails they refresh)
-                jacobians_here = self.simplified_newton
-                    && (self.refresh_after_first_step && it == 1
-                        || sens && predicted <= self.newton_tolerance * (1.0 + norm_inf(&self.xs)));
+                jacobians_here = sens && reuse && it == 0
+                    || self.simplified_newton
+                        && (self.refresh_after_first_step && it == 1
+                            || sens
+                                && predicted <= self.newton_tolerance * (1.0 + norm_inf(&self.xs)));
                 if jacobians_here {
                     self.evaluations.jacobians += 1;
                     model.rhs_and_jacobians(
@@ -332,6 +340,9 @@ impl Integrator {
         if !converged {
             return Err(OcpError::NewtonFailed { iterations: it, residual });
         }
+        if let Warm::Start(record) = warm {
+            self.record_path_midpoint(record, j);
+        }
         if sens {
             if !jacobians_here {
                 self.evaluations.jacobians += 1;
@@ -364,7 +375,7 @@ impl Integrator {
             }
             self.s *= -1.0;
             axpy(self.s.as_mut_slice(), 2.0, self.tm.as_slice());
-            if let Warm::Record(record) = warm {
+            if let Warm::Record { record, .. } = warm {
                 self.record_substep(record, j);
             }
         }

@@ -40,6 +40,15 @@ pub struct MidpointRecord {
     lu: Vec<DMatrix<f64>>,
     perm: Vec<Vec<usize>>,
     perm_inv: Vec<Vec<usize>>,
+    /// The last integration started from this record ([`Integrator::integrate_near`]): its
+    /// substeps (0 when none), step, control, start and converged midpoints. A later
+    /// integration with sensitivities from exactly the same data starts each substep's Newton
+    /// iteration there.
+    path_substeps: usize,
+    path_h: f64,
+    path_u: Vec<f64>,
+    path_x0: Vec<f64>,
+    path_m: Vec<Vec<f64>>,
 }
 
 impl MidpointRecord {
@@ -48,9 +57,21 @@ impl MidpointRecord {
         self.substeps > 0
     }
 
-    /// Forgets the recorded integration.
+    /// Forgets the recorded integration and the midpoints of the last integration started
+    /// from it.
     pub fn clear(&mut self) {
         self.substeps = 0;
+        self.path_substeps = 0;
+    }
+
+    /// Whether the midpoints of the last integration started from this record are those of
+    /// an integration from `x0` with `u`, `substeps` steps of `h` (the same data to the bit).
+    fn path_matches(&self, x0: &[f64], u: &[f64], h: f64, substeps: usize) -> bool {
+        self.path_substeps == substeps
+            && substeps > 0
+            && self.path_h == h
+            && self.path_u == u
+            && self.path_x0 == x0
     }
 }
 
@@ -58,10 +79,13 @@ impl MidpointRecord {
 pub(super) enum Warm<'a> {
     /// Nothing: Newton from scratch.
     Cold,
-    /// Records its converged substeps (an integration with sensitivities).
-    Record(&'a mut MidpointRecord),
-    /// Starts each substep's Newton iteration from the record's predictor.
-    Start(&'a MidpointRecord),
+    /// Records its converged substeps (an integration with sensitivities); with `reuse`, each
+    /// substep's Newton iteration starts at the midpoint of the record's last integration
+    /// from the same data (converged there: one evaluation, with the Jacobians).
+    Record { record: &'a mut MidpointRecord, reuse: bool },
+    /// Starts each substep's Newton iteration from the record's predictor, and keeps the
+    /// converged midpoints in the record.
+    Start(&'a mut MidpointRecord),
 }
 
 impl Integrator {
@@ -82,6 +106,11 @@ impl Integrator {
             lu: vec![DMatrix::zeros(nx, nx); n],
             perm: vec![vec![0; nx]; n],
             perm_inv: vec![vec![0; nx]; n],
+            path_substeps: 0,
+            path_h: 0.0,
+            path_u: vec![0.0; nu],
+            path_x0: vec![0.0; nx],
+            path_m: vec![vec![0.0; nx]; n],
         }
     }
 
@@ -92,7 +121,13 @@ impl Integrator {
 
     /// [`Integrator::integrate_with_sensitivities`], recording the converged substeps in
     /// `record` (implicit midpoint; the record is cleared first and holds this integration
-    /// only when it succeeds). The result is the same to the bit as without recording.
+    /// only when it succeeds). When the record holds the midpoints of an
+    /// [`Integrator::integrate_near`] from exactly `(x0, u)` (the same bits, e.g. the accepted
+    /// line-search trial of the previous real-time iteration, shifted), each substep's Newton
+    /// iteration starts at them: they passed the convergence test there, so the substep costs
+    /// one evaluation with the Jacobians instead of an iteration; the test is repeated, so a
+    /// midpoint that does not pass it is iterated on as usual. Otherwise the result is the same
+    /// to the bit as without recording.
     #[allow(clippy::too_many_arguments)]
     pub fn integrate_with_sensitivities_recorded<D: crate::Dynamics + ?Sized>(
         &mut self,
@@ -106,14 +141,18 @@ impl Integrator {
     ) -> Result<()> {
         self.check_args(x0, u, x_end)?;
         self.check_record(record)?;
-        record.clear();
-        self.sensitivities_warm(model, x0, u, x_end, a, b, Warm::Record(record))
+        let reuse = self.kind == IntegratorKind::ImplicitMidpoint
+            && record.path_matches(x0, u, self.h, self.substeps);
+        record.substeps = 0;
+        self.sensitivities_warm(model, x0, u, x_end, a, b, Warm::Record { record, reuse })
     }
 
     /// `x_end = Φ(x0, u)` near the integration held by `record` (implicit midpoint): each
     /// substep's Newton iteration starts from the record's first-order predictor with the
     /// record's Newton matrix (module docs of `integrator::warm_start`; same convergence test
-    /// as [`Integrator::integrate`], so the same end state to the Newton tolerance). Without a
+    /// as [`Integrator::integrate`], so the same end state to the Newton tolerance); the
+    /// converged midpoints are kept in the record for a later
+    /// [`Integrator::integrate_with_sensitivities_recorded`] from the same data. Without a
     /// matching record (none held, another substep count, an explicit method) this is
     /// [`Integrator::integrate`].
     pub fn integrate_near<D: crate::Dynamics + ?Sized>(
@@ -122,10 +161,11 @@ impl Integrator {
         x0: &[f64],
         u: &[f64],
         x_end: &mut [f64],
-        record: &MidpointRecord,
+        record: &mut MidpointRecord,
     ) -> Result<()> {
         self.check_args(x0, u, x_end)?;
         self.check_record(record)?;
+        record.path_substeps = 0;
         let warm = if self.kind == IntegratorKind::ImplicitMidpoint
             && record.substeps == self.substeps
             && record.h == self.h
@@ -148,6 +188,24 @@ impl Integrator {
         record.lu[j].copy_from(&self.lu);
         record.perm[j].copy_from_slice(&self.perm);
         record.perm_inv[j].copy_from_slice(&self.perm_inv);
+    }
+
+    /// Keeps substep `j`'s converged midpoint (still in `xs`) in `record`'s path.
+    pub(super) fn record_path_midpoint(&self, record: &mut MidpointRecord, j: usize) {
+        record.path_m[j].copy_from_slice(&self.xs);
+    }
+
+    /// Marks `record`'s path as the integration just finished from `x0` with control `u`.
+    pub(super) fn finish_path(&self, record: &mut MidpointRecord, x0: &[f64], u: &[f64]) {
+        record.path_u.copy_from_slice(u);
+        record.path_x0.copy_from_slice(x0);
+        record.path_h = self.h;
+        record.path_substeps = self.substeps;
+    }
+
+    /// Substep `j`'s midpoint of `record`'s path.
+    pub(super) fn path_midpoint(record: &MidpointRecord, j: usize) -> &[f64] {
+        &record.path_m[j]
     }
 
     /// Marks `record` as holding the integration just finished with control `u`.

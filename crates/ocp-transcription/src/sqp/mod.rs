@@ -463,6 +463,18 @@ impl<D: Dynamics> SqpSolver<D> {
         std::mem::swap(&mut self.s, &mut self.shift_s);
         std::mem::swap(&mut self.lam, &mut self.shift_l);
         std::mem::swap(&mut self.u, &mut self.shift_u);
+        self.shift_records(m);
+    }
+
+    /// Moves the intervals' records with a shift by `m` intervals: the midpoints of the
+    /// accepted trial of interval `k + m` start the next linearisation of interval `k` when its
+    /// data are unchanged (`Integrator::integrate_with_sensitivities_recorded`); the last `m`
+    /// are cleared.
+    fn shift_records(&mut self, m: usize) {
+        let m = m.min(self.records.len());
+        self.records.rotate_left(m);
+        let len = self.records.len();
+        self.records[len - m..].iter_mut().for_each(MidpointRecord::clear);
     }
 
     /// Shifts the iterate by a time `tau ≥ 0` (any sampling time, not a multiple of `Δt`):
@@ -494,6 +506,14 @@ impl<D: Dynamics> SqpSolver<D> {
         std::mem::swap(&mut self.s, &mut self.shift_s);
         std::mem::swap(&mut self.lam, &mut self.shift_l);
         std::mem::swap(&mut self.u, &mut self.shift_u);
+        // a whole number of intervals moves the nodes and controls unchanged (weights 1 and
+        // 0): the records move with them as in `shift`; otherwise no record matches its data
+        let m = (tau / dt).round();
+        if m * dt == tau {
+            self.shift_records(m as usize);
+        } else {
+            self.records.iter_mut().for_each(MidpointRecord::clear);
+        }
         Ok(())
     }
 

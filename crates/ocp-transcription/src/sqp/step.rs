@@ -224,19 +224,27 @@ impl<D: Dynamics> SqpSolver<D> {
         let ok = if self.integrators.len() == n && n > 1 {
             use rayon::prelude::*;
             let (model, s, u, counts) = (&self.model, &self.shift_s, &self.shift_u, &self.counts);
-            let records = &self.records;
-            let ok =
-                self.integrators.par_iter_mut().zip(self.trial_phi.par_iter_mut()).enumerate().all(
-                    |(k, (int, phi))| {
-                        let (s, u, phi) = (s[k].as_slice(), u[k].as_slice(), phi.as_mut_slice());
-                        int.set_substeps(counts[k]).is_ok()
-                            && match records.get(k) {
-                                Some(r) => int.integrate_near(model, s, u, phi, r),
-                                None => int.integrate(model, s, u, phi),
-                            }
-                            .is_ok()
-                    },
-                );
+            let run = |k: usize,
+                       int: &mut crate::Integrator,
+                       phi: &mut nalgebra::DVector<f64>,
+                       record: Option<&mut crate::MidpointRecord>| {
+                let (s, u, phi) = (s[k].as_slice(), u[k].as_slice(), phi.as_mut_slice());
+                int.set_substeps(counts[k]).is_ok()
+                    && match record {
+                        Some(r) => int.integrate_near(model, s, u, phi, r),
+                        None => int.integrate(model, s, u, phi),
+                    }
+                    .is_ok()
+            };
+            let items =
+                self.integrators.par_iter_mut().zip(self.trial_phi.par_iter_mut()).enumerate();
+            let ok = if self.records.is_empty() {
+                items.all(|(k, (int, phi))| run(k, int, phi, None))
+            } else {
+                items
+                    .zip(self.records.par_iter_mut())
+                    .all(|((k, (int, phi)), r)| run(k, int, phi, Some(r)))
+            };
             if ok {
                 for k in 0..n {
                     self.add_trial_violation(k, &mut c);
@@ -250,7 +258,7 @@ impl<D: Dynamics> SqpSolver<D> {
                 let (s, u) = (self.shift_s[k].as_slice(), self.shift_u[k].as_slice());
                 let phi = self.trial_phi[k].as_mut_slice();
                 if int.set_substeps(self.counts[k]).is_err()
-                    || match self.records.get(k) {
+                    || match self.records.get_mut(k) {
                         Some(r) => int.integrate_near(&self.model, s, u, phi, r),
                         None => int.integrate(&self.model, s, u, phi),
                     }

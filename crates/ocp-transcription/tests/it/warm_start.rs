@@ -57,7 +57,7 @@ fn a_warm_started_trial_agrees_with_newton_from_scratch_and_costs_less() {
                 m.take();
                 int.integrate(&m, &xt, &ut, &mut cold).unwrap();
                 let c = m.take();
-                int.integrate_near(&m, &xt, &ut, &mut warm, &record).unwrap();
+                int.integrate_near(&m, &xt, &ut, &mut warm, &mut record).unwrap();
                 let w = m.take();
                 let case = format!("refresh {refresh}, n = {n}, t = {t}: warm {w:?}, cold {c:?}");
                 let d = max_rel(&cold, &warm);
@@ -112,12 +112,12 @@ fn recording_is_transparent_and_a_mismatched_record_is_ignored() {
             .unwrap();
     let (mut a, mut b) = (vec![0.0; nx], vec![0.0; nx]);
     other.integrate(&m, &xt, &ut, &mut a).unwrap();
-    other.integrate_near(&m, &xt, &ut, &mut b, &record).unwrap();
+    other.integrate_near(&m, &xt, &ut, &mut b, &mut record).unwrap();
     assert_eq!(a, b);
     // a cleared record
     record.clear();
     let mut c = vec![0.0; nx];
-    int.integrate_near(&m, &xt, &ut, &mut c, &record).unwrap();
+    int.integrate_near(&m, &xt, &ut, &mut c, &mut record).unwrap();
     assert_eq!(c, cold);
     // a record of another model's size is an error
     let small = Integrator::new(
@@ -126,5 +126,52 @@ fn recording_is_transparent_and_a_mismatched_record_is_ignored() {
         0.25,
     )
     .unwrap();
-    assert!(int.integrate_near(&m, &xt, &ut, &mut c, &small.new_record()).is_err());
+    assert!(int.integrate_near(&m, &xt, &ut, &mut c, &mut small.new_record()).is_err());
+}
+
+/// A linearisation from exactly the data of the record's last trial (the accepted trial of a
+/// real-time iteration, shifted) starts each substep at the trial's converged midpoint: one
+/// evaluation with the Jacobians per substep, the same end state and sensitivities as from
+/// scratch to the Newton tolerance. Data that differ in one bit are integrated as before.
+#[test]
+fn a_linearisation_at_the_last_trial_starts_at_its_midpoints() {
+    let (m, x, u) = stiff_case();
+    let m = Counting::new(m);
+    let (nx, nu) = (m.nx(), m.nu());
+    let (dx, du) = direction(&x, nu);
+    for n in [4, 16] {
+        let settings = IntegratorSettings::new(IntegratorKind::ImplicitMidpoint, n);
+        let mut int = Integrator::new(&m, &settings, 0.25).unwrap();
+        let mut record = int.new_record();
+        let out = |int: &mut Integrator, x: &[f64], u: &[f64], r: &mut _| {
+            let mut o = (vec![0.0; nx], DMatrix::zeros(nx, nx), DMatrix::zeros(nx, nu));
+            int.integrate_with_sensitivities_recorded(&m, x, u, &mut o.0, &mut o.1, &mut o.2, r)
+                .unwrap();
+            (o, m.take())
+        };
+        out(&mut int, &x, &u, &mut record);
+        let (xt, ut) = (at(&x, &dx, 0.5), at(&u, &du, 0.5));
+        let mut trial = vec![0.0; nx];
+        int.integrate_near(&m, &xt, &ut, &mut trial, &mut record).unwrap();
+        m.take();
+        // from scratch (a record without the trial's midpoints)
+        let mut fresh = int.new_record();
+        let (cold, cold_count) = out(&mut int, &xt, &ut, &mut fresh);
+        let (warm, warm_count) = out(&mut int, &xt, &ut, &mut record);
+        let case = format!("n = {n}: warm {warm_count:?}, cold {cold_count:?}");
+        assert_eq!(warm_count, (n, n), "{case}");
+        assert!(cold_count.0 + cold_count.1 > 2 * n, "{case}");
+        let d = [max_rel(&cold.0, &warm.0), max_rel(cold.1.as_slice(), warm.1.as_slice())];
+        let d = [d[0], d[1], max_rel(cold.2.as_slice(), warm.2.as_slice())];
+        assert!(d[0] <= 1e-12 && d[1] <= 1e-9 && d[2] <= 1e-9, "{case}: {d:?}");
+        // the trial's end state is the linearisation's, to the tolerance
+        assert!(max_rel(&trial, &warm.0) <= 1e-12, "{case}");
+        // one bit of one start entry changed: integrated from scratch
+        let mut xb = xt.clone();
+        xb[0] = f64::from_bits(xb[0].to_bits() + 1);
+        int.integrate_near(&m, &xt, &ut, &mut trial, &mut record).unwrap();
+        m.take();
+        let (_, moved) = out(&mut int, &xb, &ut, &mut record);
+        assert_eq!(moved, cold_count, "{case}: one bit off");
+    }
 }
