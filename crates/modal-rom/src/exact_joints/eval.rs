@@ -3,7 +3,8 @@
 //!
 //! Every joint row is `A_j(ξ) = C_j(ξ) E_j` with `E_j` the fields' values at the joint's two end
 //! nodes (`2k × na`, constant) and `C_j` small and linear in `R(ξ_j)`; support rows `S` are
-//! constant (and absent once the model has reduced its fields by them, theory.md §10.3). So every product of `A`, `Ȧ`, `∂A/∂ξ` with `Z(ξ) = (Z0 − AᵀH) L⁻ᵀ`
+//! constant (and absent once the model has reduced its fields by them, theory.md §10.3). So
+//! every product of `A`, `Ȧ`, `∂A/∂ξ` with `Z(ξ) = (Z0 − AᵀH) L⁻ᵀ`
 //! (`H = G A Z0`, theory.md §10.4) reduces to products of the precomputed `E_j Z0`, `E_j Sᵀ`,
 //! `E_j E_iᵀ`, `S Sᵀ` with `r × ·` matrices: the `ξ` columns of the Jacobian cost
 //! `O(na (m + r) + m r²)` each, the `p` columns are `ZᵀJ11Z − K − κ Ξ` (`κ_jc = K(∂A/∂ξ_jc) p`,
