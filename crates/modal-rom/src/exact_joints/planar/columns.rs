@@ -42,7 +42,7 @@ impl Planar {
     ) {
         let (n, m, m2) = (self.n, self.m, self.m2);
         let r = if R > 0 { R } else { self.r };
-        let nb = self.ops.w.ncols();
+        let nb = self.nb;
         let nf = n + nb;
         let ns = ws.ns;
         let r2 = 2 * r;

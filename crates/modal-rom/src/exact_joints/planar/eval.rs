@@ -6,6 +6,7 @@
 use super::kernels::lowrank_right_solve_lt_padded;
 use super::Planar;
 use crate::error::{ModalError, Result};
+use crate::exact_joints::ambient::AmbientOps;
 use crate::exact_joints::eval::with_buffers;
 use crate::exact_joints::frame::{gemv, gemv_t, lowrank_right_solve_lt, skew_apply};
 use crate::exact_joints::model::{u_left, u_right};
@@ -118,7 +119,7 @@ fn z(n: usize) -> Vec<f64> {
 impl PlanarWs {
     fn new(pl: &Planar, key: Vec<usize>) -> Self {
         let (n, m, r) = (pl.n, pl.m, pl.r);
-        let nb = pl.ops.w.ncols();
+        let nb = pl.nb;
         let nj = pl.joints.len();
         let rx = pl.joints.iter().map(|j| j.rows).max().unwrap_or(0);
         PlanarWs {
@@ -146,7 +147,7 @@ impl PlanarWs {
             f1: z(n),
             f2: z(nb),
             jf: z((n + nb) * (n + nb)),
-            amb: z(pl.ops.scratch_len()),
+            amb: z(pl.amb_len),
             ztf: z(m),
             kp: z(m),
             az: std::array::from_fn(|_| z(r * m)),
@@ -211,10 +212,9 @@ fn numerical(stage: &str, reason: &str) -> ModalError {
 impl Planar {
     /// The sizes the workspace depends on.
     pub(super) fn dims_key(&self) -> Vec<usize> {
-        let mut k =
-            vec![self.n, self.m, self.m2, self.r, self.ops.w.ncols(), self.ops.scratch_len()];
+        let mut k = vec![self.n, self.m, self.m2, self.r, self.nb, self.amb_len];
         k.extend(self.joints.iter().map(|j| j.rows));
-        k.extend(self.ops.layout_key());
+        k.extend(self.amb_key.iter().copied());
         k
     }
 
@@ -448,6 +448,7 @@ impl Planar {
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn eval(
         &self,
+        ops: &AmbientOps,
         ws: &mut PlanarWs,
         x: &[f64],
         u: &[f64],
@@ -458,9 +459,9 @@ impl Planar {
     ) -> Result<()> {
         // one revolute joint (two rows): row counts known at compile time
         if self.r == 2 && self.joints.len() == 1 {
-            self.eval_imp::<2>(ws, x, u, offsets, root, f, jac)
+            self.eval_imp::<2>(ops, ws, x, u, offsets, root, f, jac)
         } else {
-            self.eval_imp::<0>(ws, x, u, offsets, root, f, jac)
+            self.eval_imp::<0>(ops, ws, x, u, offsets, root, f, jac)
         }
     }
 
@@ -469,6 +470,7 @@ impl Planar {
     #[inline(always)]
     fn eval_imp<const R: usize>(
         &self,
+        ops: &AmbientOps,
         ws: &mut PlanarWs,
         x: &[f64],
         u: &[f64],
@@ -479,7 +481,7 @@ impl Planar {
     ) -> Result<()> {
         let (n, m, m2) = (self.n, self.m, self.m2);
         let r = if R > 0 { R } else { self.r };
-        let nb = self.ops.w.ncols();
+        let nb = self.nb;
         ws.ns = f.len();
         let want = jac.is_some();
         self.frame::<R>(ws, x, offsets, want)?;
@@ -491,7 +493,7 @@ impl Planar {
             mv(&mut ws.q2, &self.z2, nb, p2);
         }
         let jf = if want { Some(&mut ws.jf[..]) } else { None };
-        self.ops.eval(&ws.q1, &ws.q2, u, &mut ws.f1, &mut ws.f2, jf, &mut ws.amb);
+        ops.eval(&ws.q1, &ws.q2, u, &mut ws.f1, &mut ws.f2, jf, &mut ws.amb);
         mtv(&mut ws.ztf, &ws.z[..n * m], &ws.f1);
         // joint rates, ξ̇_j, V = ȦZ = Δω A_θ Z (`A_α Z` from the frame)
         for (j, jr) in self.joints.iter().enumerate() {

@@ -70,7 +70,11 @@ pub(crate) struct Planar {
     nu: usize,
     /// Fields `n`.
     n: usize,
-    ops: AmbientOps,
+    /// Force fields `nb`, the ambient operators' scratch length and layout key (the
+    /// operators themselves are the model's, passed to [`Planar::eval`]).
+    nb: usize,
+    amb_len: usize,
+    amb_key: Vec<usize>,
     joints: Vec<PlanarJoint>,
     /// Total joint rows.
     r: usize,
@@ -136,7 +140,6 @@ impl Planar {
             return None;
         }
         let n = na;
-        let ops = ops.clone();
         let nt = tilde(&Vector3::ith(axis, 1.0));
         let mut joints = Vec::new();
         let mut r = 0;
@@ -230,7 +233,9 @@ impl Planar {
             kc,
             z0con: Vec::new(),
             n,
-            ops,
+            nb: ops.w.ncols(),
+            amb_len: ops.scratch_len(),
+            amb_key: ops.layout_key().collect(),
             joints,
             r,
             root,
@@ -298,7 +303,7 @@ impl crate::exact_joints::ExactJointsRom {
         let (offsets, root) = (&pl.offsets[..], pl.root_offset);
         debug_assert!(offsets.iter().enumerate().all(|(j, &o)| o == self.joint_offset(j)));
         debug_assert_eq!(root, self.has_root().then(|| self.root_offset()));
-        Some(with_planar_workspace(pl, |ws| pl.eval(ws, x, u, offsets, root, f, jac)))
+        Some(with_planar_workspace(pl, |ws| pl.eval(&self.ops, ws, x, u, offsets, root, f, jac)))
     }
 
     /// The general evaluation (also for planar models): right-hand side and, with `jac`, the
