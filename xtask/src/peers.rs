@@ -117,7 +117,11 @@ pub fn problem(root: &Path, scene: &'static str, omega0: f64) -> Result<Problem>
         }
         None => ocp.x_ref = weights.x_ref.clone(),
     }
-    Ok(Problem { scene, omega0, model, ocp, x0, controller: control.controller })
+    // the peers map one interval function over the horizon, so every interval takes the
+    // scene's own count (a real-time tail of coarser substeps is left out of this problem)
+    let mut controller = control.controller;
+    controller.integrator.tail = None;
+    Ok(Problem { scene, omega0, model, ocp, x0, controller })
 }
 
 /// The SQP settings of a named variant; where the model or the integrator has no second

@@ -77,8 +77,15 @@ pub struct OcpExport {
     pub x0: Vec<f64>,
     /// Integrator inside each interval (`Debug` name) and its substeps.
     pub integrator: String,
-    /// Substeps per interval.
+    /// Substeps per interval (before `tail_from_interval`).
     pub substeps: usize,
+    /// The intervals from this one on take `tail_substeps` substeps
+    /// (`ocp_transcription::IntegratorSettings::tail`; absent: every interval `substeps`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tail_from_interval: Option<usize>,
+    /// Substeps of each interval from `tail_from_interval` on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tail_substeps: Option<usize>,
     /// Newton tolerance of the implicit midpoint rule on `‖r‖∞ / (1 + ‖m‖∞)` (`r` the residual
     /// of `m − x − h/2 f(m, u) = 0`, `x⁺ = 2m − x`), when that is the integrator.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -130,6 +137,8 @@ pub fn first_sample_problem(
         x0: q0,
         integrator: format!("{:?}", controller.integrator.kind),
         substeps: controller.integrator.substeps,
+        tail_from_interval: controller.integrator.tail.map(|t| t.from_interval),
+        tail_substeps: controller.integrator.tail.map(|t| t.substeps),
         newton_tolerance: newton_tolerance(&controller.integrator),
         cost_discretisation: COST.into(),
         inputs: setup.rom.input_names().to_vec(),
@@ -234,6 +243,8 @@ impl ExactFirstSample {
             x0: self.x0.clone(),
             integrator: format!("{:?}", controller.integrator.kind),
             substeps: controller.integrator.substeps,
+            tail_from_interval: controller.integrator.tail.map(|t| t.from_interval),
+            tail_substeps: controller.integrator.tail.map(|t| t.substeps),
             newton_tolerance: newton_tolerance(&controller.integrator),
             cost_discretisation: COST.into(),
             inputs: rom.input_names().to_vec(),

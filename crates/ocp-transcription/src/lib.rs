@@ -82,7 +82,7 @@ pub use dynamics::Dynamics;
 pub use error::{OcpError, Result};
 pub use integrator::{
     interval_error, AdaptiveSubsteps, Evaluations, Integrator, IntegratorKind, IntegratorSettings,
-    LinearPart, MidpointRecord, SIMPLIFIED_NEWTON_MAX_RATE,
+    LinearPart, MidpointRecord, TailSubsteps, SIMPLIFIED_NEWTON_MAX_RATE,
 };
 pub use ocp::Ocp;
 pub use qp::QpForm;

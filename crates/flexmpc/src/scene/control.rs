@@ -198,6 +198,20 @@ fn controller_of(ctx: &Ctx<'_>, spec: &SceneSpec) -> Result<mpc::ControllerSetti
     set(&mut c.link_elastic_modes, cs.link_elastic_modes.map(Some));
     set(&mut c.integrator.kind, cs.integrator);
     set(&mut c.integrator.substeps, cs.substeps);
+    match (cs.tail_from_interval, cs.tail_substeps) {
+        (Some(from_interval), Some(substeps)) => {
+            c.integrator.tail = Some(ocp_transcription::TailSubsteps { from_interval, substeps });
+        }
+        (None, None) => {}
+        (from, _) => {
+            let (key, other) = if from.is_some() {
+                ("controller.tail_from_interval", "tail_substeps")
+            } else {
+                ("controller.tail_substeps", "tail_from_interval")
+            };
+            return ctx.err(span.clone(), key, format!("needs `{other}` too"));
+        }
+    }
     set(&mut c.integrator.newton_tolerance, cs.newton_tolerance);
     if cs.newton_tolerance.is_some()
         && c.integrator.kind != ocp_transcription::IntegratorKind::ImplicitMidpoint

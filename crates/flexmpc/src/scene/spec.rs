@@ -305,6 +305,12 @@ pub struct ControllerSpec {
     pub integrator: Option<ocp_transcription::IntegratorKind>,
     /// Integrator substeps per shooting interval `τp/Nc` (≥ 1).
     pub substeps: Option<usize>,
+    /// With `tail_substeps`: the first shooting interval (≥ 1, below the interval count) of
+    /// the horizon's tail, whose intervals take `tail_substeps` substeps instead of
+    /// `substeps` ([`ocp_transcription::IntegratorSettings::tail`]).
+    pub tail_from_interval: Option<usize>,
+    /// With `tail_from_interval`: substeps (≥ 1) of each interval of the horizon's tail.
+    pub tail_substeps: Option<usize>,
     /// Newton tolerance of the implicit midpoint rule in the shooting intervals, on
     /// `‖r‖∞ / (1 + ‖m‖∞)`, in (0, 1e-2] (default that of
     /// [`ocp_transcription::IntegratorSettings`]).

@@ -367,6 +367,30 @@ controllers = ["nmpc"]
     assert_eq!(c.first_sample_continuation, 4);
     assert_eq!(c.first_sample_levenberg_marquardt, Some(1e-2));
     assert_eq!(c.rollout_intervals, 3);
+    // the horizon's tail: both keys or neither, and the library's checks at their keys
+    let text = base.replacen(
+        "substeps = 16",
+        "substeps = 16\ntail_from_interval = 12\ntail_substeps = 2",
+        1,
+    );
+    let c = load_str(Path::new("ok.toml"), &text).unwrap_or_else(|e| panic!("{e}"));
+    let c = c.control.expect("[scenario]").controller;
+    let tail = ocp_transcription::TailSubsteps { from_interval: 12, substeps: 2 };
+    assert_eq!(c.integrator.tail, Some(tail));
+    check(
+        "substeps = 16",
+        "substeps = 16\ntail_substeps = 2",
+        "tail_substeps = 2",
+        "controller.tail_substeps",
+        "needs `tail_from_interval` too",
+    );
+    check(
+        "substeps = 16",
+        "substeps = 16\ntail_from_interval = 0\ntail_substeps = 2",
+        "tail_from_interval = 0",
+        "controller.tail_from_interval",
+        "at least 1",
+    );
     check(
         "substeps = 16",
         "rollout_intervals = -1",

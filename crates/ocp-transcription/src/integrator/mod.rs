@@ -41,7 +41,7 @@ mod stages;
 mod warm_start;
 
 pub use settings::{
-    interval_error, AdaptiveSubsteps, IntegratorKind, IntegratorSettings, LinearPart,
+    interval_error, AdaptiveSubsteps, IntegratorKind, IntegratorSettings, LinearPart, TailSubsteps,
     SIMPLIFIED_NEWTON_MAX_RATE,
 };
 pub use warm_start::MidpointRecord;

@@ -73,6 +73,24 @@ pub struct IntegratorSettings {
     /// chosen from its nodes and control by an error table, fixed during one SQP iteration.
     /// `None` (default): every interval uses `substeps`.
     pub adaptive: Option<AdaptiveSubsteps>,
+    /// Fewer substeps at the far end of the horizon: the shooting intervals from
+    /// [`TailSubsteps::from_interval`] on use [`TailSubsteps::substeps`] instead of
+    /// `substeps`. Only the first control of a plan is applied; the tail's coarser steps
+    /// keep its slow motion to second order (implicit midpoint) and, with an A-stable method,
+    /// its fast modes bounded, at a fraction of the tail's cost (docs/ocp-transcription.md,
+    /// "Coarser substeps at the end of the horizon"). Not with `adaptive`. `None` (default):
+    /// every interval uses `substeps`.
+    pub tail: Option<TailSubsteps>,
+}
+
+/// The substep count of the horizon's last shooting intervals ([`IntegratorSettings::tail`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TailSubsteps {
+    /// Index of the first interval of the tail, `≥ 1` and below the problem's interval
+    /// count.
+    pub from_interval: usize,
+    /// Substeps of each tail interval, `≥ 1`.
+    pub substeps: usize,
 }
 
 /// An a priori one-interval error table for choosing substep counts from the state.
@@ -285,6 +303,7 @@ impl Default for IntegratorSettings {
             simplified_newton: true,
             refresh_after_first_step: true,
             adaptive: None,
+            tail: None,
         }
     }
 }
@@ -331,15 +350,44 @@ impl IntegratorSettings {
                 ));
             }
         }
+        if let Some(t) = &self.tail {
+            if self.adaptive.is_some() {
+                return Err(invalid(
+                    "integrator.tail",
+                    format!("{t:?}"),
+                    "cannot be combined with adaptive substeps (they choose every interval's count)",
+                ));
+            }
+            if t.substeps == 0 {
+                return Err(invalid("integrator.tail.substeps", t.substeps, "must be at least 1"));
+            }
+            if t.from_interval == 0 {
+                return Err(invalid(
+                    "integrator.tail.from_interval",
+                    t.from_interval,
+                    "must be at least 1 (from 0 the tail is every interval: set `substeps`)",
+                ));
+            }
+        }
         Ok(())
     }
 
+    /// The substep count of shooting interval `k` without adaptation: the tail's from
+    /// [`TailSubsteps::from_interval`] on, else `substeps`.
+    pub fn substeps_of(&self, k: usize) -> usize {
+        match &self.tail {
+            Some(t) if k >= t.from_interval => t.substeps,
+            _ => self.substeps,
+        }
+    }
+
     /// The substep counts an integrator built from these settings can run:
-    /// `[min_substeps, max_substeps]` when adaptive, else `substeps` only.
+    /// `[min_substeps, max_substeps]` when adaptive, else `substeps` and the tail's.
     pub(super) fn count_range(&self) -> (usize, usize) {
-        match &self.adaptive {
-            Some(a) => (a.min_substeps, a.max_substeps),
-            None => (self.substeps, self.substeps),
+        match (&self.adaptive, &self.tail) {
+            (Some(a), _) => (a.min_substeps, a.max_substeps),
+            (None, Some(t)) => (self.substeps.min(t.substeps), self.substeps.max(t.substeps)),
+            (None, None) => (self.substeps, self.substeps),
         }
     }
 }

@@ -166,7 +166,16 @@ impl<D: Dynamics> SqpSolver<D> {
         for i in 0..nu {
             u0[i] = u0[i].clamp(ocp.u_min[i], ocp.u_max[i]);
         }
-        let counts = vec![settings.integrator.substeps; n];
+        if let Some(t) = &settings.integrator.tail {
+            if t.from_interval >= n {
+                return Err(invalid(
+                    "integrator.tail.from_interval",
+                    format!("{} with {n} intervals", t.from_interval),
+                    "must be below the problem's interval count",
+                ));
+            }
+        }
+        let counts = (0..n).map(|k| settings.integrator.substeps_of(k)).collect();
         let records = if settings.mode == SqpMode::RealTimeIteration
             && settings.integrator.kind == crate::IntegratorKind::ImplicitMidpoint
         {
@@ -430,12 +439,15 @@ impl<D: Dynamics> SqpSolver<D> {
         self.s[0].copy_from_slice(x0);
         for k in 0..intervals.min(self.n) {
             let (head, tail) = self.s.split_at_mut(k + 1);
-            let c = self.integrators[0].choose_substeps(
-                &self.model,
-                head[k].as_slice(),
-                self.u[k].as_slice(),
-                None,
-            );
+            let c = match self.settings.integrator.adaptive {
+                Some(_) => self.integrators[0].choose_substeps(
+                    &self.model,
+                    head[k].as_slice(),
+                    self.u[k].as_slice(),
+                    None,
+                ),
+                None => self.settings.integrator.substeps_of(k),
+            };
             self.integrators[0].set_substeps(c)?;
             self.counts[k] = c;
             self.integrators[0].integrate(

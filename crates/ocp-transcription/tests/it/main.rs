@@ -9,4 +9,5 @@ mod quasi_newton;
 mod reference;
 mod simplified_newton;
 mod sqp;
+mod tail;
 mod warm_start;
