@@ -259,12 +259,13 @@ impl ControllerSettings {
     /// paper's 24) takes 2 substeps ([`IntegratorSettings::tail`]): only the first control is
     /// applied, and the far plan needs the slow motion, which the coarser steps keep to
     /// second order (about 40 % less work in the first samples and 20 % over a loop, and the
-    /// stabilised ranges hold: docs/mpc.md, "Coarser substeps at the end of the horizon";
-    /// with fewer than 13 intervals set `integrator.tail` to match). Its Newton iterations stop at the relative
-    /// residual 1e-8 ([`REAL_TIME_NEWTON_TOLERANCE`]) instead of the library's 1e-13: the
-    /// substeps' own error is orders of magnitude larger, and the defects and merit
-    /// differences the iteration decides on are of order one (about 11 % less thread CPU per
-    /// sample, the same stabilised ranges; 1e-6 lost the edges of both, docs/mpc.md).
+    /// stabilised ranges hold: docs/mpc.md, "Coarser substeps at the end of the horizon"; a
+    /// horizon of 12 intervals or fewer needs its own `integrator.tail`, or `None`). Its
+    /// Newton iterations stop at the relative residual 1e-8 ([`REAL_TIME_NEWTON_TOLERANCE`])
+    /// instead of the library's 1e-13: the substeps' own error is orders of magnitude larger,
+    /// and the defects and merit differences the iteration decides on are of order one (about
+    /// 11 % less thread CPU per sample, the same stabilised ranges; 1e-6 lost the edges of
+    /// both, docs/mpc.md).
     /// Stabilises the paper's 3D spin to ω0 = 1 on the FE plant within the sampling time; the
     /// full SQP (`real_time_iteration = false`, 16 substeps, no Levenberg–Marquardt term)
     /// reaches ω0 = 1.125 at seconds per sample
